@@ -1,0 +1,21 @@
+// The base role table: every stage once, with rate, budget, priority and CPU; checked at compile time.
+#include "role.hpp"
+
+#include "airground/platform/status_stage.hpp"
+
+namespace ag {
+
+namespace {
+// name, factory, rate [Hz], budget [µs], SCHED_FIFO priority, CPU (-1 any), parameters, what it does
+constexpr StageSpec kBaseStages[] = {
+    {"status", &StatusStage::make, 1.0, 2'000, 10, -1, StatusStage::kParams, "scheduler counters, once a second"},
+};
+static_assert(role_table_ok(kBaseStages));
+}  // namespace
+
+const RoleDescription& base_role() {
+  static const RoleDescription role{"base", "base station: listens, relays and records the team's mission", kBaseStages, {}};
+  return role;
+}
+
+}  // namespace ag

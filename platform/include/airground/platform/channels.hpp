@@ -1,0 +1,178 @@
+// Typed channels between stages: latest-value and ring channels, fanned out one buffer per reader so
+// every buffer stays single-producer single-consumer. Wired in init(), sealed before the first step.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "airground/platform/latest_value.hpp"
+#include "airground/platform/result.hpp"
+#include "airground/platform/spsc_ring.hpp"
+
+namespace ag {
+
+namespace detail {
+template <typename T>
+struct TypeTag {
+  static constexpr char id = 0;
+};
+template <typename T>
+constexpr const void* type_tag() noexcept {
+  return &TypeTag<T>::id;
+}
+
+struct ChannelBase {
+  virtual ~ChannelBase() = default;
+  std::string name;
+  const void* tag{nullptr};
+  bool has_writer{false};
+};
+
+template <typename T>
+struct LatestChannel final : ChannelBase {
+  std::vector<std::unique_ptr<LatestValue<T>>> readers;
+};
+
+template <typename T, std::size_t N>
+struct RingChannel final : ChannelBase {
+  std::vector<std::unique_ptr<SpscRing<T, N>>> readers;
+  std::vector<std::uint64_t> drops;  // per reader: pushes refused because that reader's ring was full
+};
+}  // namespace detail
+
+template <typename T>
+class LatestWriter {
+ public:
+  LatestWriter() = default;
+  explicit LatestWriter(detail::LatestChannel<T>* c) : ch_(c) {}
+  void publish(const T& v) noexcept {
+    for (auto& r : ch_->readers) r->write(v);
+  }
+  [[nodiscard]] bool connected() const noexcept { return ch_ != nullptr; }
+  [[nodiscard]] std::size_t reader_count() const noexcept { return ch_ ? ch_->readers.size() : 0; }
+
+ private:
+  detail::LatestChannel<T>* ch_{nullptr};
+};
+
+template <typename T>
+class LatestReader {
+ public:
+  LatestReader() = default;
+  explicit LatestReader(LatestValue<T>* lv) : lv_(lv) {}
+  [[nodiscard]] const T& read() noexcept { return lv_->read(); }
+  [[nodiscard]] bool fresh() const noexcept { return lv_->fresh(); }
+  [[nodiscard]] bool connected() const noexcept { return lv_ != nullptr; }
+
+ private:
+  LatestValue<T>* lv_{nullptr};
+};
+
+template <typename T, std::size_t N>
+class RingWriter {
+ public:
+  RingWriter() = default;
+  explicit RingWriter(detail::RingChannel<T, N>* c) : ch_(c) {}
+  // Pushes to every reader; returns how many readers refused because they were full (counted).
+  std::size_t push(const T& v) noexcept {
+    std::size_t refused = 0;
+    for (std::size_t i = 0; i < ch_->readers.size(); ++i) {
+      if (!ch_->readers[i]->try_push(v)) {
+        ++ch_->drops[i];
+        ++refused;
+      }
+    }
+    return refused;
+  }
+
+ private:
+  detail::RingChannel<T, N>* ch_{nullptr};
+};
+
+template <typename T, std::size_t N>
+class RingReader {
+ public:
+  RingReader() = default;
+  explicit RingReader(SpscRing<T, N>* r) : ring_(r) {}
+  [[nodiscard]] T* front() noexcept { return ring_->front(); }
+  void pop() noexcept { ring_->pop(); }
+  [[nodiscard]] std::size_t size() const noexcept { return ring_->size(); }
+
+ private:
+  SpscRing<T, N>* ring_{nullptr};
+};
+
+// One per robot instance. Lookups happen in init() only; the handles are what step() uses.
+class ChannelRegistry {
+ public:
+  template <typename T>
+  Result<LatestWriter<T>> latest_writer(std::string_view name) {
+    auto ch = find_or_add<detail::LatestChannel<T>>(name);
+    if (!ch) return ch.error();
+    if (ch.value()->has_writer) return dup_writer(name);
+    ch.value()->has_writer = true;
+    return LatestWriter<T>(ch.value());
+  }
+  template <typename T>
+  Result<LatestReader<T>> latest_reader(std::string_view name) {
+    if (sealed_) return sealed_error(name);
+    auto ch = find_or_add<detail::LatestChannel<T>>(name);
+    if (!ch) return ch.error();
+    ch.value()->readers.push_back(std::make_unique<LatestValue<T>>());
+    return LatestReader<T>(ch.value()->readers.back().get());
+  }
+  template <typename T, std::size_t N>
+  Result<RingWriter<T, N>> ring_writer(std::string_view name) {
+    auto ch = find_or_add<detail::RingChannel<T, N>>(name);
+    if (!ch) return ch.error();
+    if (ch.value()->has_writer) return dup_writer(name);
+    ch.value()->has_writer = true;
+    return RingWriter<T, N>(ch.value());
+  }
+  template <typename T, std::size_t N>
+  Result<RingReader<T, N>> ring_reader(std::string_view name) {
+    if (sealed_) return sealed_error(name);
+    auto ch = find_or_add<detail::RingChannel<T, N>>(name);
+    if (!ch) return ch.error();
+    ch.value()->readers.push_back(std::make_unique<SpscRing<T, N>>());
+    ch.value()->drops.push_back(0);
+    return RingReader<T, N>(ch.value()->readers.back().get());
+  }
+  // After every stage's init(): no more readers may be added (the fan-out lists are final).
+  void seal() noexcept { sealed_ = true; }
+  [[nodiscard]] std::size_t size() const noexcept { return channels_.size(); }
+
+ private:
+  template <typename C>
+  Result<C*> find_or_add(std::string_view name) {
+    using Tag = C;
+    for (auto& c : channels_) {
+      if (c->name == name) {
+        if (c->tag != detail::type_tag<Tag>())
+          return Error::make(ErrorCode::kInvalidArgument, "channel '" + std::string(name) + "' is used with two different message types");
+        return static_cast<C*>(c.get());
+      }
+    }
+    auto c = std::make_unique<C>();
+    c->name = std::string(name);
+    c->tag = detail::type_tag<Tag>();
+    C* raw = c.get();
+    channels_.push_back(std::move(c));
+    return raw;
+  }
+  static Error dup_writer(std::string_view name) {
+    return Error::make(ErrorCode::kInvalidArgument, "channel '" + std::string(name) + "' already has a writer (channels are single-producer)");
+  }
+  static Error sealed_error(std::string_view name) {
+    return Error::make(ErrorCode::kInvalidArgument, "channel '" + std::string(name) + "': readers must subscribe in init()");
+  }
+
+  std::vector<std::unique_ptr<detail::ChannelBase>> channels_;
+  bool sealed_{false};
+};
+
+}  // namespace ag

@@ -1,0 +1,50 @@
+// One robot's running role: its stages built from the table, their counters and their channels.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "airground/platform/channels.hpp"
+#include "airground/platform/clock.hpp"
+#include "airground/platform/config.hpp"
+#include "airground/platform/perf_counters.hpp"
+#include "airground/platform/result.hpp"
+#include "airground/platform/role_table.hpp"
+
+namespace ag {
+
+// The sections every role has (robot, scheduler, log), then the role's own, then one per stage.
+[[nodiscard]] std::vector<ParamSection> role_schema(const RoleDescription& role);
+
+struct StageSlot {
+  const StageSpec* spec;
+  std::unique_ptr<Stage> stage;
+  StagePerf* perf;
+};
+
+class RoleInstance {
+ public:
+  // Builds and initialises every stage in table order; the first failing init() is the error.
+  static Result<std::unique_ptr<RoleInstance>> create(const RoleDescription& role, const Config& config,
+                                                      const Clock& clock, std::string instance_name);
+  RoleInstance(const RoleInstance&) = delete;
+  RoleInstance& operator=(const RoleInstance&) = delete;
+  ~RoleInstance();
+
+  [[nodiscard]] const std::string& name() const noexcept { return name_; }
+  [[nodiscard]] std::vector<StageSlot>& stages() noexcept { return stages_; }
+  [[nodiscard]] PerfRegistry& perf() noexcept { return perf_; }
+  [[nodiscard]] ChannelRegistry& channels() noexcept { return channels_; }
+  void stop_all() noexcept;
+
+ private:
+  RoleInstance() = default;
+  std::string name_;
+  PerfRegistry perf_;
+  ChannelRegistry channels_;
+  std::vector<StageSlot> stages_;
+  bool stopped_{false};
+};
+
+}  // namespace ag

@@ -1,0 +1,95 @@
+// Single-producer single-consumer ring: fixed capacity, lock-free, used in place through front()/pop().
+#pragma once
+
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <new>
+#include <type_traits>
+#include <utility>
+
+#include "airground/platform/cacheline.hpp"
+
+namespace ag {
+
+// Capacity is a compile-time power of two so the index wraps with a mask. Indices run free (64-bit,
+// they never wrap in practice) and each side caches the other's index so the common case touches
+// only its own cache line. Storage is allocated once in the constructor (start-up), never after.
+template <typename T, std::size_t Capacity>
+class SpscRing {
+  static_assert(Capacity >= 2 && (Capacity & (Capacity - 1)) == 0, "capacity must be a power of two");
+  static_assert(std::is_nothrow_destructible_v<T>);
+
+ public:
+  using value_type = T;
+
+  SpscRing() : slots_(static_cast<Slot*>(::operator new(sizeof(Slot) * Capacity, std::align_val_t{alignof(Slot)}))) {}
+  SpscRing(const SpscRing&) = delete;
+  SpscRing& operator=(const SpscRing&) = delete;
+  ~SpscRing() {
+    while (front() != nullptr) pop();
+    ::operator delete(slots_, std::align_val_t{alignof(Slot)});
+  }
+
+  static constexpr std::size_t capacity() noexcept { return Capacity; }
+
+  // Producer side. Returns false (and leaves the ring untouched) when full.
+  template <typename... Args>
+  [[nodiscard]] bool try_emplace(Args&&... args) noexcept(std::is_nothrow_constructible_v<T, Args&&...>) {
+    const std::uint64_t w = prod_.write.load(std::memory_order_relaxed);
+    if (w - prod_.cached_read == Capacity) {
+      prod_.cached_read = cons_.read.load(std::memory_order_acquire);
+      if (w - prod_.cached_read == Capacity) return false;
+    }
+    ::new (static_cast<void*>(&slots_[w & kMask])) T(std::forward<Args>(args)...);
+    prod_.write.store(w + 1, std::memory_order_release);
+    return true;
+  }
+  [[nodiscard]] bool try_push(const T& v) noexcept(std::is_nothrow_copy_constructible_v<T>) { return try_emplace(v); }
+  [[nodiscard]] bool try_push(T&& v) noexcept(std::is_nothrow_move_constructible_v<T>) { return try_emplace(std::move(v)); }
+
+  // Consumer side: the oldest element, or nullptr when empty. Valid until pop().
+  [[nodiscard]] T* front() noexcept {
+    const std::uint64_t r = cons_.read.load(std::memory_order_relaxed);
+    if (r == cons_.cached_write) {
+      cons_.cached_write = prod_.write.load(std::memory_order_acquire);
+      if (r == cons_.cached_write) return nullptr;
+    }
+    return std::launder(reinterpret_cast<T*>(&slots_[r & kMask]));
+  }
+  // Destroys the front element; only call after front() returned non-null.
+  void pop() noexcept {
+    const std::uint64_t r = cons_.read.load(std::memory_order_relaxed);
+    std::launder(reinterpret_cast<T*>(&slots_[r & kMask]))->~T();
+    cons_.read.store(r + 1, std::memory_order_release);
+  }
+
+  // Approximate from any thread; exact from either side when the other is idle.
+  [[nodiscard]] std::size_t size() const noexcept {
+    const std::uint64_t r = cons_.read.load(std::memory_order_acquire);
+    const std::uint64_t w = prod_.write.load(std::memory_order_acquire);
+    return static_cast<std::size_t>(w - r);
+  }
+  [[nodiscard]] bool empty() const noexcept { return size() == 0; }
+
+ private:
+  static constexpr std::uint64_t kMask = Capacity - 1;
+  struct Slot {
+    alignas(T) std::byte bytes[sizeof(T)];
+  };
+  struct alignas(kFalseSharingRange) ProducerSide {
+    std::atomic<std::uint64_t> write{0};
+    std::uint64_t cached_read{0};
+  };
+  struct alignas(kFalseSharingRange) ConsumerSide {
+    std::atomic<std::uint64_t> read{0};
+    std::uint64_t cached_write{0};
+  };
+
+  ProducerSide prod_;
+  ConsumerSide cons_;
+  Slot* const slots_;
+};
+
+}  // namespace ag

@@ -1,0 +1,44 @@
+// The stage interface: init() wires and allocates, step(now) computes within its budget.
+#pragma once
+
+#include <string_view>
+
+#include "airground/platform/channels.hpp"
+#include "airground/platform/clock.hpp"
+#include "airground/platform/config.hpp"
+#include "airground/platform/perf_counters.hpp"
+#include "airground/platform/result.hpp"
+#include "airground/platform/time.hpp"
+
+namespace ag {
+
+// What a stage may use while it starts: its parameters, the channels of its robot, the clock and
+// (read-only) the scheduler's counters. Nothing here is valid to re-look-up inside step().
+struct StageContext {
+  const Config& config;
+  ChannelRegistry& channels;
+  const Clock& clock;
+  const PerfRegistry& perf;
+  std::string_view instance;  // the robot this stage belongs to ("uav", "ugv1", ...)
+  std::string_view stage_name;
+
+  [[nodiscard]] SectionView params() const { return SectionView(config, stage_name); }
+};
+
+class Stage {
+ public:
+  Stage() = default;
+  Stage(const Stage&) = delete;
+  Stage& operator=(const Stage&) = delete;
+  virtual ~Stage() = default;
+
+  // Start-up: read parameters, subscribe and advertise channels, allocate every buffer. An error
+  // here stops the robot before it runs, with the message shown to the operator.
+  virtual Status init(StageContext& ctx) = 0;
+  // One release: must not allocate, must not block, must return within the budget.
+  virtual void step(TimeNs now) noexcept = 0;
+  // Shutdown, after the last step(): flush what must survive a restart.
+  virtual void stop() noexcept {}
+};
+
+}  // namespace ag

@@ -1,0 +1,58 @@
+// The status stage: once a period, publishes the scheduler's counters for this robot and logs them.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <span>
+
+#include "airground/platform/config.hpp"
+#include "airground/platform/stage.hpp"
+
+namespace ag {
+
+// Published on the latest-value channel "scheduler_status"; the gossip stage will carry it to the team.
+struct SchedulerStatus {
+  static constexpr std::size_t kMaxStages = 32;
+  struct StageLine {
+    std::array<char, 24> name{};
+    std::uint64_t runs{0};
+    std::uint64_t overruns{0};
+    std::uint64_t slips{0};
+    float exec_p50_us{0}, exec_p99_us{0}, exec_max_us{0};  // [µs]
+    float late_p99_us{0};                                   // [µs] wake-up lateness
+    float budget_us{0};                                     // [µs]
+  };
+  TimeNs sample_time_ns{0};   // [ns] when the counters were read
+  TimeNs publish_time_ns{0};  // [ns]
+  std::uint32_t seq{0};
+  std::uint32_t stage_count{0};
+  std::uint64_t total_overruns{0};
+  std::uint64_t total_slips{0};
+  std::array<StageLine, kMaxStages> stages{};
+};
+
+class StatusStage final : public Stage {
+ public:
+  static constexpr ParamSpec kParams[] = {
+      ParamSpec::boolean("log_counters", true, "write one line per stage on every report"),
+      ParamSpec::integer("log_every", 10, 1, 3600, "reports", "log the full table every N reports; problems are logged at once"),
+  };
+  static std::unique_ptr<Stage> make() { return std::make_unique<StatusStage>(); }
+
+  Status init(StageContext& ctx) override;
+  void step(TimeNs now) noexcept override;
+  [[nodiscard]] const SchedulerStatus& last() const noexcept { return msg_; }
+
+ private:
+  const PerfRegistry* perf_{nullptr};
+  const Clock* clock_{nullptr};
+  LatestWriter<SchedulerStatus> out_;
+  SchedulerStatus msg_{};
+  bool log_counters_{true};
+  std::int64_t log_every_{10};
+  std::uint64_t reported_overruns_{0};
+  std::uint64_t reported_slips_{0};
+};
+
+}  // namespace ag

@@ -1,0 +1,65 @@
+// Status stage: reads the counters of every stage of its robot and publishes them.
+#include "airground/platform/status_stage.hpp"
+
+#include <algorithm>
+#include <cstdio>
+
+#include "airground/platform/log.hpp"
+
+namespace ag {
+
+Status StatusStage::init(StageContext& ctx) {
+  perf_ = &ctx.perf;
+  clock_ = &ctx.clock;
+  const SectionView p = ctx.params();
+  log_counters_ = p.boolean("log_counters");
+  log_every_ = p.integer("log_every");
+  auto w = ctx.channels.latest_writer<SchedulerStatus>("scheduler_status");
+  if (!w) return w.error();
+  out_ = w.value();
+  return ok_status();
+}
+
+void StatusStage::step(TimeNs now) noexcept {
+  msg_.sample_time_ns = now;
+  msg_.seq += 1;
+  const std::size_t n = std::min(perf_->size(), SchedulerStatus::kMaxStages);
+  msg_.stage_count = static_cast<std::uint32_t>(n);
+  msg_.total_overruns = 0;
+  msg_.total_slips = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const StagePerf& p = perf_->at(i);
+    const StagePerfSnapshot s = snapshot(p);
+    auto& line = msg_.stages[i];
+    std::snprintf(line.name.data(), line.name.size(), "%s", p.name.c_str());
+    line.runs = s.runs;
+    line.overruns = s.overruns;
+    line.slips = s.slips;
+    line.exec_p50_us = static_cast<float>(to_us(s.exec_p50));
+    line.exec_p99_us = static_cast<float>(to_us(s.exec_p99));
+    line.exec_max_us = static_cast<float>(to_us(s.exec_max));
+    line.late_p99_us = static_cast<float>(to_us(s.late_p99));
+    line.budget_us = static_cast<float>(to_us(s.budget_ns));
+    msg_.total_overruns += s.overruns;
+    msg_.total_slips += s.slips;
+  }
+  msg_.publish_time_ns = clock_->now();
+  out_.publish(msg_);
+
+  const bool trouble = msg_.total_overruns != reported_overruns_ || msg_.total_slips != reported_slips_;
+  if (log_counters_ && (trouble || (msg_.seq - 1) % static_cast<std::uint32_t>(log_every_) == 0)) {
+    for (std::size_t i = 0; i < n; ++i) {
+      const auto& l = msg_.stages[i];
+      const log::Level lvl = (trouble && (l.overruns != 0 || l.slips != 0)) ? log::Level::kWarn : log::Level::kInfo;
+      log::write(lvl, "status", "stage=%s runs=%llu exec_p50_us=%.1f exec_p99_us=%.1f exec_max_us=%.1f budget_us=%.0f late_p99_us=%.1f overruns=%llu slips=%llu",
+                 l.name.data(), static_cast<unsigned long long>(l.runs), static_cast<double>(l.exec_p50_us),
+                 static_cast<double>(l.exec_p99_us), static_cast<double>(l.exec_max_us), static_cast<double>(l.budget_us),
+                 static_cast<double>(l.late_p99_us), static_cast<unsigned long long>(l.overruns),
+                 static_cast<unsigned long long>(l.slips));
+    }
+  }
+  reported_overruns_ = msg_.total_overruns;
+  reported_slips_ = msg_.total_slips;
+}
+
+}  // namespace ag
