@@ -1,0 +1,66 @@
+# Thin wrapper over CMake presets, ctest and the dependency install. Every target installs what is missing first.
+SHELL := /bin/bash
+.DEFAULT_GOAL := build
+JOBS ?= $(shell nproc)
+export CMAKE_BUILD_PARALLEL_LEVEL := $(JOBS)
+export CTEST_PARALLEL_LEVEL := $(JOBS)
+
+.PHONY: deps build cross tsan asan test test-native test-cross test-tsan test-asan bench package demo clean help
+
+help:
+	@echo "make deps     install missing Debian packages (apt-get; root or sudo) and the arm64 sysroot"
+	@echo "make build    build the native (x86-64-v3) tree: role binaries, tests, benchmarks"
+	@echo "make test     native tests, the aarch64 cross build with its unit tests under qemu, the ring stress under TSan"
+	@echo "make bench    ring throughput/latency vs moodycamel, scheduler wake-up lateness"
+	@echo "make package  .deb per role for amd64 and arm64 in build/*/packages"
+	@echo "make demo     the default simulated mission and its report (arrives with the simulator)"
+
+deps:
+	@tools/install-deps.sh
+
+build: deps
+	cmake --preset native
+	cmake --build --preset native
+
+cross: deps
+	cmake --preset xavier-nx
+	cmake --build --preset xavier-nx
+
+tsan: deps
+	cmake --preset tsan
+	cmake --build --preset tsan --target airground_stress_tests
+
+asan: deps
+	cmake --preset asan
+	cmake --build --preset asan
+
+test-native: build
+	ctest --preset native
+
+test-cross: cross
+	ctest --preset xavier-nx
+
+test-tsan: tsan
+	ctest --preset tsan
+
+test-asan: asan
+	ctest --preset asan
+
+test: test-native test-cross test-tsan
+	@echo "make test: native, aarch64 (qemu) and ThreadSanitizer suites passed"
+
+bench: build
+	cmake --build --preset native --target bench
+
+package: build cross
+	cd build/native && cpack -G DEB
+	cd build/xavier-nx && cpack -G DEB
+	@ls -1 build/native/packages/*.deb build/xavier-nx/packages/*.deb
+
+demo: build
+	@echo "make demo: the simulated mission arrives with the simulator (issue 3: airground-sim);"
+	@echo "until then run a role binary by hand, e.g. build/native/firmware_host/airground-ugv --run-for 5"
+	@exit 2
+
+clean:
+	rm -rf build
