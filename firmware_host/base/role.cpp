@@ -1,5 +1,5 @@
 // The base role table: every stage once, with rate, budget, priority and CPU; checked at compile time.
-#include "role.hpp"
+#include "roles.hpp"
 
 #include "airground/platform/status_stage.hpp"
 

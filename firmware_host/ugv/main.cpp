@@ -1,5 +1,5 @@
 // airground-ugv: the ugv role binary.
-#include "../common/role_main.hpp"
-#include "role.hpp"
+#include "role_main.hpp"
+#include "roles.hpp"
 
 int main(int argc, char** argv) { return ag::run_role(ag::ugv_role(), argc, argv); }

@@ -33,6 +33,31 @@ std::string fmt_num(double v) {
   return buf;
 }
 
+// Shortest text that reads back to the same double, so to_yaml() round-trips exactly.
+std::string fmt_exact(double v) {
+  char buf[64];
+  const auto res = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, res.ptr);
+}
+
+// A YAML double-quoted scalar: quotes, backslashes and control characters escaped.
+std::string yaml_quoted(std::string_view text) {
+  std::string out = "\"";
+  for (const char ch : text) {
+    if (ch == '"' || ch == '\\') {
+      out += '\\';
+      out += ch;
+    } else if (static_cast<unsigned char>(ch) < 0x20) {
+      char esc[8];
+      std::snprintf(esc, sizeof esc, "\\x%02x", static_cast<unsigned>(static_cast<unsigned char>(ch)));
+      out += esc;
+    } else {
+      out += ch;
+    }
+  }
+  return out + "\"";
+}
+
 std::string range_text(const ParamSpec& s) {
   switch (s.type) {
     case ParamType::kBool: return "true|false";
@@ -245,8 +270,8 @@ std::string Config::to_yaml() const {
       std::string val;
       if (std::holds_alternative<bool>(v)) val = std::get<bool>(v) ? "true" : "false";
       else if (std::holds_alternative<std::int64_t>(v)) val = std::to_string(std::get<std::int64_t>(v));
-      else if (std::holds_alternative<double>(v)) val = fmt_num(std::get<double>(v));
-      else val = "\"" + std::get<std::string>(v) + "\"";
+      else if (std::holds_alternative<double>(v)) val = fmt_exact(std::get<double>(v));
+      else val = yaml_quoted(std::get<std::string>(v));
       std::string line = "  " + std::string(p.key) + ": " + val;
       if (line.size() < 36) line.resize(36, ' ');
       o << line << " # " << range_text(p);

@@ -42,6 +42,12 @@ void run_measured(Runnable& r, TimeNs now, TimeNs lateness, ExecTimer timer) noe
 
 void LockstepExecutor::add(RoleInstance& robot) { append(runs_, robot); }
 
+void LockstepExecutor::add_stage(Stage& stage, StagePerf& perf, double rate_hz) {
+  perf.period_ns = period_from_hz(rate_hz);
+  if (perf.budget_ns <= 0) perf.budget_ns = perf.period_ns;
+  runs_.push_back(Runnable{&stage, &perf, perf.name.c_str(), perf.period_ns, perf.budget_ns, 0, -1, 0});
+}
+
 void LockstepExecutor::start(TimeNs t0) noexcept {
   clock_.set(t0);
   for (auto& r : runs_) r.next_release = t0;

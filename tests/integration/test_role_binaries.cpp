@@ -85,7 +85,7 @@ INSTANTIATE_TEST_SUITE_P(
                       BadConfig{"bad_choice", "log:\n  level: loud\n", {"log.level", "debug|info|warn|error"}},
                       BadConfig{"malformed", "status:\n  log_every: [3\n", {"malformed YAML", ":3:"}},
                       BadConfig{"list_value", "status:\n  log_every: [3, 4]\n", {"status.log_every", "single value"}}),
-    [](const auto& info) { return std::string(info.param.name); });
+    [](const auto& test_case) { return std::string(test_case.param.name); });
 
 TEST(RoleBinaryErrors, MissingConfigFileAndBadOptionsExit2) {
   const auto missing = run({role_bin("uav"), "--config", "/nonexistent/uav.yaml"});
@@ -166,7 +166,7 @@ TEST(RoleBinaryService, SigintAlsoStopsCleanlyAndRunForEnds) {
   EXPECT_EQ(r.exit_code, 0) << r.err;
   const auto timed = run({role_bin("uav"), "--run-for", "1.2", "--set", "scheduler.realtime=false"}, 10.0);
   EXPECT_EQ(timed.exit_code, 0) << timed.err;
-  EXPECT_NE(timed.err.find("stage=status runs=1"), std::string::npos) << "the status stage ran: " << timed.err;
+  EXPECT_NE(timed.err.find("final stage=status runs=2"), std::string::npos) << "released at 0 s and 1 s: " << timed.err;
 }
 
 }  // namespace

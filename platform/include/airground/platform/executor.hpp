@@ -41,6 +41,9 @@ class LockstepExecutor {
 
   explicit LockstepExecutor(SimClock& clock, ExecTimer timer = ExecTimer::kThreadCpu) : clock_(clock), timer_(timer) {}
   void add(RoleInstance& robot);
+  // A stage outside any role table (the simulator's world, sensors and vehicles). It runs before the
+  // robots' stages that share its release time when added first. `perf` must outlive the executor.
+  void add_stage(Stage& stage, StagePerf& perf, double rate_hz);
   void start(TimeNs t0) noexcept;
   // Run every release with time <= t_end, then leave the clock at t_end.
   void run_until(TimeNs t_end) noexcept;

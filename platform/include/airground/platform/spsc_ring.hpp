@@ -2,6 +2,7 @@
 #pragma once
 
 #include <atomic>
+#include <bit>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -13,18 +14,20 @@
 
 namespace ag {
 
-// Capacity is a compile-time power of two so the index wraps with a mask. Indices run free (64-bit,
-// they never wrap in practice) and each side caches the other's index so the common case touches
-// only its own cache line. Storage is allocated once in the constructor (start-up), never after.
+// Capacity is exact: that many elements fit. Indices run free (64-bit, they never wrap in practice)
+// and each side caches the other's index so the common case touches only its own cache line. The
+// slot array is the next power of two above Capacity plus a slack of two cache lines, so that even a
+// full ring never has the producer writing into the line the consumer is reading. Storage is
+// allocated once in the constructor (start-up), never after.
 template <typename T, std::size_t Capacity>
 class SpscRing {
-  static_assert(Capacity >= 2 && (Capacity & (Capacity - 1)) == 0, "capacity must be a power of two");
+  static_assert(Capacity >= 1, "capacity must be at least 1");
   static_assert(std::is_nothrow_destructible_v<T>);
 
  public:
   using value_type = T;
 
-  SpscRing() : slots_(static_cast<Slot*>(::operator new(sizeof(Slot) * Capacity, std::align_val_t{alignof(Slot)}))) {}
+  SpscRing() : slots_(static_cast<Slot*>(::operator new(sizeof(Slot) * kSlots, std::align_val_t{alignof(Slot)}))) {}
   SpscRing(const SpscRing&) = delete;
   SpscRing& operator=(const SpscRing&) = delete;
   ~SpscRing() {
@@ -38,9 +41,9 @@ class SpscRing {
   template <typename... Args>
   [[nodiscard]] bool try_emplace(Args&&... args) noexcept(std::is_nothrow_constructible_v<T, Args&&...>) {
     const std::uint64_t w = prod_.write.load(std::memory_order_relaxed);
-    if (w - prod_.cached_read == Capacity) {
+    if (w - prod_.cached_read >= Capacity) {
       prod_.cached_read = cons_.read.load(std::memory_order_acquire);
-      if (w - prod_.cached_read == Capacity) return false;
+      if (w - prod_.cached_read >= Capacity) return false;
     }
     ::new (static_cast<void*>(&slots_[w & kMask])) T(std::forward<Args>(args)...);
     prod_.write.store(w + 1, std::memory_order_release);
@@ -74,10 +77,12 @@ class SpscRing {
   [[nodiscard]] bool empty() const noexcept { return size() == 0; }
 
  private:
-  static constexpr std::uint64_t kMask = Capacity - 1;
   struct Slot {
     alignas(T) std::byte bytes[sizeof(T)];
   };
+  static constexpr std::size_t kSlack = (2 * kFalseSharingRange + sizeof(Slot) - 1) / sizeof(Slot);
+  static constexpr std::size_t kSlots = std::bit_ceil(Capacity + kSlack);
+  static constexpr std::uint64_t kMask = kSlots - 1;
   struct alignas(kFalseSharingRange) ProducerSide {
     std::atomic<std::uint64_t> write{0};
     std::uint64_t cached_read{0};

@@ -1,8 +1,0 @@
-// The ugv role: its stage table and description (shared by the binary, the simulator and the timing tests).
-#pragma once
-
-#include "airground/platform/role_table.hpp"
-
-namespace ag {
-[[nodiscard]] const RoleDescription& ugv_role();
-}  // namespace ag

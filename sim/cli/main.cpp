@@ -1,0 +1,389 @@
+// airground-sim: worlds (generate, import, show), one camera frame or LiDAR scan, and team runs.
+#include <unistd.h>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "airground/platform/log.hpp"
+#include "airground/sim/camera.hpp"
+#include "airground/sim/generator.hpp"
+#include "airground/sim/importer.hpp"
+#include "airground/sim/lidar.hpp"
+#include "airground/sim/raycast.hpp"
+#include "airground/sim/runner.hpp"
+#include "airground/sim/world_png.hpp"
+
+namespace fs = std::filesystem;
+using namespace ag;
+using namespace ag::sim;
+
+namespace {
+
+constexpr const char* kUsage =
+    "airground-sim — the world our robots live in when there is no field\n\n"
+    "Usage:\n"
+    "  airground-sim world generate --seed S [--size METRES] [--targets N] [--resolution M] --out DIR\n"
+    "  airground-sim world import --classes RASTER.png --legend LEGEND.yaml --resolution METRES_PER_PIXEL\n"
+    "                             --out DIR [--elevation RASTER.tif] [--color IMAGE.png] [--name NAME]\n"
+    "                             [--datum LAT,LON,HEIGHT]   (--px-per-m P instead of --resolution)\n"
+    "  airground-sim world show DIR --out DIR\n"
+    "  airground-sim render --world W --pose X Y Z ROLL PITCH YAW --out DIR [--scale 0.5] [--config camera.yaml]\n"
+    "  airground-sim scan --world W --pose X Y YAW --out DIR [--columns 512|1024|2048] [--height 0.6]\n"
+    "  airground-sim run --world W --ugvs N --seed S --duration T --out DIR [options]\n\n"
+    "--world W is a world directory or 'default' (the built-in 400 m world, seed 42).\n"
+    "Angles in radians, positions in metres in the world's map frame (x east, y north, origin at the centre).\n"
+    "'airground-sim COMMAND --help' shows a command's options. Exit status: 0 ok, 1 failed, 2 bad usage.\n";
+
+constexpr const char* kRunHelp =
+    "airground-sim run --world W --ugvs N --seed S --duration T --out DIR [options]\n\n"
+    "Runs a team in lockstep on a simulated clock: the quadrotor flies a lawnmower survey, the ground\n"
+    "robots drive scripted routes over the roads from ground truth, every robot runs its real role\n"
+    "table, and every sensor stream is recorded. Writes summary.yaml, summary.json, report.md,\n"
+    "trajectories.png and the recordings into DIR. Defaults: --world default --ugvs 3 --seed 1\n"
+    "--duration 60 --out sim-run.\n\n"
+    "Options:\n"
+    "  --no-uav                 ground robots only\n"
+    "  --physics-hz F           vehicle/odometry/GPS step (50)\n"
+    "  --camera-hz F            quadrotor camera frames (2)      --camera-scale S   1 = 1280x800 (1)\n"
+    "  --lidar-hz F             LiDAR scans (10)                 --lidar-columns C  512|1024|2048 (1024)\n"
+    "  --altitude M             survey altitude (40)             --uav-speed V      (5 m/s)\n"
+    "  --ugv-speed V            scripted ground speed (1.2 m/s)  --overlap F        survey side overlap (0.6)\n"
+    "  --config-dir DIR         model parameters: gps.yaml, visual_odometry.yaml, wheel_odometry.yaml,\n"
+    "                           radio.yaml, diff_drive.yaml, quadrotor.yaml, camera.yaml, lidar.yaml\n"
+    "  --record none|light|full what to record (light: CSV streams + every 20th camera frame)\n"
+    "  --threads N              sensor worker threads (all cores)\n"
+    "  --quiet                  no progress line\n";
+
+struct Args {
+  std::vector<std::string> pos;
+  std::map<std::string, std::vector<std::string>> opt;
+  bool has(const std::string& k) const { return opt.count(k) != 0; }
+  std::string get(const std::string& k, const std::string& def = "") const {
+    auto it = opt.find(k);
+    return it == opt.end() || it->second.empty() ? def : it->second.front();
+  }
+};
+
+[[noreturn]] void usage_error(const std::string& msg) {
+  std::fprintf(stderr, "airground-sim: %s (see --help)\n", msg.c_str());
+  std::exit(2);
+}
+
+// Options take the following words up to the next "--" option; --pose takes several numbers.
+Args parse(int argc, char** argv, int first) {
+  Args a;
+  std::string cur;
+  for (int i = first; i < argc; ++i) {
+    std::string s = argv[i];
+    const bool is_opt = s.rfind("--", 0) == 0 && !(s.size() > 2 && (std::isdigit(static_cast<unsigned char>(s[2])) != 0 || s[2] == '.'));
+    if (is_opt) {
+      cur = s.substr(2);
+      a.opt[cur];
+    } else if (!cur.empty()) {
+      a.opt[cur].push_back(s);
+    } else {
+      a.pos.push_back(s);
+    }
+  }
+  return a;
+}
+
+double number(const Args& a, const std::string& k, double def) {
+  if (!a.has(k)) return def;
+  const std::string v = a.get(k);
+  char* end = nullptr;
+  const double d = std::strtod(v.c_str(), &end);
+  if (v.empty() || *end != '\0' || !std::isfinite(d)) usage_error("--" + k + " needs a number, got '" + v + "'");
+  return d;
+}
+
+std::vector<double> numbers(const Args& a, const std::string& k, std::size_t n) {
+  auto it = a.opt.find(k);
+  if (it == a.opt.end() || it->second.size() != n) usage_error("--" + k + " needs " + std::to_string(n) + " numbers");
+  std::vector<double> out;
+  for (const auto& v : it->second) {
+    char* end = nullptr;
+    out.push_back(std::strtod(v.c_str(), &end));
+    if (*end != '\0') usage_error("--" + k + ": '" + v + "' is not a number");
+  }
+  return out;
+}
+
+std::string required(const Args& a, const std::string& k) {
+  if (!a.has(k) || a.get(k).empty()) usage_error("--" + k + " is required");
+  return a.get(k);
+}
+
+int fail(const Error& e) {
+  std::fprintf(stderr, "airground-sim: %s\n", e.message.c_str());
+  return 1;
+}
+
+Datum parse_datum(const Args& a) {
+  Datum d;
+  if (!a.has("datum")) return d;
+  const std::string v = a.get("datum");
+  if (std::sscanf(v.c_str(), "%lf,%lf,%lf", &d.lat_deg, &d.lon_deg, &d.height_m) != 3 || std::abs(d.lat_deg) > 90 || std::abs(d.lon_deg) > 180)
+    usage_error("--datum needs LAT,LON,HEIGHT in degrees and metres, got '" + v + "'");
+  return d;
+}
+
+int world_generate(const Args& a) {
+  GeneratorOptions o;
+  o.seed = static_cast<std::uint64_t>(number(a, "seed", 1));
+  o.size_m = number(a, "size", o.size_m);
+  o.targets = static_cast<int>(number(a, "targets", o.targets));
+  o.resolution = number(a, "resolution", o.resolution);
+  o.datum = parse_datum(a);
+  const std::string out = required(a, "out");
+  std::fprintf(stderr, "generating a %.0f m world (seed %llu, %d targets, %.2f m cells)...\n", o.size_m,
+               static_cast<unsigned long long>(o.seed), o.targets, o.resolution);
+  const auto t0 = std::chrono::steady_clock::now();
+  std::vector<TargetCluster> targets;
+  auto w = generate_world(o, &targets);
+  if (!w) return fail(w.error());
+  if (auto st = save_world(w.value(), out); !st) return fail(st.error());
+  if (auto st = save_targets(targets, w.value().header.staging, out); !st) return fail(st.error());
+  if (auto st = write_world_pngs(w.value(), (fs::path(out) / "png").string()); !st) return fail(st.error());
+  std::printf("world %s: %dx%d cells, %zu target clusters, %.1f s; layer pictures in %s/png\n", out.c_str(),
+              w.value().grid().width, w.value().grid().height, targets.size(),
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), out.c_str());
+  return 0;
+}
+
+int world_import(const Args& a) {
+  ImportOptions o;
+  o.classes_path = required(a, "classes");
+  o.legend_path = required(a, "legend");
+  if (a.has("px-per-m")) {
+    const double ppm = number(a, "px-per-m", 0);
+    if (ppm <= 0) usage_error("--px-per-m must be positive");
+    o.resolution_m_per_px = 1.0 / ppm;
+  } else {
+    o.resolution_m_per_px = number(a, "resolution", 0);
+  }
+  if (!(o.resolution_m_per_px > 0)) usage_error("--resolution METRES_PER_PIXEL (or --px-per-m) is required and positive");
+  o.elevation_path = a.get("elevation");
+  o.color_path = a.get("color");
+  o.name = a.get("name", fs::path(o.classes_path).stem().string());
+  o.datum = parse_datum(a);
+  const std::string out = required(a, "out");
+  auto w = import_world(o);
+  if (!w) return fail(w.error());
+  if (auto st = save_world(w.value(), out); !st) return fail(st.error());
+  if (auto st = write_world_pngs(w.value(), (fs::path(out) / "png").string()); !st) return fail(st.error());
+  std::printf("world %s: %dx%d cells at %.3f m; layer pictures in %s/png\n", out.c_str(), w.value().grid().width,
+              w.value().grid().height, w.value().grid().resolution, out.c_str());
+  return 0;
+}
+
+int world_show(const Args& a) {
+  if (a.pos.empty()) usage_error("world show needs the world directory");
+  const std::string out = required(a, "out");
+  auto w = resolve_world(a.pos.front());
+  if (!w) return fail(w.error());
+  if (auto st = write_world_pngs(*w.value(), out); !st) return fail(st.error());
+  std::printf("wrote the layers of %s to %s\n", a.pos.front().c_str(), out.c_str());
+  return 0;
+}
+
+int render(const Args& a) {
+  auto w = resolve_world(a.get("world", "default"));
+  if (!w) return fail(w.error());
+  const auto p = numbers(a, "pose", 6);
+  const std::string out = required(a, "out");
+  CameraModel model;
+  CameraShading shading;
+  if (a.has("config")) {
+    auto m = CameraModel::load_file(a.get("config"));
+    if (!m) return fail(m.error());
+    model = m.value();
+    auto s = CameraShading::load_file(a.get("config"));
+    if (!s) return fail(s.error());
+    shading = s.value();
+  }
+  if (a.has("scale")) model = model.scaled(number(a, "scale", 1.0));
+  CameraRenderer renderer(*w.value(), model, shading);
+  CameraFrame f;
+  const auto t0 = std::chrono::steady_clock::now();
+  renderer.render(Pose3{p[0], p[1], p[2], p[3], p[4], p[5]}, f);
+  const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  fs::create_directories(out);
+  cv::Mat bgr, depth_mm;
+  cv::cvtColor(f.rgb, bgr, cv::COLOR_RGB2BGR);
+  f.depth.convertTo(depth_mm, CV_16U, 1000.0);
+  cv::Mat depth_vis;
+  double dmax = 0;
+  cv::minMaxLoc(f.depth, nullptr, &dmax);
+  f.depth.convertTo(depth_vis, CV_8U, dmax > 0 ? 255.0 / dmax : 1.0);
+  cv::applyColorMap(depth_vis, depth_vis, cv::COLORMAP_VIRIDIS);
+  const bool ok = cv::imwrite((fs::path(out) / "rgb.png").string(), bgr) &&
+                  cv::imwrite((fs::path(out) / "class.png").string(), f.cls) &&
+                  cv::imwrite((fs::path(out) / "class_colour.png").string(), [&] { cv::Mat c; cv::cvtColor(class_display_image(f.cls), c, cv::COLOR_RGB2BGR); return c; }()) &&
+                  cv::imwrite((fs::path(out) / "depth_mm.png").string(), depth_mm) &&
+                  cv::imwrite((fs::path(out) / "depth.png").string(), depth_vis);
+  if (!ok) return fail(Error::make(ErrorCode::kIo, "cannot write images into " + out));
+  std::printf("rendered %dx%d in %.1f ms: %s/{rgb,class,class_colour,depth_mm,depth}.png (class.png holds ids, depth_mm.png 16-bit mm)\n",
+              f.rgb.cols, f.rgb.rows, ms, out.c_str());
+  return 0;
+}
+
+int scan(const Args& a) {
+  auto w = resolve_world(a.get("world", "default"));
+  if (!w) return fail(w.error());
+  const auto p = numbers(a, "pose", 3);
+  const std::string out = required(a, "out");
+  const int columns = static_cast<int>(number(a, "columns", 1024));
+  const double height = number(a, "height", 0.6);
+  auto beams = OusterBeamModel::load_default(columns);
+  if (!beams) return fail(beams.error());
+  const World& world = *w.value();
+  const GridGeometry& g = world.grid();
+  const int c = g.col(p[0]), r = g.row(p[1]);
+  if (!g.contains(c, r)) usage_error("--pose is outside the world");
+  LidarSimulator lidar(world, beams.value(), LidarNoise{});
+  std::vector<LidarPoint> pts;
+  const Pose3 pose{p[0], p[1], static_cast<double>(world.surface_at(c, r)) + height, 0, 0, p[2]};
+  const auto t0 = std::chrono::steady_clock::now();
+  lidar.scan(pose, 1, pts);
+  const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  fs::create_directories(out);
+  std::ofstream ply(fs::path(out) / "scan.ply");
+  ply << "ply\nformat ascii 1.0\ncomment airground-sim scan, sensor frame (x forward, y left, z up) [m]\nelement vertex "
+      << pts.size() << "\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar class\nproperty ushort ring\n";
+  ply << "end_header\n";
+  for (const auto& q : pts) {
+    const Rgb col = ClassTable::builtin().info(static_cast<ClassId>(q.cls)).color;
+    ply << q.x << ' ' << q.y << ' ' << q.z << ' ' << int(col.r) << ' ' << int(col.g) << ' ' << int(col.b) << ' ' << int(q.cls) << ' ' << q.ring << '\n';
+  }
+  // Top-down picture, 60 m across, 10 px/m, forward up.
+  constexpr int kPx = 600;
+  cv::Mat top(kPx, kPx, CV_8UC3, cv::Scalar(20, 20, 20));
+  for (const auto& q : pts) {
+    const int u = static_cast<int>(kPx / 2 - q.y * 10), v = static_cast<int>(kPx / 2 - q.x * 10);
+    if (u < 0 || v < 0 || u >= kPx || v >= kPx) continue;
+    const Rgb col = ClassTable::builtin().info(static_cast<ClassId>(q.cls)).color;
+    top.at<cv::Vec3b>(v, u) = cv::Vec3b(col.b, col.g, col.r);
+  }
+  cv::drawMarker(top, cv::Point(kPx / 2, kPx / 2), cv::Scalar(255, 255, 255), cv::MARKER_TRIANGLE_UP, 12, 2);
+  cv::imwrite((fs::path(out) / "scan_top.png").string(), top);
+  std::printf("scan of %zu points (%d x %d rays) in %.1f ms: %s/scan.ply, %s/scan_top.png\n", pts.size(),
+              beams.value().rings(), columns, ms, out.c_str(), out.c_str());
+  return 0;
+}
+
+int run(const Args& a) {
+  RunOptions o;
+  o.world = a.get("world", o.world);
+  o.ugvs = static_cast<int>(number(a, "ugvs", o.ugvs));
+  o.seed = static_cast<std::uint64_t>(number(a, "seed", static_cast<double>(o.seed)));
+  o.duration_s = number(a, "duration", o.duration_s);
+  o.out_dir = a.get("out", o.out_dir);
+  o.uav = !a.has("no-uav");
+  o.physics_hz = number(a, "physics-hz", o.physics_hz);
+  o.camera_hz = number(a, "camera-hz", o.camera_hz);
+  o.camera_scale = number(a, "camera-scale", o.camera_scale);
+  o.lidar_hz = number(a, "lidar-hz", o.lidar_hz);
+  o.lidar_columns = static_cast<int>(number(a, "lidar-columns", o.lidar_columns));
+  o.uav_altitude_m = number(a, "altitude", o.uav_altitude_m);
+  o.uav_speed_mps = number(a, "uav-speed", o.uav_speed_mps);
+  o.ugv_speed_mps = number(a, "ugv-speed", o.ugv_speed_mps);
+  o.survey_overlap = number(a, "overlap", o.survey_overlap);
+  o.config_dir = a.get("config-dir");
+  o.threads = static_cast<int>(number(a, "threads", 0));
+  const std::string rec = a.get("record", "light");
+  if (rec == "none") o.record = RecordLevel::kNone;
+  else if (rec == "light") o.record = RecordLevel::kLight;
+  else if (rec == "full") o.record = RecordLevel::kFull;
+  else usage_error("--record must be none, light or full");
+  for (double hz : {o.physics_hz, o.camera_hz, o.lidar_hz})
+    if (!(hz > 0 && hz <= 1000)) usage_error("rates must be in (0, 1000] Hz");
+  const bool tty = isatty(2) != 0;
+  const bool show = !a.has("quiet");
+  double last_print = -1;
+  auto progress = [&](double sim, double total, double rtf) {
+    if (!show) return;
+    if (!tty && sim - last_print < total / 10 && sim < total) return;
+    last_print = sim;
+    std::fprintf(stderr, "%ssim %7.1f / %.1f s  %3.0f%%  real-time factor %.1fx%s", tty ? "\r" : "", sim, total,
+                 100.0 * sim / total, rtf, tty ? "   " : "\n");
+  };
+  std::fprintf(stderr, "running %s%d ground robots on world '%s' for %.0f s (seed %llu) -> %s\n", o.uav ? "1 quadrotor + " : "",
+               o.ugvs, o.world.c_str(), o.duration_s, static_cast<unsigned long long>(o.seed), o.out_dir.c_str());
+  auto s = run_team(o, progress);
+  if (show && tty) std::fprintf(stderr, "\n");
+  if (!s) return fail(s.error());
+  const RunSummary& r = s.value();
+  std::printf("simulated %.1f s in %.1f s: real-time factor %.1fx (sensor rendering %.1f s CPU on the main thread)\n",
+              r.sim_s, r.wall_s, r.real_time_factor, r.sensor_cpu_s);
+  std::printf("quadrotor: %.0f m, %llu camera frames, %llu GPS fixes, %llu VO samples (%llu segments)\n", r.uav_distance_m,
+              static_cast<unsigned long long>(r.camera_frames), static_cast<unsigned long long>(r.gps_fixes),
+              static_cast<unsigned long long>(r.vo_samples), static_cast<unsigned long long>(r.vo_segments));
+  for (const auto& u : r.ugvs)
+    std::printf("%s: %.0f m, %llu goals, %llu collisions, %llu scans, odometry error at end %.2f m\n", u.name.c_str(),
+                u.distance_m, static_cast<unsigned long long>(u.goals_reached), static_cast<unsigned long long>(u.collisions),
+                static_cast<unsigned long long>(u.scans), u.odometry_final_error_m);
+  std::printf("radio: %llu sent, %llu delivered; report: %s/report.md\n", static_cast<unsigned long long>(r.radio_sent),
+              static_cast<unsigned long long>(r.radio_delivered), o.out_dir.c_str());
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2 || std::string(argv[1]) == "--help" || std::string(argv[1]) == "-h") {
+    std::fputs(kUsage, argc < 2 ? stderr : stdout);
+    return argc < 2 ? 2 : 0;
+  }
+  const std::string cmd = argv[1];
+  const bool help = [&] {
+    for (int i = 1; i < argc; ++i)
+      if (std::string(argv[i]) == "--help" || std::string(argv[i]) == "-h") return true;
+    return false;
+  }();
+  try {
+    if (cmd == "world") {
+      if (argc < 3) usage_error("world needs generate, import or show");
+      const std::string sub = argv[2];
+      if (help) {
+        std::fputs(kUsage, stdout);
+        return 0;
+      }
+      const Args a = parse(argc, argv, 3);
+      if (sub == "generate") return world_generate(a);
+      if (sub == "import") return world_import(a);
+      if (sub == "show") return world_show(a);
+      usage_error("unknown world command '" + sub + "'");
+    }
+    if (cmd == "run" && help) {
+      std::fputs(kRunHelp, stdout);
+      return 0;
+    }
+    if (help) {
+      std::fputs(kUsage, stdout);
+      return 0;
+    }
+    const Args a = parse(argc, argv, 2);
+    if (cmd == "render") return render(a);
+    if (cmd == "scan") return scan(a);
+    if (cmd == "run") return run(a);
+    if (cmd == "--version") {
+      std::printf("airground-sim 0.1.0\n");
+      return 0;
+    }
+    usage_error("unknown command '" + cmd + "'");
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "airground-sim: %s\n", e.what());
+    return 1;
+  }
+}

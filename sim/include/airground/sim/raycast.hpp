@@ -1,0 +1,80 @@
+// Exact ray casting against the World's 2.5D surface, shared by the simulated camera and LiDAR.
+#pragma once
+
+#include <Eigen/Core>
+
+#include <cstdint>
+#include <vector>
+
+#include "airground/core/geometry.hpp"
+#include "airground/sim/world.hpp"
+
+namespace ag::sim {
+
+// The first surface a ray meets. Every cell is a flat-topped column reaching down forever, its top at
+// terrain + height, so building sides are vertical faces; a hit on a side face names the column hit.
+struct RayHit {
+  bool hit{false};
+  double range{0};                                  // [m] from the ray origin along the unit direction
+  Eigen::Vector3d point{Eigen::Vector3d::Zero()};   // [m] map frame
+  std::int32_t col{-1}, row{-1};                    // the cell whose face was hit
+  bool vertical_face{false};                        // a column side, not its top
+  Eigen::Vector3d normal{Eigen::Vector3d::UnitZ()};  // outward unit face normal, map frame
+};
+
+struct RaycastOptions {
+  // Max-height pyramid over blocks of 4, 16 and 64 cells: a ray skips any block it passes above.
+  // Off = plain cell-by-cell traversal (the reference the pyramid is tested against).
+  bool hierarchical{true};
+};
+
+// Built once per World (copies the surface and builds the pyramid); cast() is const, allocation-free and
+// safe to call from many threads. Rays leaving the world's rectangle return no hit; a ray starting
+// inside a column hits at range 0.
+class HeightfieldRaycaster {
+ public:
+  // Throws std::invalid_argument when the height/terrain layers do not match the grid or are not finite.
+  explicit HeightfieldRaycaster(const World& world, RaycastOptions options = {});
+
+  // unit_dir must have unit length (ranges are measured along it); max_range [m].
+  [[nodiscard]] RayHit cast(const Eigen::Vector3d& origin, const Eigen::Vector3d& unit_dir,
+                            double max_range) const noexcept;
+
+  [[nodiscard]] const GridGeometry& grid() const noexcept { return grid_; }
+  // terrain + height of a cell [m] (no bounds check).
+  [[nodiscard]] float surface(std::int32_t col, std::int32_t row) const noexcept {
+    return surface_[static_cast<std::size_t>(row) * static_cast<std::size_t>(grid_.width) +
+                    static_cast<std::size_t>(col)];
+  }
+  [[nodiscard]] float max_surface() const noexcept { return max_surface_; }
+  [[nodiscard]] float min_surface() const noexcept { return min_surface_; }
+
+ private:
+  struct Level {
+    int shift{0};  // block side = 1 << shift cells
+    std::int32_t width{0}, height{0};
+    std::vector<float> max;  // highest surface in each block, row-major
+  };
+  static constexpr int kMaxLevels = 3;
+  // A ray clipped to the world's box, in grid coordinates (u east, v south, per metre of range).
+  struct Ray {
+    const Eigen::Vector3d& origin;
+    const Eigen::Vector3d& dir;
+    double u0, v0, z0, du, dv, dz;
+    double t0, t1;  // the part of the ray inside the box
+    int axis;       // how it enters: 0 from above or at the origin, 1 across a u face, 2 across a v face
+  };
+  template <bool kPosU, bool kPosV, int kLevels>
+  RayHit traverse(const Ray& ray) const noexcept;
+
+  GridGeometry grid_;
+  std::vector<float> surface_;  // terrain + height, row-major
+  std::vector<Level> levels_;   // finest first
+  float max_surface_{0};
+  float min_surface_{0};
+};
+
+// Map-from-frame rotation of a pose (R = Rz(yaw) Ry(pitch) Rx(roll)).
+[[nodiscard]] Eigen::Matrix3d rotation_of(const Pose3& pose) noexcept;
+
+}  // namespace ag::sim

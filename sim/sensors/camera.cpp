@@ -1,0 +1,436 @@
+// The simulated nadir camera: lens model, YAML loading, per-pixel ray table and the ray-cast renderer.
+#include "airground/sim/camera.hpp"
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include "airground/platform/config.hpp"
+
+namespace ag::sim {
+
+namespace {
+
+constexpr CameraModel kDefaultModel{};
+constexpr CameraShading kDefaultShading{};
+
+constexpr ParamSpec kCameraParams[] = {
+    ParamSpec::integer("width", kDefaultModel.width, 16, 16384, "px", "image width"),
+    ParamSpec::integer("height", kDefaultModel.height, 16, 16384, "px", "image height"),
+    ParamSpec::real("fx", kDefaultModel.fx, 1.0, 1.0e5, "px", "focal length along x"),
+    ParamSpec::real("fy", kDefaultModel.fy, 1.0, 1.0e5, "px", "focal length along y"),
+    ParamSpec::real("cx", kDefaultModel.cx, -0.5, 16383.5, "px", "principal point x (pixel centres are integers)"),
+    ParamSpec::real("cy", kDefaultModel.cy, -0.5, 16383.5, "px", "principal point y"),
+    ParamSpec::real("k1", kDefaultModel.k1, -5.0, 5.0, "", "radial distortion r^2"),
+    ParamSpec::real("k2", kDefaultModel.k2, -5.0, 5.0, "", "radial distortion r^4"),
+    ParamSpec::real("p1", kDefaultModel.p1, -1.0, 1.0, "", "tangential distortion"),
+    ParamSpec::real("p2", kDefaultModel.p2, -1.0, 1.0, "", "tangential distortion"),
+    ParamSpec::real("k3", kDefaultModel.k3, -5.0, 5.0, "", "radial distortion r^6"),
+};
+constexpr ParamSpec kShadingParams[] = {
+    ParamSpec::real("sun_azimuth_deg", kDefaultShading.sun_azimuth_deg, 0.0, 360.0, "deg",
+                    "compass azimuth of the sun, clockwise from north"),
+    ParamSpec::real("sun_elevation_deg", kDefaultShading.sun_elevation_deg, 1.0, 90.0, "deg", "sun above the horizon"),
+    ParamSpec::real("ambient", kDefaultShading.ambient, 0.0, 1.0, "", "light share reaching shadowed surfaces"),
+    ParamSpec::boolean("shadows", kDefaultShading.shadows, "cast shadows (a second ray toward the sun)"),
+    ParamSpec::boolean("detail_texture", kDefaultShading.detail_texture, "world-fixed fine texture for stereo"),
+    ParamSpec::real("max_range_m", kDefaultShading.max_range_m, 1.0, 1.0e6, "m", "longest ray; beyond is sky"),
+};
+constexpr ParamSection kCameraSchema[] = {
+    {"camera", kCameraParams, "simulated nadir camera intrinsics (OpenCV model)"},
+    {"camera_shading", kShadingParams, "lighting and texture of the simulated camera"},
+};
+
+Result<Config> load_camera_config(std::string_view yaml, std::string_view origin) {
+  return Config::load_string(kCameraSchema, yaml, origin);
+}
+Result<Config> load_camera_config_file(const std::string& path) { return Config::load_file(kCameraSchema, path); }
+
+Result<CameraModel> model_from(const Result<Config>& cfg, std::string_view origin) {
+  if (!cfg) return cfg.error();
+  const SectionView s(cfg.value(), "camera");
+  CameraModel m;
+  m.width = static_cast<int>(s.integer("width"));
+  m.height = static_cast<int>(s.integer("height"));
+  m.fx = s.real("fx");
+  m.fy = s.real("fy");
+  m.cx = s.real("cx");
+  m.cy = s.real("cy");
+  m.k1 = s.real("k1");
+  m.k2 = s.real("k2");
+  m.p1 = s.real("p1");
+  m.p2 = s.real("p2");
+  m.k3 = s.real("k3");
+  if (auto st = m.check(); !st)
+    return Error::make(ErrorCode::kConfig, "config error: " + std::string(origin) + ": " + st.error().message);
+  return m;
+}
+
+Result<CameraShading> shading_from(const Result<Config>& cfg) {
+  if (!cfg) return cfg.error();
+  const SectionView s(cfg.value(), "camera_shading");
+  CameraShading sh;
+  sh.sun_azimuth_deg = s.real("sun_azimuth_deg");
+  sh.sun_elevation_deg = s.real("sun_elevation_deg");
+  sh.ambient = s.real("ambient");
+  sh.shadows = s.boolean("shadows");
+  sh.detail_texture = s.boolean("detail_texture");
+  sh.max_range_m = s.real("max_range_m");
+  return sh;
+}
+
+// The OpenCV distortion of normalized coordinates and its Jacobian.
+struct Distorted {
+  double x, y;
+  double dxdx, dxdy, dydx, dydy;
+};
+Distorted distort(const CameraModel& m, double x, double y) noexcept {
+  const double r2 = x * x + y * y;
+  const double radial = 1.0 + r2 * (m.k1 + r2 * (m.k2 + r2 * m.k3));
+  const double dradial = m.k1 + r2 * (2.0 * m.k2 + 3.0 * m.k3 * r2);  // d radial / d r2
+  Distorted d{};
+  d.x = x * radial + 2.0 * m.p1 * x * y + m.p2 * (r2 + 2.0 * x * x);
+  d.y = y * radial + m.p1 * (r2 + 2.0 * y * y) + 2.0 * m.p2 * x * y;
+  d.dxdx = radial + 2.0 * x * x * dradial + 2.0 * m.p1 * y + 6.0 * m.p2 * x;
+  d.dxdy = 2.0 * x * y * dradial + 2.0 * m.p1 * x + 2.0 * m.p2 * y;
+  d.dydx = 2.0 * x * y * dradial + 2.0 * m.p1 * x + 2.0 * m.p2 * y;
+  d.dydy = radial + 2.0 * y * y * dradial + 6.0 * m.p1 * y + 2.0 * m.p2 * x;
+  return d;
+}
+
+// Newton iteration from the distorted point; false where the lens folds over (no unique inverse).
+bool undistort(const CameraModel& m, double xd, double yd, double& x, double& y) noexcept {
+  x = xd;
+  y = yd;
+  for (int it = 0; it < 60; ++it) {
+    const Distorted d = distort(m, x, y);
+    const double ex = d.x - xd, ey = d.y - yd;
+    const double det = d.dxdx * d.dydy - d.dxdy * d.dydx;
+    if (!(det > 1e-9)) return false;
+    x -= (d.dydy * ex - d.dxdy * ey) / det;
+    y -= (-d.dydx * ex + d.dxdx * ey) / det;
+    if (ex * ex + ey * ey < 1e-28) break;
+  }
+  const Distorted d = distort(m, x, y);
+  const double det = d.dxdx * d.dydy - d.dxdy * d.dydx;
+  return std::hypot(d.x - xd, d.y - yd) < 1e-10 && det > 1e-9 && std::isfinite(x) && std::isfinite(y);
+}
+
+// Deterministic lattice hash in [0, 1).
+inline double lattice(std::int64_t i, std::int64_t j, std::uint64_t salt) noexcept {
+  std::uint64_t z = static_cast<std::uint64_t>(i) * 0x9E3779B97F4A7C15ULL ^ static_cast<std::uint64_t>(j) * 0xC2B2AE3D27D4EB4FULL ^ salt;
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+  z ^= z >> 31;
+  return static_cast<double>(z >> 11) * 0x1.0p-53;
+}
+
+// Smooth value noise in [0, 1) on a unit lattice.
+inline double value_noise(double a, double b, std::uint64_t salt) noexcept {
+  const double fa = std::floor(a), fb = std::floor(b);
+  const auto ia = static_cast<std::int64_t>(fa), ib = static_cast<std::int64_t>(fb);
+  double ta = a - fa, tb = b - fb;
+  ta = ta * ta * (3.0 - 2.0 * ta);
+  tb = tb * tb * (3.0 - 2.0 * tb);
+  const double n00 = lattice(ia, ib, salt), n10 = lattice(ia + 1, ib, salt);
+  const double n01 = lattice(ia, ib + 1, salt), n11 = lattice(ia + 1, ib + 1, salt);
+  return (n00 + (n10 - n00) * ta) + ((n01 + (n11 - n01) * ta) - (n00 + (n10 - n00) * ta)) * tb;
+}
+
+constexpr float kGroundStep = 0.3f;    // [m] lower steps are shaded as ground
+constexpr double kShadowBias = 0.05;   // [m] shadow rays leave the ground this high (no self-shadowing)
+constexpr int kSunBlockShift = 2;      // sun ceiling per 4x4-cell block
+
+// Octaves of the detail texture: wavelength [m] and amplitude of the brightness factor.
+struct Octave {
+  double wavelength, amplitude;
+  std::uint64_t salt;
+};
+constexpr Octave kOctaves[] = {
+    {0.03, 0.08, 0x1234567ULL}, {0.06, 0.08, 0x2345678ULL}, {0.12, 0.09, 0x3456789ULL},
+    {0.25, 0.10, 0x456789AULL}, {0.50, 0.10, 0x56789ABULL}, {1.00, 0.08, 0x6789ABCULL},
+};
+
+// Brightness factor at surface coordinates (a, b) [m] seen with a pixel footprint [m]: octaves finer than
+// the footprint fade out (a pixel integrates them) so every view agrees on what it can resolve.
+inline double detail_factor(double a, double b, double footprint) noexcept {
+  double f = 1.0;
+  for (const Octave& o : kOctaves) {
+    const double w = std::clamp(2.0 - 4.0 * footprint / o.wavelength, 0.0, 1.0);
+    if (w <= 0.0) continue;
+    f += o.amplitude * w * (2.0 * value_noise(a / o.wavelength, b / o.wavelength, o.salt) - 1.0);
+  }
+  return f;
+}
+
+}  // namespace
+
+CameraModel CameraModel::scaled(double factor) const {
+  CameraModel m = *this;
+  m.width = static_cast<int>(std::lround(width * factor));
+  m.height = static_cast<int>(std::lround(height * factor));
+  m.fx = fx * factor;
+  m.fy = fy * factor;
+  m.cx = (cx + 0.5) * factor - 0.5;  // pixel centres are integers: scale about the image corner
+  m.cy = (cy + 0.5) * factor - 0.5;
+  return m;
+}
+
+Status CameraModel::check() const {
+  const auto bad = [](const std::string& what) { return Error::make(ErrorCode::kInvalidArgument, what); };
+  if (width <= 0 || height <= 0) return bad("camera width and height must be positive");
+  if (!(fx > 0.0) || !(fy > 0.0) || !std::isfinite(fx) || !std::isfinite(fy)) return bad("camera fx and fy must be positive");
+  if (!(cx >= -0.5 && cx <= width - 0.5)) return bad("camera cx must lie inside the image [-0.5, width - 0.5]");
+  if (!(cy >= -0.5 && cy <= height - 0.5)) return bad("camera cy must lie inside the image [-0.5, height - 0.5]");
+  for (const double k : {k1, k2, p1, p2, k3})
+    if (!std::isfinite(k)) return bad("camera distortion coefficients must be finite");
+  return ok_status();
+}
+
+Eigen::Matrix3d CameraModel::body_from_camera() noexcept {
+  Eigen::Matrix3d m;
+  // camera x = body -y (right), camera y = body -x (image down = backward), camera z = body -z (down)
+  m << 0, -1, 0,  //
+      -1, 0, 0,   //
+      0, 0, -1;
+  return m;
+}
+
+Result<CameraModel> CameraModel::load_string(std::string_view yaml, std::string_view origin) {
+  return model_from(load_camera_config(yaml, origin), origin);
+}
+Result<CameraModel> CameraModel::load_file(const std::string& path) {
+  return model_from(load_camera_config_file(path), path);
+}
+Result<CameraShading> CameraShading::load_string(std::string_view yaml, std::string_view origin) {
+  return shading_from(load_camera_config(yaml, origin));
+}
+Result<CameraShading> CameraShading::load_file(const std::string& path) {
+  return shading_from(load_camera_config_file(path));
+}
+
+CameraRenderer::CameraRenderer(const World& world, const CameraModel& model, const CameraShading& shading,
+                               std::shared_ptr<const HeightfieldRaycaster> raycaster)
+    : world_(world), model_(model), shading_(shading), raycaster_(std::move(raycaster)) {
+  if (auto st = model_.check(); !st) throw std::invalid_argument("CameraRenderer: " + st.error().message);
+  const GridGeometry& g = world.grid();
+  if (world.class_id.type() != CV_8UC1 || world.class_id.rows != g.height || world.class_id.cols != g.width ||
+      world.albedo.type() != CV_8UC3 || world.albedo.rows != g.height || world.albedo.cols != g.width)
+    throw std::invalid_argument("CameraRenderer: the world's class_id (CV_8UC1) and albedo (CV_8UC3) must match its grid");
+  if (!raycaster_) {
+    raycaster_ = std::make_shared<const HeightfieldRaycaster>(world);
+  } else {
+    const GridGeometry& r = raycaster_->grid();
+    if (r.width != g.width || r.height != g.height || r.resolution != g.resolution || r.origin_x != g.origin_x ||
+        r.origin_y != g.origin_y)
+      throw std::invalid_argument("CameraRenderer: the shared raycaster was built for another world");
+  }
+  const double az = shading_.sun_azimuth_deg * kPi / 180.0, el = shading_.sun_elevation_deg * kPi / 180.0;
+  sun_ = Eigen::Vector3d(std::sin(az) * std::cos(el), std::cos(az) * std::cos(el), std::sin(el));
+
+  if (shading_.shadows) build_sun_ceiling();
+
+  const auto n = static_cast<std::size_t>(model_.width) * static_cast<std::size_t>(model_.height);
+  rays_.assign(3 * n, 0.0f);
+  for (int r = 0; r < model_.height; ++r) {
+    for (int c = 0; c < model_.width; ++c) {
+      double x = 0, y = 0;
+      if (!undistort(model_, (c - model_.cx) / model_.fx, (r - model_.cy) / model_.fy, x, y)) continue;
+      const double inv = 1.0 / std::sqrt(x * x + y * y + 1.0);
+      float* p = rays_.data() + 3 * (static_cast<std::size_t>(r) * static_cast<std::size_t>(model_.width) +
+                                     static_cast<std::size_t>(c));
+      p[0] = static_cast<float>(x * inv);
+      p[1] = static_cast<float>(y * inv);
+      p[2] = static_cast<float>(inv);
+    }
+  }
+}
+
+// U(B), an upper bound on the shadow height over block B, from the exact recursion along the sun's
+// horizontal direction s (rise k per metre): G(x) = max(max_{0<=d<D} S(x + d s) - k d, G(x + D s) - k D).
+// Over a block, the first term is bounded by the highest block in the bounding box of the region swept
+// by B over [0, D), the second by U of the blocks under B + D s, which lie sunward of B (D = 2 blocks),
+// so visiting blocks from the sun's side outward computes every U from finished ones.
+void CameraRenderer::build_sun_ceiling() {
+  const HeightfieldRaycaster& rc = *raycaster_;
+  const GridGeometry& g = rc.grid();
+  constexpr std::int32_t side = std::int32_t{1} << kSunBlockShift;
+  const std::int32_t bw = (g.width + side - 1) >> kSunBlockShift, bh = (g.height + side - 1) >> kSunBlockShift;
+  const auto nb = static_cast<std::size_t>(bw) * static_cast<std::size_t>(bh);
+  const auto at = [bw](std::int32_t i, std::int32_t j) {
+    return static_cast<std::size_t>(j) * static_cast<std::size_t>(bw) + static_cast<std::size_t>(i);
+  };
+  std::vector<float> block_max(nb, -std::numeric_limits<float>::infinity());
+  for (std::int32_t r = 0; r < g.height; ++r)
+    for (std::int32_t c = 0; c < g.width; ++c) {
+      float& m = block_max[at(c >> kSunBlockShift, r >> kSunBlockShift)];
+      m = std::max(m, rc.surface(c, r));
+    }
+  sun_blocks_w_ = bw;
+  const double horizontal = std::hypot(sun_.x(), sun_.y());
+  if (horizontal < 1e-9) {  // the sun overhead: only a point's own column could shade it
+    sun_ceiling_ = std::move(block_max);
+    return;
+  }
+  const double su = sun_.x() / horizontal, sv = -sun_.y() / horizontal;  // in (u east, v south) block units
+  constexpr double kStep = 2.0;                                             // D [blocks]
+  const double decay = sun_.z() / horizontal * kStep * side * g.resolution;
+  std::vector<std::int32_t> order(nb);
+  for (std::size_t k = 0; k < nb; ++k) order[k] = static_cast<std::int32_t>(k);
+  const auto along = [&](std::int32_t k) { return (k % bw + 0.5) * su + (k / bw + 0.5) * sv; };
+  std::sort(order.begin(), order.end(), [&](std::int32_t a, std::int32_t b) { return along(a) > along(b); });
+
+  sun_ceiling_.assign(nb, -std::numeric_limits<float>::infinity());
+  constexpr double kTouch = 1e-9;  // blocks that only touch a region count as inside it
+  const auto span = [&](double lo, double hi, std::int32_t n, std::int32_t& first, std::int32_t& last) {
+    first = std::max(static_cast<std::int32_t>(std::floor(lo - kTouch)), 0);
+    last = std::min(static_cast<std::int32_t>(std::floor(hi + kTouch)), n - 1);
+  };
+  for (const std::int32_t k : order) {
+    const std::int32_t bi = k % bw, bj = k / bw;
+    float m = -std::numeric_limits<float>::infinity();
+    std::int32_t i0 = 0, i1 = 0, j0 = 0, j1 = 0;
+    span(bi + std::min(0.0, kStep * su), bi + 1 + std::max(0.0, kStep * su), bw, i0, i1);
+    span(bj + std::min(0.0, kStep * sv), bj + 1 + std::max(0.0, kStep * sv), bh, j0, j1);
+    for (std::int32_t j = j0; j <= j1; ++j)
+      for (std::int32_t i = i0; i <= i1; ++i) m = std::max(m, block_max[at(i, j)]);
+    span(bi + kStep * su, bi + 1 + kStep * su, bw, i0, i1);
+    span(bj + kStep * sv, bj + 1 + kStep * sv, bh, j0, j1);
+    for (std::int32_t j = j0; j <= j1; ++j)
+      for (std::int32_t i = i0; i <= i1; ++i) m = std::max(m, static_cast<float>(static_cast<double>(sun_ceiling_[at(i, j)]) - decay));
+    sun_ceiling_[static_cast<std::size_t>(k)] = m;
+  }
+}
+
+Eigen::Vector3f CameraRenderer::pixel_ray(int col, int row) const noexcept {
+  if (col < 0 || row < 0 || col >= model_.width || row >= model_.height) return Eigen::Vector3f::Zero();
+  const float* p = rays_.data() + 3 * (static_cast<std::size_t>(row) * static_cast<std::size_t>(model_.width) +
+                                       static_cast<std::size_t>(col));
+  return {p[0], p[1], p[2]};
+}
+
+void CameraRenderer::prepare(const Pose3& body_pose_in_map, CameraFrame& out, std::int64_t stamp_ns) const {
+  out.rgb.create(model_.height, model_.width, CV_8UC3);
+  out.cls.create(model_.height, model_.width, CV_8UC1);
+  out.depth.create(model_.height, model_.width, CV_32FC1);
+  out.pose = body_pose_in_map;
+  out.stamp_ns = stamp_ns;
+}
+
+void CameraRenderer::render(const Pose3& body_pose_in_map, CameraFrame& out, std::int64_t stamp_ns) const {
+  prepare(body_pose_in_map, out, stamp_ns);
+  render_rows(body_pose_in_map, 0, model_.height, out);
+}
+
+void CameraRenderer::render_rows(const Pose3& pose, int row_begin, int row_end, CameraFrame& out) const noexcept {
+  row_begin = std::max(row_begin, 0);
+  row_end = std::min(row_end, std::min(model_.height, out.rgb.rows));
+  if (out.rgb.cols != model_.width || out.cls.size() != out.rgb.size() || out.depth.size() != out.rgb.size()) return;
+
+  const Eigen::Matrix3d map_from_camera = rotation_of(pose) * CameraModel::body_from_camera();
+  const Eigen::Vector3d eye(pose.x, pose.y, pose.z);
+  const HeightfieldRaycaster& rc = *raycaster_;
+  const GridGeometry& g = world_.grid();
+  const double inv_res = 1.0 / g.resolution;
+  const double zmax = static_cast<double>(rc.max_surface());
+  const double sun_flat = shading_.ambient + (1.0 - shading_.ambient) * sun_.z();  // a lit flat top renders at albedo
+  const double pixel_angle = 1.0 / std::max(model_.fx, model_.fy);
+
+  for (int r = row_begin; r < row_end; ++r) {
+    auto* rgb = out.rgb.ptr<cv::Vec3b>(r);
+    auto* cls = out.cls.ptr<std::uint8_t>(r);
+    auto* depth = out.depth.ptr<float>(r);
+    const float* ray = rays_.data() + 3 * static_cast<std::size_t>(r) * static_cast<std::size_t>(model_.width);
+    for (int c = 0; c < model_.width; ++c, ray += 3) {
+      const Eigen::Vector3d dc(ray[0], ray[1], ray[2]);
+      RayHit hit;
+      if (dc.z() > 0.0) hit = rc.cast(eye, map_from_camera * dc, shading_.max_range_m);
+      if (!hit.hit) {
+        rgb[c] = cv::Vec3b(0, 0, 0);
+        cls[c] = raw(ClassId::kUnknown);
+        depth[c] = 0.0f;
+        continue;
+      }
+      depth[c] = static_cast<float>(hit.range * dc.z());
+      cls[c] = world_.class_id.at<std::uint8_t>(hit.row, hit.col);
+
+      // Steps lower than kGroundStep (terrain sampled into flat cells, curbs) are shaded as ground.
+      const Eigen::Vector3d& p = hit.point;
+      const float s_hit = rc.surface(hit.col, hit.row);
+      bool wall = hit.vertical_face;
+      if (wall) {
+        const std::int32_t nc = hit.col + static_cast<std::int32_t>(hit.normal.x());
+        const std::int32_t nr = hit.row - static_cast<std::int32_t>(hit.normal.y());
+        wall = !g.contains(nc, nr) || s_hit - rc.surface(nc, nr) >= kGroundStep;
+      }
+      const Eigen::Vector3d normal = wall ? hit.normal : Eigen::Vector3d::UnitZ();
+
+      // Albedo: bilinear between cell centres on the ground and tops, blending only cells of about the
+      // same surface (a roof edge does not take the street's colour); the wall's own cell on sides.
+      double alb[3] = {0, 0, 0};
+      const cv::Vec3b& own = world_.albedo.at<cv::Vec3b>(hit.row, hit.col);
+      if (wall) {
+        for (int k = 0; k < 3; ++k) alb[k] = own[k];
+      } else {
+        const double u = (p.x() - g.origin_x) * inv_res - 0.5, v = (g.origin_y - p.y()) * inv_res - 0.5;
+        const double fu = std::floor(u), fv = std::floor(v);
+        const double tu = u - fu, tv = v - fv;
+        const auto i0 = static_cast<std::int32_t>(fu), j0 = static_cast<std::int32_t>(fv);
+        double wsum = 0.0;
+        for (int dj = 0; dj < 2; ++dj) {
+          for (int di = 0; di < 2; ++di) {
+            const std::int32_t i = std::clamp(i0 + di, 0, g.width - 1), j = std::clamp(j0 + dj, 0, g.height - 1);
+            if (std::abs(rc.surface(i, j) - s_hit) > kGroundStep) continue;
+            const double wgt = (di != 0 ? tu : 1.0 - tu) * (dj != 0 ? tv : 1.0 - tv);
+            const cv::Vec3b& a = world_.albedo.at<cv::Vec3b>(j, i);
+            for (int k = 0; k < 3; ++k) alb[k] += wgt * a[k];
+            wsum += wgt;
+          }
+        }
+        if (wsum > 1e-9) {
+          for (double& a : alb) a /= wsum;
+        } else {
+          for (int k = 0; k < 3; ++k) alb[k] = own[k];
+        }
+      }
+
+      double factor = 1.0;
+      if (shading_.detail_texture) {
+        const Eigen::Vector3d dw = map_from_camera * dc;
+        const double cos_view = std::max(0.2, std::abs(normal.dot(dw)));
+        const double footprint = hit.range * pixel_angle / cos_view;
+        if (!wall) {
+          factor = detail_factor(p.x(), p.y(), footprint);
+        } else if (normal.x() != 0.0) {
+          factor = detail_factor(p.y(), p.z(), footprint);
+        } else {
+          factor = detail_factor(p.x(), p.z(), footprint);
+        }
+      }
+
+      double light = shading_.ambient;
+      const double cos_sun = normal.dot(sun_);
+      if (cos_sun > 0.0) {
+        bool lit = true;
+        if (shading_.shadows) {
+          // From just off the surface (above the cell's top for ground), toward the sun; skipped where
+          // the sun ceiling proves nothing can shade that height.
+          const Eigen::Vector3d from = wall ? Eigen::Vector3d(p + 1e-3 * normal)
+                                            : Eigen::Vector3d(p.x(), p.y(), static_cast<double>(s_hit) + kShadowBias);
+          if (from.z() < zmax && (!shading_.shadow_culling || from.z() <= static_cast<double>(sun_ceiling(hit.col, hit.row))))
+            lit = !rc.cast(from, sun_, (zmax - from.z()) / sun_.z() + 1.0).hit;
+        }
+        if (lit) light += (1.0 - shading_.ambient) * cos_sun;
+      }
+      const double gain = factor * light / sun_flat;
+      rgb[c] = cv::Vec3b(cv::saturate_cast<std::uint8_t>(alb[0] * gain), cv::saturate_cast<std::uint8_t>(alb[1] * gain),
+                         cv::saturate_cast<std::uint8_t>(alb[2] * gain));
+    }
+  }
+}
+
+}  // namespace ag::sim

@@ -1,0 +1,242 @@
+// The simulated Ouster LiDAR: metadata loading, the SDK's beam geometry, ray-cast scans with seeded noise.
+#include "airground/sim/lidar.hpp"
+
+#include <Eigen/Geometry>
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+
+#include "airground/platform/config.hpp"
+
+namespace ag::sim {
+
+namespace {
+
+using nlohmann::json;
+
+constexpr LidarNoise kDefaultNoise{};
+constexpr ParamSpec kNoiseParams[] = {
+    ParamSpec::real("range_sigma_m", kDefaultNoise.range_sigma_m, 0.0, 1.0, "m", "Gaussian range noise"),
+    ParamSpec::real("min_range_m", kDefaultNoise.min_range_m, 0.0, 10.0, "m", "closer returns are dropped"),
+    ParamSpec::real("max_range_m", kDefaultNoise.max_range_m, 1.0, 1000.0, "m", "nothing is seen beyond"),
+    ParamSpec::real("dropout_prob", kDefaultNoise.dropout_prob, 0.0, 1.0, "", "chance a return is lost"),
+};
+constexpr ParamSection kNoiseSchema[] = {{"lidar_noise", kNoiseParams, "simulated LiDAR range noise"}};
+
+Result<LidarNoise> noise_from(const Result<Config>& cfg, std::string_view origin) {
+  if (!cfg) return cfg.error();
+  const SectionView s(cfg.value(), "lidar_noise");
+  LidarNoise n;
+  n.range_sigma_m = s.real("range_sigma_m");
+  n.min_range_m = s.real("min_range_m");
+  n.max_range_m = s.real("max_range_m");
+  n.dropout_prob = s.real("dropout_prob");
+  if (auto st = n.check(); !st)
+    return Error::make(ErrorCode::kConfig, "config error: " + std::string(origin) + ": " + st.error().message);
+  return n;
+}
+
+Error malformed(std::string_view origin, const std::string& what) {
+  return Error::make(ErrorCode::kMalformed, "ouster metadata " + std::string(origin) + ": " + what);
+}
+
+// A list of finite numbers within [lo, hi] under `key` of `node`.
+Result<std::vector<double>> number_list(const json& node, const char* key, double lo, double hi, std::string_view origin) {
+  const auto it = node.find(key);
+  if (it == node.end()) return malformed(origin, std::string("missing key '") + key + "'");
+  if (!it->is_array()) return malformed(origin, std::string("'") + key + "' must be a list of numbers");
+  std::vector<double> v;
+  v.reserve(it->size());
+  for (const auto& e : *it) {
+    if (!e.is_number()) return malformed(origin, std::string("'") + key + "' holds a non-number");
+    const double x = e.get<double>();
+    if (!std::isfinite(x) || x < lo || x > hi)
+      return malformed(origin, std::string("'") + key + "' value " + std::to_string(x) + " outside [" +
+                                   std::to_string(lo) + ", " + std::to_string(hi) + "]");
+    v.push_back(x);
+  }
+  return v;
+}
+
+// Counter-based randomness: splitmix64 of (seed, ray) so that every ray's noise is independent of the others.
+inline std::uint64_t splitmix64(std::uint64_t& state) noexcept {
+  std::uint64_t z = (state += 0x9E3779B97F4A7C15ULL);
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+  return z ^ (z >> 31);
+}
+inline double unit_open(std::uint64_t bits) noexcept {  // (0, 1]
+  return (static_cast<double>(bits >> 11) + 1.0) * 0x1.0p-53;
+}
+
+}  // namespace
+
+Status LidarNoise::check() const {
+  const auto bad = [](const std::string& what) { return Error::make(ErrorCode::kInvalidArgument, what); };
+  if (!(range_sigma_m >= 0.0) || !std::isfinite(range_sigma_m)) return bad("lidar_noise.range_sigma_m must be >= 0");
+  if (!(min_range_m >= 0.0)) return bad("lidar_noise.min_range_m must be >= 0");
+  if (!(max_range_m > min_range_m) || !std::isfinite(max_range_m))
+    return bad("lidar_noise.max_range_m must be finite and above min_range_m");
+  if (!(dropout_prob >= 0.0 && dropout_prob <= 1.0)) return bad("lidar_noise.dropout_prob must be in [0, 1]");
+  return ok_status();
+}
+
+Result<LidarNoise> LidarNoise::load_string(std::string_view yaml, std::string_view origin) {
+  return noise_from(Config::load_string(kNoiseSchema, yaml, origin), origin);
+}
+Result<LidarNoise> LidarNoise::load_file(const std::string& path) {
+  return noise_from(Config::load_file(kNoiseSchema, path), path);
+}
+
+Result<OusterBeamModel> OusterBeamModel::from_metadata_string(std::string_view text, std::string_view origin, int columns) {
+  if (columns != 512 && columns != 1024 && columns != 2048)
+    return Error::make(ErrorCode::kInvalidArgument, "ouster metadata " + std::string(origin) + ": columns must be 512, 1024 or 2048, got " +
+                                                        std::to_string(columns));
+  json root;
+  try {
+    root = json::parse(text.begin(), text.end());
+  } catch (const json::exception& e) {
+    return malformed(origin, std::string("not valid JSON (") + e.what() + ")");
+  }
+  if (!root.is_object()) return malformed(origin, "the top level must be a JSON object");
+  // Firmware 2.x metadata keeps the intrinsics at the top level; SDK 0.11+ metadata nests them.
+  const json& beams = root.contains("beam_intrinsics") && root["beam_intrinsics"].is_object() ? root["beam_intrinsics"] : root;
+  const json& lidar = root.contains("lidar_intrinsics") && root["lidar_intrinsics"].is_object() ? root["lidar_intrinsics"] : root;
+
+  OusterBeamModel m;
+  m.columns = columns;
+  auto alt = number_list(beams, "beam_altitude_angles", -90.0, 90.0, origin);
+  if (!alt) return alt.error();
+  auto azi = number_list(beams, "beam_azimuth_angles", -180.0, 180.0, origin);
+  if (!azi) return azi.error();
+  if (alt.value().empty() || alt.value().size() > 256)
+    return malformed(origin, "'beam_altitude_angles' must list 1 to 256 beams");
+  if (azi.value().size() != alt.value().size())
+    return malformed(origin, "'beam_azimuth_angles' has " + std::to_string(azi.value().size()) + " entries, 'beam_altitude_angles' " +
+                                 std::to_string(alt.value().size()));
+  m.altitude_deg = std::move(alt.value());
+  m.azimuth_deg = std::move(azi.value());
+
+  if (const auto it = beams.find("lidar_origin_to_beam_origin_mm"); it != beams.end()) {
+    if (!it->is_number() || !std::isfinite(it->get<double>()) || it->get<double>() < 0.0 || it->get<double>() > 200.0)
+      return malformed(origin, "'lidar_origin_to_beam_origin_mm' must be a number in [0, 200]");
+    m.lidar_origin_to_beam_origin_mm = it->get<double>();
+  }
+  if (beams.contains("beam_to_lidar_transform")) {  // newer metadata: the beam origin may sit off the plane
+    auto t = number_list(beams, "beam_to_lidar_transform", -1.0e4, 1.0e4, origin);
+    if (!t) return t.error();
+    if (t.value().size() != 16) return malformed(origin, "'beam_to_lidar_transform' must hold 16 numbers (row-major 4x4)");
+    m.lidar_origin_to_beam_origin_mm = t.value()[3];
+    m.beam_origin_z_mm = t.value()[11];
+    if (std::abs(m.lidar_origin_to_beam_origin_mm) > 200.0 || std::abs(m.beam_origin_z_mm) > 200.0)
+      return malformed(origin, "'beam_to_lidar_transform' offsets must be within 200 mm");
+  }
+  m.lidar_to_sensor = Eigen::Matrix4d::Identity();
+  m.lidar_to_sensor(0, 0) = -1.0;  // OS-1: lidar frame x points at the connector, sensor frame x away from it
+  m.lidar_to_sensor(1, 1) = -1.0;
+  m.lidar_to_sensor(2, 3) = 36.18;
+  if (lidar.contains("lidar_to_sensor_transform")) {
+    auto t = number_list(lidar, "lidar_to_sensor_transform", -1.0e4, 1.0e4, origin);
+    if (!t) return t.error();
+    if (t.value().size() != 16) return malformed(origin, "'lidar_to_sensor_transform' must hold 16 numbers (row-major 4x4)");
+    for (int r = 0; r < 4; ++r)
+      for (int c = 0; c < 4; ++c) m.lidar_to_sensor(r, c) = t.value()[static_cast<std::size_t>(4 * r + c)];
+    const Eigen::Matrix3d rot = m.lidar_to_sensor.topLeftCorner<3, 3>();
+    if ((rot.transpose() * rot - Eigen::Matrix3d::Identity()).norm() > 1e-3 || rot.determinant() < 0.0 ||
+        (m.lidar_to_sensor.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).norm() > 1e-9)
+      return malformed(origin, "'lidar_to_sensor_transform' is not a rigid transform");
+  }
+  return m;
+}
+
+Result<OusterBeamModel> OusterBeamModel::from_metadata_json(const std::string& path, int columns) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Error::make(ErrorCode::kIo, "ouster metadata " + path + ": cannot open");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return from_metadata_string(ss.str(), path, columns);
+}
+
+std::string OusterBeamModel::default_metadata_path() {
+  return std::string(AG_SOURCE_DIR) + "/config/sensors/ouster/os1-64_legacy_metadata.json";
+}
+
+Result<OusterBeamModel> OusterBeamModel::load_default(int columns) {
+  return from_metadata_json(default_metadata_path(), columns);
+}
+
+LidarSimulator::LidarSimulator(const World& world, const OusterBeamModel& beams, const LidarNoise& noise,
+                               std::shared_ptr<const HeightfieldRaycaster> raycaster)
+    : world_(world), beams_(beams), noise_(noise), raycaster_(std::move(raycaster)) {
+  if (beams_.altitude_deg.empty() || beams_.altitude_deg.size() != beams_.azimuth_deg.size() || beams_.rings() > 65535)
+    throw std::invalid_argument("LidarSimulator: the beam model needs matching, non-empty altitude and azimuth lists");
+  if (beams_.columns != 512 && beams_.columns != 1024 && beams_.columns != 2048)
+    throw std::invalid_argument("LidarSimulator: columns must be 512, 1024 or 2048");
+  if (auto st = noise_.check(); !st) throw std::invalid_argument("LidarSimulator: " + st.error().message);
+  const GridGeometry& g = world.grid();
+  if (world.class_id.type() != CV_8UC1 || world.class_id.rows != g.height || world.class_id.cols != g.width)
+    throw std::invalid_argument("LidarSimulator: the world's class_id layer must be CV_8UC1 matching its grid");
+  if (!raycaster_) {
+    raycaster_ = std::make_shared<const HeightfieldRaycaster>(world);
+  } else {
+    const GridGeometry& r = raycaster_->grid();
+    if (r.width != g.width || r.height != g.height || r.resolution != g.resolution || r.origin_x != g.origin_x ||
+        r.origin_y != g.origin_y)
+      throw std::invalid_argument("LidarSimulator: the shared raycaster was built for another world");
+  }
+
+  const double n = beams_.lidar_origin_to_beam_origin_mm * 1e-3, nz = beams_.beam_origin_z_mm * 1e-3;
+  beam_offset_m_ = std::hypot(n, nz);
+  const Eigen::Matrix3d rot = beams_.lidar_to_sensor.topLeftCorner<3, 3>();
+  const Eigen::Vector3d trans = beams_.lidar_to_sensor.topRightCorner<3, 1>() * 1e-3;
+  const auto rings = static_cast<std::size_t>(beams_.rings());
+  const auto cols = static_cast<std::size_t>(beams_.columns);
+  ray_origin_.resize(rings * cols);
+  ray_dir_.resize(rings * cols);
+  for (std::size_t c = 0; c < cols; ++c) {
+    const double encoder = 2.0 * kPi * (1.0 - static_cast<double>(c) / static_cast<double>(cols));
+    for (std::size_t i = 0; i < rings; ++i) {
+      const double azimuth = -beams_.azimuth_deg[i] * kPi / 180.0;
+      const double altitude = beams_.altitude_deg[i] * kPi / 180.0;
+      const Eigen::Vector3d dir(std::cos(encoder + azimuth) * std::cos(altitude),
+                                std::sin(encoder + azimuth) * std::cos(altitude), std::sin(altitude));
+      const Eigen::Vector3d beam_origin(n * std::cos(encoder), n * std::sin(encoder), nz);
+      ray_origin_[c * rings + i] = rot * beam_origin + trans;
+      ray_dir_[c * rings + i] = (rot * dir).normalized();
+    }
+  }
+}
+
+void LidarSimulator::scan(const Pose3& pose, std::uint64_t seed, std::vector<LidarPoint>& out) const {
+  out.clear();
+  out.reserve(ray_dir_.size());
+  const Eigen::Matrix3d rot = rotation_of(pose);
+  const Eigen::Vector3d pos(pose.x, pose.y, pose.z);
+  const HeightfieldRaycaster& rc = *raycaster_;
+  const double sigma = noise_.range_sigma_m;
+  const double cast_range = noise_.max_range_m + 6.0 * sigma;
+  const auto rings = static_cast<std::size_t>(beams_.rings());
+  const std::uint64_t key = seed * 0xD1B54A32D192ED03ULL;
+
+  for (std::size_t k = 0; k < ray_dir_.size(); ++k) {
+    const RayHit hit = rc.cast(rot * ray_origin_[k] + pos, rot * ray_dir_[k], cast_range);
+    if (!hit.hit) continue;
+    const auto col = static_cast<std::uint16_t>(k / rings), ring = static_cast<std::uint16_t>(k % rings);
+    double range = hit.range + beam_offset_m_;
+    if (sigma > 0.0 || noise_.dropout_prob > 0.0) {
+      std::uint64_t state = key ^ ((static_cast<std::uint64_t>(col) << 32) | ring);
+      const double u1 = unit_open(splitmix64(state)), u2 = unit_open(splitmix64(state));
+      if (noise_.dropout_prob > 0.0 && unit_open(splitmix64(state)) <= noise_.dropout_prob) continue;
+      range += sigma * std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * kPi * u2);  // Box-Muller
+    }
+    if (range < noise_.min_range_m || range > noise_.max_range_m) continue;
+    const Eigen::Vector3d p = ray_origin_[k] + (range - beam_offset_m_) * ray_dir_[k];
+    out.push_back(LidarPoint{static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()),
+                             static_cast<float>(range), world_.class_id.at<std::uint8_t>(hit.row, hit.col), ring, col});
+  }
+}
+
+}  // namespace ag::sim

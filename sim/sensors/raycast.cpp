@@ -1,0 +1,241 @@
+// Ray / 2.5D heightfield intersection: Amanatides-Woo cell traversal that skips max-pyramid blocks.
+#include "airground/sim/raycast.hpp"
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <cmath>
+#include <iterator>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace ag::sim {
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr int kLevelShifts[] = {2, 4, 6};  // blocks of 4, 16 and 64 cells
+
+// floor() of a grid coordinate already known to lie near [lo, hi], as a clamped index.
+std::int32_t floor_clamped(double x, std::int32_t lo, std::int32_t hi) noexcept {
+  const double f = std::floor(std::clamp(x, static_cast<double>(lo), static_cast<double>(hi)));
+  return static_cast<std::int32_t>(f);
+}
+
+}  // namespace
+
+Eigen::Matrix3d rotation_of(const Pose3& pose) noexcept {
+  return (Eigen::AngleAxisd(pose.yaw, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(pose.pitch, Eigen::Vector3d::UnitY()) *
+          Eigen::AngleAxisd(pose.roll, Eigen::Vector3d::UnitX()))
+      .toRotationMatrix();
+}
+
+HeightfieldRaycaster::HeightfieldRaycaster(const World& world, RaycastOptions options) : grid_(world.grid()) {
+  const auto w = grid_.width, h = grid_.height;
+  if (w <= 0 || h <= 0 || !(grid_.resolution > 0.0) || !std::isfinite(grid_.resolution))
+    throw std::invalid_argument("HeightfieldRaycaster: the world grid is empty or its resolution is not positive");
+  const auto check = [&](const cv::Mat& m, const char* name) {
+    if (m.type() != CV_32FC1 || m.rows != h || m.cols != w)
+      throw std::invalid_argument(std::string("HeightfieldRaycaster: layer '") + name + "' must be CV_32FC1 of " +
+                                  std::to_string(w) + "x" + std::to_string(h) + " cells");
+  };
+  check(world.height, "height");
+  check(world.terrain, "terrain");
+
+  const auto uw = static_cast<std::size_t>(w);
+  surface_.resize(uw * static_cast<std::size_t>(h));
+  max_surface_ = -std::numeric_limits<float>::infinity();
+  min_surface_ = std::numeric_limits<float>::infinity();
+  for (std::int32_t r = 0; r < h; ++r) {
+    const float* hr = world.height.ptr<float>(r);
+    const float* tr = world.terrain.ptr<float>(r);
+    float* sr = surface_.data() + static_cast<std::size_t>(r) * uw;
+    for (std::int32_t c = 0; c < w; ++c) {
+      const float s = tr[c] + hr[c];  // the same float sum as World::surface_at
+      if (!std::isfinite(s))
+        throw std::invalid_argument("HeightfieldRaycaster: non-finite surface at cell (" + std::to_string(c) + ", " +
+                                    std::to_string(r) + ")");
+      sr[c] = s;
+      max_surface_ = std::max(max_surface_, s);
+      min_surface_ = std::min(min_surface_, s);
+    }
+  }
+
+  if (!options.hierarchical) return;
+  static_assert(std::size(kLevelShifts) == kMaxLevels);
+  for (const int shift : kLevelShifts) {
+    Level lv;
+    lv.shift = shift;
+    const std::int32_t side = std::int32_t{1} << shift;
+    lv.width = (w + side - 1) >> shift;
+    lv.height = (h + side - 1) >> shift;
+    lv.max.assign(static_cast<std::size_t>(lv.width) * static_cast<std::size_t>(lv.height),
+                  -std::numeric_limits<float>::infinity());
+    for (std::int32_t r = 0; r < h; ++r) {
+      const float* sr = surface_.data() + static_cast<std::size_t>(r) * uw;
+      float* mr = lv.max.data() + static_cast<std::size_t>(r >> shift) * static_cast<std::size_t>(lv.width);
+      for (std::int32_t c = 0; c < w; ++c) {
+        float& m = mr[c >> shift];
+        m = std::max(m, sr[c]);
+      }
+    }
+    levels_.push_back(std::move(lv));
+  }
+}
+
+RayHit HeightfieldRaycaster::cast(const Eigen::Vector3d& origin, const Eigen::Vector3d& unit_dir,
+                                  double max_range) const noexcept {
+  RayHit out;
+  const std::int32_t w = grid_.width, h = grid_.height;
+  const double inv_res = 1.0 / grid_.resolution;
+  // Grid coordinates: u along columns (east), v along rows (south), z up; all linear in t [m].
+  const double u0 = (origin.x() - grid_.origin_x) * inv_res;
+  const double v0 = (grid_.origin_y - origin.y()) * inv_res;
+  const double z0 = origin.z();
+  const double du = unit_dir.x() * inv_res;
+  const double dv = -unit_dir.y() * inv_res;
+  const double dz = unit_dir.z();
+  if (!(max_range > 0.0) || !std::isfinite(u0 + v0 + z0 + du + dv + dz)) return out;
+  const double wd = static_cast<double>(w), hd = static_cast<double>(h);
+
+  // Clip to the world's box: the grid rectangle and, above, the highest column top.
+  double t0 = 0.0, t1 = max_range;
+  int axis = 0;  // how the current cell was entered: 0 from above or at the origin, 1 across u, 2 across v
+  if (du != 0.0) {
+    const double ta = ((du > 0.0 ? 0.0 : wd) - u0) / du, tb = ((du > 0.0 ? wd : 0.0) - u0) / du;
+    if (ta > t0) {
+      t0 = ta;
+      axis = 1;
+    }
+    t1 = std::min(t1, tb);
+  } else if (!(u0 >= 0.0 && u0 < wd)) {
+    return out;
+  }
+  if (dv != 0.0) {
+    const double ta = ((dv > 0.0 ? 0.0 : hd) - v0) / dv, tb = ((dv > 0.0 ? hd : 0.0) - v0) / dv;
+    if (ta > t0) {
+      t0 = ta;
+      axis = 2;
+    }
+    t1 = std::min(t1, tb);
+  } else if (!(v0 >= 0.0 && v0 < hd)) {
+    return out;
+  }
+  const double zmax = static_cast<double>(max_surface_);
+  if (dz > 0.0) {
+    if (z0 > zmax) return out;
+    t1 = std::min(t1, (zmax - z0) / dz);
+  } else if (dz < 0.0) {
+    if (z0 > zmax) {
+      const double tz = (zmax - z0) / dz;
+      if (tz > t0) {
+        t0 = tz;
+        axis = 0;
+      }
+    }
+  } else if (z0 > zmax) {
+    return out;
+  }
+  if (!(t0 <= t1)) return out;
+
+  const Ray ray{origin, unit_dir, u0, v0, z0, du, dv, dz, t0, t1, axis};
+  // One traversal per sign of the horizontal direction: the stepping has no direction branches.
+  if (levels_.empty()) {
+    if (du >= 0.0) return dv >= 0.0 ? traverse<true, true, 0>(ray) : traverse<true, false, 0>(ray);
+    return dv >= 0.0 ? traverse<false, true, 0>(ray) : traverse<false, false, 0>(ray);
+  }
+  if (du >= 0.0) return dv >= 0.0 ? traverse<true, true, kMaxLevels>(ray) : traverse<true, false, kMaxLevels>(ray);
+  return dv >= 0.0 ? traverse<false, true, kMaxLevels>(ray) : traverse<false, false, kMaxLevels>(ray);
+}
+
+template <bool kPosU, bool kPosV, int kLevels>
+RayHit HeightfieldRaycaster::traverse(const Ray& ray) const noexcept {
+  RayHit out;
+  const std::int32_t w = grid_.width, h = grid_.height;
+  const double u0 = ray.u0, v0 = ray.v0, z0 = ray.z0, du = ray.du, dv = ray.dv, dz = ray.dz, t1 = ray.t1;
+  int axis = ray.axis;
+  std::int32_t ci = axis == 1 ? (kPosU ? 0 : w - 1) : floor_clamped(u0 + ray.t0 * du, 0, w - 1);
+  std::int32_t cj = axis == 2 ? (kPosV ? 0 : h - 1) : floor_clamped(v0 + ray.t0 * dv, 0, h - 1);
+  // A zero component never reaches a boundary: its exit parameter is +inf (boundaries lie strictly ahead).
+  const double idu = du != 0.0 ? 1.0 / du : kInf;
+  const double idv = dv != 0.0 ? 1.0 / dv : kInf;
+  constexpr std::int32_t su = kPosU ? 1 : -1, sv = kPosV ? 1 : -1;
+
+  const auto make_hit = [&](double th, int ax) noexcept {
+    out.hit = true;
+    out.range = th;
+    out.point = ray.origin + th * ray.dir;
+    out.col = ci;
+    out.row = cj;
+    out.vertical_face = ax != 0;
+    if (ax == 1) out.normal = Eigen::Vector3d(kPosU ? -1.0 : 1.0, 0.0, 0.0);
+    if (ax == 2) out.normal = Eigen::Vector3d(0.0, kPosV ? 1.0 : -1.0, 0.0);  // +v is south
+    return out;
+  };
+
+  // Blocks the ray was found to dip into; re-tested only once it has left them.
+  std::int32_t dip_bx[kMaxLevels], dip_by[kMaxLevels];
+  std::fill(std::begin(dip_bx), std::end(dip_bx), -1);
+  std::fill(std::begin(dip_by), std::end(dip_by), -1);
+  double t = ray.t0;
+
+  for (;;) {
+    bool skipped = false;
+    for (int l = kLevels - 1; l >= 0; --l) {  // unrolled: the block sizes are constants
+      const Level& lv = levels_[static_cast<std::size_t>(l)];
+      const int shift = kLevelShifts[l];
+      const std::int32_t bx = ci >> shift, by = cj >> shift;
+      if (bx == dip_bx[l] && by == dip_by[l]) continue;
+      const std::int32_t side = std::int32_t{1} << shift;
+      const std::int32_t bu = bx << shift, bv = by << shift;
+      const double tu = (static_cast<double>(kPosU ? bu + side : bu) - u0) * idu;
+      const double tv = (static_cast<double>(kPosV ? bv + side : bv) - v0) * idv;
+      const double te = std::max(std::min(tu, tv), t);
+      const double zlow = z0 + std::min(t * dz, std::min(te, t1) * dz);  // lowest point inside the block
+      if (zlow > static_cast<double>(lv.max[static_cast<std::size_t>(by) * static_cast<std::size_t>(lv.width) +
+                                            static_cast<std::size_t>(bx)])) {
+        if (te >= t1) return out;
+        // Leave the block across the face reached first; the index along the other axis is clamped into
+        // the block and kept monotone. Selected without branches: which face comes first is a coin toss.
+        const bool across_u = tu <= tv;
+        std::int32_t ni = floor_clamped(u0 + te * du, bu, bu + side - 1);
+        std::int32_t nj = floor_clamped(v0 + te * dv, bv, bv + side - 1);
+        ni = kPosU ? std::max(ni, ci) : std::min(ni, ci);
+        nj = kPosV ? std::max(nj, cj) : std::min(nj, cj);
+        ci = across_u ? (kPosU ? bu + side : bu - 1) : ni;
+        cj = across_u ? nj : (kPosV ? bv + side : bv - 1);
+        axis = across_u ? 1 : 2;
+        t = te;
+        skipped = true;
+        break;
+      }
+      dip_bx[l] = bx;
+      dip_by[l] = by;
+    }
+    if (skipped) {
+      if (ci < 0 || cj < 0 || ci >= w || cj >= h) return out;
+      continue;
+    }
+
+    const double s = static_cast<double>(surface_[static_cast<std::size_t>(cj) * static_cast<std::size_t>(w) +
+                                                  static_cast<std::size_t>(ci)]);
+    if (z0 + t * dz <= s) return make_hit(t, axis);  // entered through a side (a wall), or started inside
+    const double tu = (static_cast<double>(kPosU ? ci + 1 : ci) - u0) * idu;
+    const double tv = (static_cast<double>(kPosV ? cj + 1 : cj) - v0) * idv;
+    const double te = std::max(std::min(tu, tv), t);
+    if (dz < 0.0) {
+      const double tl = std::min(te, t1);
+      if (z0 + tl * dz <= s) return make_hit(std::clamp((s - z0) / dz, t, tl), 0);  // through the top
+    }
+    if (te >= t1) return out;
+    const bool across_u = tu <= tv;
+    ci += across_u ? su : 0;
+    cj += across_u ? 0 : sv;
+    axis = across_u ? 1 : 2;
+    t = te;
+    if (ci < 0 || cj < 0 || ci >= w || cj >= h) return out;
+  }
+}
+
+}  // namespace ag::sim

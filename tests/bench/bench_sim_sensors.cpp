@@ -1,0 +1,254 @@
+// bench_sim_sensors: one-core speed of the simulated nadir camera (640x400 and 1280x800 frames/s) and
+// of the Ouster LiDAR (64x512/1024/2048 scans, ms and rays/s) over a synthetic 500 m town.
+// `bench_sim_sensors --dump DIR` also writes the rendered frames (rgb, class, depth PNGs) for a look.
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <ctime>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "airground/core/classes.hpp"
+#include "airground/sim/camera.hpp"
+#include "airground/sim/lidar.hpp"
+#include "airground/sim/raycast.hpp"
+#include "bench_common.hpp"
+
+namespace {
+
+using ag::ClassId;
+using ag::Pose3;
+using ag::sim::World;
+
+double thread_cpu_s() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+
+cv::Vec3b shade_of(ClassId k, std::mt19937& rng, int spread) {
+  const ag::Rgb c = ag::ClassTable::builtin().info(k).color;
+  std::uniform_int_distribution<int> d(-spread, spread);
+  const int s = d(rng);
+  return {cv::saturate_cast<std::uint8_t>(c.r + s), cv::saturate_cast<std::uint8_t>(c.g + s),
+          cv::saturate_cast<std::uint8_t>(c.b + s)};
+}
+
+// A 500 m x 500 m town at 0.25 m: a street grid, blocks of grass with buildings, tree crowns, parked cars,
+// gravel yards and a pond, on gently rolling terrain.
+World make_town() {
+  constexpr std::int32_t kSize = 2000;
+  World w;
+  w.header.name = "bench-town";
+  w.header.grid = ag::GridGeometry{0.25, kSize, kSize, -250.0, 250.0};
+  w.class_id = cv::Mat(kSize, kSize, CV_8UC1, cv::Scalar(ag::raw(ClassId::kGrass)));
+  w.height = cv::Mat(kSize, kSize, CV_32FC1, cv::Scalar(0.0));
+  w.terrain = cv::Mat(kSize, kSize, CV_32FC1);
+  w.albedo = cv::Mat(kSize, kSize, CV_8UC3);
+  std::mt19937 rng(2024);
+  const auto& g = w.grid();
+  for (std::int32_t r = 0; r < kSize; ++r) {
+    for (std::int32_t c = 0; c < kSize; ++c) {
+      const double x = g.x_of(c), y = g.y_of(r);
+      w.terrain.at<float>(r, c) = static_cast<float>(2.0 * std::sin(x / 60.0) * std::cos(y / 45.0));
+      const double bx = std::fmod(x + 1000.0, 60.0), by = std::fmod(y + 1000.0, 60.0);
+      const bool road = bx < 10.0 || by < 10.0;
+      const ClassId k = road ? ClassId::kRoad : ClassId::kGrass;
+      w.class_id.at<std::uint8_t>(r, c) = ag::raw(k);
+      w.albedo.at<cv::Vec3b>(r, c) = shade_of(k, rng, 12);
+    }
+  }
+  const auto put = [&](std::int32_t c, std::int32_t r, ClassId k, float h, cv::Vec3b rgb) {
+    if (!g.contains(c, r)) return;
+    w.class_id.at<std::uint8_t>(r, c) = ag::raw(k);
+    w.height.at<float>(r, c) = h;
+    w.albedo.at<cv::Vec3b>(r, c) = rgb;
+  };
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  // Per block (50 m of land between 10 m streets): a yard, one or two buildings, trees and cars.
+  for (int bi = 0; bi < 9; ++bi) {
+    for (int bj = 0; bj < 9; ++bj) {
+      const double x0 = -250.0 + bi * 60.0 + 10.0, y0 = -250.0 + bj * 60.0 + 10.0;  // SW corner of the land
+      if (u01(rng) < 0.3) {  // gravel yard
+        const double yx = x0 + 2 + u01(rng) * 20, yy = y0 + 2 + u01(rng) * 20;
+        for (double x = yx; x < yx + 20; x += 0.25)
+          for (double y = yy; y < yy + 15; y += 0.25) put(g.col(x), g.row(y), ClassId::kDirt, 0.0f, shade_of(ClassId::kDirt, rng, 15));
+      }
+      const int nb = 1 + static_cast<int>(u01(rng) * 2.0);
+      for (int b = 0; b < nb; ++b) {
+        const double wx = 10 + u01(rng) * 18, wy = 10 + u01(rng) * 18, h = 5 + u01(rng) * 25;
+        const double bx = x0 + 3 + u01(rng) * (44 - wx), by = y0 + 3 + u01(rng) * (44 - wy);
+        const cv::Vec3b roof = shade_of(ClassId::kBuilding, rng, 40);
+        for (double x = bx; x < bx + wx; x += 0.25)
+          for (double y = by; y < by + wy; y += 0.25) put(g.col(x), g.row(y), ClassId::kBuilding, static_cast<float>(h), roof);
+      }
+      for (int t = 0; t < 6; ++t) {  // round crowns, domed
+        const double cx = x0 + 3 + u01(rng) * 44, cy = y0 + 3 + u01(rng) * 44, rad = 2 + u01(rng) * 2.5, h = 6 + u01(rng) * 9;
+        for (double x = cx - rad; x <= cx + rad; x += 0.25) {
+          for (double y = cy - rad; y <= cy + rad; y += 0.25) {
+            const double d2 = ((x - cx) * (x - cx) + (y - cy) * (y - cy)) / (rad * rad);
+            if (d2 > 1.0) continue;
+            const std::int32_t c = g.col(x), r = g.row(y);
+            if (g.contains(c, r) && w.class_id.at<std::uint8_t>(r, c) == ag::raw(ClassId::kBuilding)) continue;
+            put(c, r, ClassId::kTree, static_cast<float>(h * (0.6 + 0.4 * std::sqrt(1.0 - d2))), shade_of(ClassId::kTree, rng, 20));
+          }
+        }
+      }
+      for (int v = 0; v < 4; ++v) {  // cars parked along the street south of the block
+        const double cx = x0 + u01(rng) * 45, cy = y0 - 2.5;
+        const cv::Vec3b paint = shade_of(ClassId::kVehicle, rng, 60);
+        for (double x = cx; x < cx + 4.5; x += 0.25)
+          for (double y = cy; y < cy + 1.75; y += 0.25) put(g.col(x), g.row(y), ClassId::kVehicle, 1.5f, paint);
+      }
+    }
+  }
+  for (double x = 72; x < 98; x += 0.25)  // a pond inside one block
+    for (double y = 135; y < 160; y += 0.25)
+      if ((x - 85) * (x - 85) / 169 + (y - 147.5) * (y - 147.5) / 156 < 1.0)
+        put(g.col(x), g.row(y), ClassId::kWater, 0.0f, shade_of(ClassId::kWater, rng, 8));
+  return w;
+}
+
+struct Timing {
+  double per_op_s;
+  int ops;
+};
+
+// Runs op() for at least min_s of thread CPU time (and at least min_ops times); the median op time.
+template <typename F>
+Timing time_it(F&& op, double min_s, int min_ops) {
+  std::vector<double> t;
+  const double start = thread_cpu_s();
+  while (static_cast<int>(t.size()) < min_ops || thread_cpu_s() - start < min_s) {
+    const double a = thread_cpu_s();
+    op();
+    t.push_back(thread_cpu_s() - a);
+  }
+  std::sort(t.begin(), t.end());
+  return {t[t.size() / 2], static_cast<int>(t.size())};
+}
+
+void dump_frame(const std::string& dir, const std::string& name, const ag::sim::CameraFrame& f) {
+  cv::Mat bgr;
+  cv::cvtColor(f.rgb, bgr, cv::COLOR_RGB2BGR);
+  cv::imwrite(dir + "/" + name + "_rgb.png", bgr);
+  cv::Mat cls(f.cls.size(), CV_8UC3);
+  for (int r = 0; r < cls.rows; ++r) {
+    for (int c = 0; c < cls.cols; ++c) {
+      const ag::Rgb k = ag::ClassTable::builtin().info(static_cast<ClassId>(f.cls.at<std::uint8_t>(r, c))).color;
+      cls.at<cv::Vec3b>(r, c) = cv::Vec3b(k.b, k.g, k.r);
+    }
+  }
+  cv::imwrite(dir + "/" + name + "_class.png", cls);
+  cv::Mat depth16;
+  f.depth.convertTo(depth16, CV_16UC1, 1000.0);  // millimetres
+  cv::imwrite(dir + "/" + name + "_depth_mm.png", depth16);
+  double lo = 0, hi = 0;
+  cv::minMaxLoc(f.depth, &lo, &hi, nullptr, nullptr, f.depth > 0);
+  cv::Mat vis;
+  f.depth.convertTo(vis, CV_8UC1, 255.0 / std::max(hi - lo, 1e-3), -lo * 255.0 / std::max(hi - lo, 1e-3));
+  cv::applyColorMap(vis, vis, cv::COLORMAP_TURBO);
+  vis.setTo(cv::Scalar(0, 0, 0), f.depth <= 0);
+  cv::imwrite(dir + "/" + name + "_depth_vis.png", vis);
+}
+
+// Bird's-eye view of a scan, 0.1 m per pixel, coloured by class.
+void dump_scan(const std::string& dir, const std::string& name, const std::vector<ag::sim::LidarPoint>& pts) {
+  cv::Mat img(800, 800, CV_8UC3, cv::Scalar(0, 0, 0));
+  for (const auto& p : pts) {
+    const int u = 400 - static_cast<int>(std::lround(p.y * 10.0f)), v = 400 - static_cast<int>(std::lround(p.x * 10.0f));
+    if (u < 0 || v < 0 || u >= 800 || v >= 800) continue;
+    const ag::Rgb k = ag::ClassTable::builtin().info(static_cast<ClassId>(p.cls)).color;
+    img.at<cv::Vec3b>(v, u) = cv::Vec3b(k.b, k.g, k.r);
+  }
+  cv::imwrite(dir + "/" + name + "_bev.png", img);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string dump_dir;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--dump" && i + 1 < argc) dump_dir = argv[++i];
+  }
+  const auto cpus = ag::bench::allowed_cpus();
+  const bool pinned = !cpus.empty() && ag::bench::pin_this_thread(cpus.back());
+  std::printf("bench_sim_sensors: one core%s\n", pinned ? (" (pinned to CPU " + std::to_string(cpus.back()) + ")").c_str() : "");
+
+  const double t_world = thread_cpu_s();
+  const World town = make_town();
+  const auto rc = std::make_shared<const ag::sim::HeightfieldRaycaster>(town);
+  std::printf("world: 2000x2000 cells at 0.25 m (500 m square), built with its max pyramid in %.2f s\n",
+              thread_cpu_s() - t_world);
+
+  // The camera over a street corner, 50 m above the ground, yawed.
+  const double ground = static_cast<double>(town.terrain.at<float>(town.grid().row(5.0), town.grid().col(5.0)));
+  const Pose3 cam_pose{5.0, 5.0, ground + 50.0, 0.02, -0.01, 0.3};
+  std::string json = "{\"bench\":\"sim_sensors\"";
+  char buf[256];
+  for (const bool shadows : {true, false}) {
+    for (const double scale : {0.5, 1.0}) {
+      const ag::sim::CameraModel model = ag::sim::CameraModel{}.scaled(scale);
+      ag::sim::CameraShading shading;
+      shading.shadows = shadows;
+      const ag::sim::CameraRenderer cam(town, model, shading, rc);
+      ag::sim::CameraFrame frame;
+      cam.render(cam_pose, frame);  // sizes the frame
+      const Timing t = time_it([&] { cam.render(cam_pose, frame); }, 2.0, 5);
+      const double fps = 1.0 / t.per_op_s;
+      std::printf("camera %4dx%-4d shadows %-3s: %6.1f frames/s  (%.1f ms/frame, %.0f ns/pixel, median of %d)\n",
+                  model.width, model.height, shadows ? "on" : "off", fps, 1e3 * t.per_op_s,
+                  1e9 * t.per_op_s / (model.width * model.height), t.ops);
+      std::snprintf(buf, sizeof buf, ",\"camera_%dx%d_%s_fps\":%.2f", model.width, model.height, shadows ? "shadows" : "noshadows", fps);
+      json += buf;
+      if (!dump_dir.empty() && shadows) dump_frame(dump_dir, "camera_" + std::to_string(model.width), frame);
+    }
+  }
+
+  // The LiDAR 1 m above a street, looking along it (buildings, trees and cars on both sides).
+  const double street = static_cast<double>(town.terrain.at<float>(town.grid().row(5.0), town.grid().col(-40.0)));
+  const Pose3 lidar_pose{-40.0, 5.0, street + 1.0, 0.0, 0.0, 0.05};
+  auto beams_or = ag::sim::OusterBeamModel::load_default(1024);
+  if (!beams_or) {
+    std::fprintf(stderr, "%s\n", beams_or.error().message.c_str());
+    return 1;
+  }
+  for (const int cols : {512, 1024, 2048}) {
+    ag::sim::OusterBeamModel beams = beams_or.value();
+    beams.columns = cols;
+    const ag::sim::LidarSimulator lidar(town, beams, ag::sim::LidarNoise{}, rc);
+    std::vector<ag::sim::LidarPoint> pts;
+    std::uint64_t seed = 0;
+    lidar.scan(lidar_pose, seed, pts);
+    const Timing t = time_it([&] { lidar.scan(lidar_pose, ++seed, pts); }, 1.5, 10);
+    const double rays = static_cast<double>(lidar.rays_per_scan());
+    std::printf("lidar  %2dx%-4d: %6.2f ms/scan  %5.1f Mrays/s  (%zu returns, median of %d)\n", beams.rings(), cols,
+                1e3 * t.per_op_s, rays / t.per_op_s * 1e-6, pts.size(), t.ops);
+    std::snprintf(buf, sizeof buf, ",\"lidar_64x%d_ms\":%.3f,\"lidar_64x%d_mrays_s\":%.2f", cols, 1e3 * t.per_op_s, cols,
+                  rays / t.per_op_s * 1e-6);
+    json += buf;
+    if (!dump_dir.empty() && cols == 1024) dump_scan(dump_dir, "lidar_1024", pts);
+  }
+
+  // What the max pyramid buys: the same 64x1024 scan with cell-by-cell traversal.
+  {
+    const auto plain = std::make_shared<const ag::sim::HeightfieldRaycaster>(town, ag::sim::RaycastOptions{false});
+    const ag::sim::LidarSimulator lidar(town, beams_or.value(), ag::sim::LidarNoise{}, plain);
+    std::vector<ag::sim::LidarPoint> pts;
+    lidar.scan(lidar_pose, 0, pts);
+    const Timing t = time_it([&] { lidar.scan(lidar_pose, 1, pts); }, 1.0, 3);
+    std::printf("lidar  64x1024 without the max pyramid: %6.2f ms/scan (reference)\n", 1e3 * t.per_op_s);
+    std::snprintf(buf, sizeof buf, ",\"lidar_64x1024_plain_dda_ms\":%.3f", 1e3 * t.per_op_s);
+    json += buf;
+  }
+  json += "}";
+  const std::string written = ag::bench::append_result_line(json);
+  if (!written.empty()) std::printf("results appended to %s\n", written.c_str());
+  return 0;
+}
