@@ -13,7 +13,7 @@ help:
 	@echo "make test     native tests, the aarch64 cross build with its unit tests under qemu, the ring stress under TSan"
 	@echo "make bench    ring throughput/latency vs moodycamel, scheduler wake-up lateness"
 	@echo "make package  .deb per role for amd64 and arm64 in build/*/packages"
-	@echo "make demo     the default simulated mission and its report (arrives with the simulator)"
+	@echo "make demo     the default simulated mission (1 quadrotor, 3 ground robots) and its report in build/demo"
 
 deps:
 	@tools/install-deps.sh
@@ -57,10 +57,11 @@ package: build cross
 	cd build/xavier-nx && cpack -G DEB
 	@ls -1 build/native/packages/*.deb build/xavier-nx/packages/*.deb
 
+DEMO_OUT ?= build/demo
+DEMO_DURATION ?= 120
 demo: build
-	@echo "make demo: the simulated mission arrives with the simulator (issue 3: airground-sim);"
-	@echo "until then run a role binary by hand, e.g. build/native/firmware_host/airground-ugv --run-for 5"
-	@exit 2
+	build/native/sim/airground-sim run --world default --ugvs 3 --seed 1 --duration $(DEMO_DURATION) --out $(DEMO_OUT)
+	@echo "make demo: report in $(DEMO_OUT)/report.md (trajectories.png, summary.yaml, recordings)"
 
 clean:
 	rm -rf build

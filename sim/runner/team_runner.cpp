@@ -255,7 +255,8 @@ void SimWorldStage::step(TimeNs now) noexcept {
         cv::Mat bgr;
         cv::cvtColor(a.frame.rgb, bgr, cv::COLOR_RGB2BGR);
         cv::imwrite((t.out / "camera" / (std::string(name) + "_rgb.png")).string(), bgr);
-        cv::imwrite((t.out / "camera" / (std::string(name) + "_class.png")).string(), class_display_image(a.frame.cls));
+        cv::cvtColor(class_display_image(a.frame.cls), bgr, cv::COLOR_RGB2BGR);
+        cv::imwrite((t.out / "camera" / (std::string(name) + "_class.png")).string(), bgr);
         ++t.frame_pngs;
       }
     }

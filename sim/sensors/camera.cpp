@@ -120,49 +120,49 @@ bool undistort(const CameraModel& m, double xd, double yd, double& x, double& y)
   return std::hypot(d.x - xd, d.y - yd) < 1e-10 && det > 1e-9 && std::isfinite(x) && std::isfinite(y);
 }
 
-// Deterministic lattice hash in [0, 1).
-inline double lattice(std::int64_t i, std::int64_t j, std::uint64_t salt) noexcept {
-  std::uint64_t z = static_cast<std::uint64_t>(i) * 0x9E3779B97F4A7C15ULL ^ static_cast<std::uint64_t>(j) * 0xC2B2AE3D27D4EB4FULL ^ salt;
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-  z ^= z >> 31;
-  return static_cast<double>(z >> 11) * 0x1.0p-53;
+// Deterministic lattice hash in [0, 1): one multiply-xorshift round is plenty for value noise.
+inline float lattice(std::int64_t i, std::int64_t j, std::uint64_t salt) noexcept {
+  std::uint64_t z = (static_cast<std::uint64_t>(i) * 0x9E3779B97F4A7C15ULL) ^ (static_cast<std::uint64_t>(j) * 0xC2B2AE3D27D4EB4FULL) ^ salt;
+  z = (z ^ (z >> 29)) * 0xBF58476D1CE4E5B9ULL;
+  return static_cast<float>(z >> 40) * 0x1.0p-24f;
 }
 
 // Smooth value noise in [0, 1) on a unit lattice.
-inline double value_noise(double a, double b, std::uint64_t salt) noexcept {
+inline float value_noise(double a, double b, std::uint64_t salt) noexcept {
   const double fa = std::floor(a), fb = std::floor(b);
   const auto ia = static_cast<std::int64_t>(fa), ib = static_cast<std::int64_t>(fb);
-  double ta = a - fa, tb = b - fb;
-  ta = ta * ta * (3.0 - 2.0 * ta);
-  tb = tb * tb * (3.0 - 2.0 * tb);
-  const double n00 = lattice(ia, ib, salt), n10 = lattice(ia + 1, ib, salt);
-  const double n01 = lattice(ia, ib + 1, salt), n11 = lattice(ia + 1, ib + 1, salt);
-  return (n00 + (n10 - n00) * ta) + ((n01 + (n11 - n01) * ta) - (n00 + (n10 - n00) * ta)) * tb;
+  auto ta = static_cast<float>(a - fa), tb = static_cast<float>(b - fb);
+  ta = ta * ta * (3.0f - 2.0f * ta);
+  tb = tb * tb * (3.0f - 2.0f * tb);
+  const float n00 = lattice(ia, ib, salt), n10 = lattice(ia + 1, ib, salt);
+  const float n01 = lattice(ia, ib + 1, salt), n11 = lattice(ia + 1, ib + 1, salt);
+  const float lo = n00 + (n10 - n00) * ta, hi = n01 + (n11 - n01) * ta;
+  return lo + (hi - lo) * tb;
 }
 
 constexpr float kGroundStep = 0.3f;    // [m] lower steps are shaded as ground
 constexpr double kShadowBias = 0.05;   // [m] shadow rays leave the ground this high (no self-shadowing)
 constexpr int kSunBlockShift = 2;      // sun ceiling per 4x4-cell block
 
-// Octaves of the detail texture: wavelength [m] and amplitude of the brightness factor.
+// Octaves of the detail texture: spatial frequency [1/m] and amplitude of the brightness factor.
 struct Octave {
-  double wavelength, amplitude;
+  double frequency;
+  float amplitude;
   std::uint64_t salt;
 };
 constexpr Octave kOctaves[] = {
-    {0.03, 0.08, 0x1234567ULL}, {0.06, 0.08, 0x2345678ULL}, {0.12, 0.09, 0x3456789ULL},
-    {0.25, 0.10, 0x456789AULL}, {0.50, 0.10, 0x56789ABULL}, {1.00, 0.08, 0x6789ABCULL},
+    {1.0 / 0.03, 0.08f, 0x1234567ULL}, {1.0 / 0.06, 0.08f, 0x2345678ULL}, {1.0 / 0.12, 0.09f, 0x3456789ULL},
+    {1.0 / 0.25, 0.10f, 0x456789AULL}, {1.0 / 0.50, 0.10f, 0x56789ABULL}, {1.0 / 1.00, 0.08f, 0x6789ABCULL},
 };
 
 // Brightness factor at surface coordinates (a, b) [m] seen with a pixel footprint [m]: octaves finer than
-// the footprint fade out (a pixel integrates them) so every view agrees on what it can resolve.
-inline double detail_factor(double a, double b, double footprint) noexcept {
-  double f = 1.0;
+// four footprints fade out, gone at two (a pixel integrates them), so every view agrees on what it resolves.
+inline float detail_factor(double a, double b, double footprint) noexcept {
+  float f = 1.0f;
   for (const Octave& o : kOctaves) {
-    const double w = std::clamp(2.0 - 4.0 * footprint / o.wavelength, 0.0, 1.0);
-    if (w <= 0.0) continue;
-    f += o.amplitude * w * (2.0 * value_noise(a / o.wavelength, b / o.wavelength, o.salt) - 1.0);
+    const auto w = static_cast<float>(std::min(2.0 - 4.0 * footprint * o.frequency, 1.0));
+    if (w <= 0.0f) continue;
+    f += o.amplitude * w * (2.0f * value_noise(a * o.frequency, b * o.frequency, o.salt) - 1.0f);
   }
   return f;
 }
@@ -300,8 +300,12 @@ void CameraRenderer::build_sun_ceiling() {
       for (std::int32_t i = i0; i <= i1; ++i) m = std::max(m, block_max[at(i, j)]);
     span(bi + kStep * su, bi + 1 + kStep * su, bw, i0, i1);
     span(bj + kStep * sv, bj + 1 + kStep * sv, bh, j0, j1);
-    for (std::int32_t j = j0; j <= j1; ++j)
-      for (std::int32_t i = i0; i <= i1; ++i) m = std::max(m, static_cast<float>(static_cast<double>(sun_ceiling_[at(i, j)]) - decay));
+    for (std::int32_t j = j0; j <= j1; ++j) {
+      for (std::int32_t i = i0; i <= i1; ++i) {
+        const double lowered = static_cast<double>(sun_ceiling_[at(i, j)]) - decay;
+        m = std::max(m, std::nextafter(static_cast<float>(lowered), std::numeric_limits<float>::infinity()));  // round up
+      }
+    }
     sun_ceiling_[static_cast<std::size_t>(k)] = m;
   }
 }
@@ -392,13 +396,14 @@ void CameraRenderer::render_rows(const Pose3& pose, int row_begin, int row_end, 
           }
         }
         if (wsum > 1e-9) {
-          for (double& a : alb) a /= wsum;
+          const double inv = 1.0 / wsum;
+          for (double& a : alb) a *= inv;
         } else {
           for (int k = 0; k < 3; ++k) alb[k] = own[k];
         }
       }
 
-      double factor = 1.0;
+      float factor = 1.0f;
       if (shading_.detail_texture) {
         const Eigen::Vector3d dw = map_from_camera * dc;
         const double cos_view = std::max(0.2, std::abs(normal.dot(dw)));
@@ -426,7 +431,7 @@ void CameraRenderer::render_rows(const Pose3& pose, int row_begin, int row_end, 
         }
         if (lit) light += (1.0 - shading_.ambient) * cos_sun;
       }
-      const double gain = factor * light / sun_flat;
+      const double gain = static_cast<double>(factor) * light / sun_flat;
       rgb[c] = cv::Vec3b(cv::saturate_cast<std::uint8_t>(alb[0] * gain), cv::saturate_cast<std::uint8_t>(alb[1] * gain),
                          cv::saturate_cast<std::uint8_t>(alb[2] * gain));
     }

@@ -1,7 +1,7 @@
 // The simulated Ouster LiDAR: metadata loading, the SDK's beam geometry, ray-cast scans with seeded noise.
 #include "airground/sim/lidar.hpp"
 
-#include <Eigen/Geometry>
+#include <Eigen/LU>
 #include <nlohmann/json.hpp>
 
 #include <cmath>

@@ -15,7 +15,7 @@ namespace ag::sim {
 namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
-constexpr int kLevelShifts[] = {2, 4, 6};  // blocks of 4, 16 and 64 cells
+constexpr int kLevelShifts[] = {2, 3, 4, 5, 6};  // blocks of 4, 8, 16, 32 and 64 cells
 
 // floor() of a grid coordinate already known to lie near [lo, hi], as a clamped index.
 std::int32_t floor_clamped(double x, std::int32_t lo, std::int32_t hi) noexcept {
@@ -98,12 +98,15 @@ RayHit HeightfieldRaycaster::cast(const Eigen::Vector3d& origin, const Eigen::Ve
   const double dz = unit_dir.z();
   if (!(max_range > 0.0) || !std::isfinite(u0 + v0 + z0 + du + dv + dz)) return out;
   const double wd = static_cast<double>(w), hd = static_cast<double>(h);
+  // A zero component never reaches a boundary: its exit parameter is +inf (boundaries lie strictly ahead).
+  const double idu = du != 0.0 ? 1.0 / du : kInf;
+  const double idv = dv != 0.0 ? 1.0 / dv : kInf;
 
   // Clip to the world's box: the grid rectangle and, above, the highest column top.
   double t0 = 0.0, t1 = max_range;
   int axis = 0;  // how the current cell was entered: 0 from above or at the origin, 1 across u, 2 across v
   if (du != 0.0) {
-    const double ta = ((du > 0.0 ? 0.0 : wd) - u0) / du, tb = ((du > 0.0 ? wd : 0.0) - u0) / du;
+    const double ta = ((du > 0.0 ? 0.0 : wd) - u0) * idu, tb = ((du > 0.0 ? wd : 0.0) - u0) * idu;
     if (ta > t0) {
       t0 = ta;
       axis = 1;
@@ -113,7 +116,7 @@ RayHit HeightfieldRaycaster::cast(const Eigen::Vector3d& origin, const Eigen::Ve
     return out;
   }
   if (dv != 0.0) {
-    const double ta = ((dv > 0.0 ? 0.0 : hd) - v0) / dv, tb = ((dv > 0.0 ? hd : 0.0) - v0) / dv;
+    const double ta = ((dv > 0.0 ? 0.0 : hd) - v0) * idv, tb = ((dv > 0.0 ? hd : 0.0) - v0) * idv;
     if (ta > t0) {
       t0 = ta;
       axis = 2;
@@ -139,7 +142,7 @@ RayHit HeightfieldRaycaster::cast(const Eigen::Vector3d& origin, const Eigen::Ve
   }
   if (!(t0 <= t1)) return out;
 
-  const Ray ray{origin, unit_dir, u0, v0, z0, du, dv, dz, t0, t1, axis};
+  const Ray ray{origin, unit_dir, u0, v0, z0, du, dv, dz, idu, idv, t0, t1, axis};
   // One traversal per sign of the horizontal direction: the stepping has no direction branches.
   if (levels_.empty()) {
     if (du >= 0.0) return dv >= 0.0 ? traverse<true, true, 0>(ray) : traverse<true, false, 0>(ray);
@@ -154,12 +157,10 @@ RayHit HeightfieldRaycaster::traverse(const Ray& ray) const noexcept {
   RayHit out;
   const std::int32_t w = grid_.width, h = grid_.height;
   const double u0 = ray.u0, v0 = ray.v0, z0 = ray.z0, du = ray.du, dv = ray.dv, dz = ray.dz, t1 = ray.t1;
+  const double idu = ray.idu, idv = ray.idv;
   int axis = ray.axis;
   std::int32_t ci = axis == 1 ? (kPosU ? 0 : w - 1) : floor_clamped(u0 + ray.t0 * du, 0, w - 1);
   std::int32_t cj = axis == 2 ? (kPosV ? 0 : h - 1) : floor_clamped(v0 + ray.t0 * dv, 0, h - 1);
-  // A zero component never reaches a boundary: its exit parameter is +inf (boundaries lie strictly ahead).
-  const double idu = du != 0.0 ? 1.0 / du : kInf;
-  const double idv = dv != 0.0 ? 1.0 / dv : kInf;
   constexpr std::int32_t su = kPosU ? 1 : -1, sv = kPosV ? 1 : -1;
 
   const auto make_hit = [&](double th, int ax) noexcept {
@@ -191,7 +192,7 @@ RayHit HeightfieldRaycaster::traverse(const Ray& ray) const noexcept {
       const std::int32_t bu = bx << shift, bv = by << shift;
       const double tu = (static_cast<double>(kPosU ? bu + side : bu) - u0) * idu;
       const double tv = (static_cast<double>(kPosV ? bv + side : bv) - v0) * idv;
-      const double te = std::max(std::min(tu, tv), t);
+      const double te = std::max(t, std::min(tu, tv));  // never -0 at a start on a boundary
       const double zlow = z0 + std::min(t * dz, std::min(te, t1) * dz);  // lowest point inside the block
       if (zlow > static_cast<double>(lv.max[static_cast<std::size_t>(by) * static_cast<std::size_t>(lv.width) +
                                             static_cast<std::size_t>(bx)])) {
@@ -223,7 +224,7 @@ RayHit HeightfieldRaycaster::traverse(const Ray& ray) const noexcept {
     if (z0 + t * dz <= s) return make_hit(t, axis);  // entered through a side (a wall), or started inside
     const double tu = (static_cast<double>(kPosU ? ci + 1 : ci) - u0) * idu;
     const double tv = (static_cast<double>(kPosV ? cj + 1 : cj) - v0) * idv;
-    const double te = std::max(std::min(tu, tv), t);
+    const double te = std::max(t, std::min(tu, tv));  // never -0 at a start on a boundary
     if (dz < 0.0) {
       const double tl = std::min(te, t1);
       if (z0 + tl * dz <= s) return make_hit(std::clamp((s - z0) / dz, t, tl), 0);  // through the top

@@ -64,6 +64,7 @@ struct BuildingPart {
   Box box;
   Roof roof{Roof::kFlat};
   double eave{6}, rise{0};  // [m] wall height, extra height of the ridge above the eaves
+  float base{0};            // [m] terrain the building stands on (set when placed)
 };
 
 // A straight road side that a block faces: the kerb line from a to b, `inward` pointing into the block.
@@ -686,7 +687,10 @@ bool ProceduralTown::place_building(Rng& rng, const std::vector<BuildingPart>& p
       const bool mine = cls(c, r) == raw(ClassId::kBuilding);
       set(c, r, ClassId::kBuilding, mine ? std::max(h, w_.height.at<float>(r, c)) : h);
     });
-    if (p.roof == Roof::kGable) gables_.push_back(p);
+    if (p.roof == Roof::kGable) {
+      gables_.push_back(p);
+      gables_.back().base = base;
+    }
   }
   // Plant rooms and vents on flat roofs.
   for (const BuildingPart& p : parts) {
@@ -1014,6 +1018,9 @@ void ProceduralTown::paint() {
     const double reach = p.box.reach(0);
     for_cells(p.box.c.x - reach, p.box.c.y - reach, p.box.c.x + reach, p.box.c.y + reach, [&](int c, int r, double x, double y) {
       if (!p.box.contains(x, y, -0.3) || cls(c, r) != raw(ClassId::kBuilding)) return;
+      // Only where this part's roof is the top surface: a wing's ridge stops where it meets the main roof.
+      const double ridge = p.eave + p.rise + static_cast<double>(p.base - w_.terrain.at<float>(r, c));
+      if (static_cast<double>(w_.height.at<float>(r, c)) > ridge + 0.05) return;
       if (std::fabs(p.box.to_local(x, y).y) < std::max(0.15, g_.resolution * 0.6)) {
         cv::Vec3b& v = w_.albedo.at<cv::Vec3b>(r, c);
         for (int ch = 0; ch < 3; ++ch) v[ch] = static_cast<std::uint8_t>(std::min(255, v[ch] + 26));

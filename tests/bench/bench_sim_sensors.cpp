@@ -56,7 +56,7 @@ World make_town() {
     for (std::int32_t c = 0; c < kSize; ++c) {
       const double x = g.x_of(c), y = g.y_of(r);
       w.terrain.at<float>(r, c) = static_cast<float>(2.0 * std::sin(x / 60.0) * std::cos(y / 45.0));
-      const double bx = std::fmod(x + 1000.0, 60.0), by = std::fmod(y + 1000.0, 60.0);
+      const double bx = std::fmod(x + 250.0, 60.0), by = std::fmod(y + 250.0, 60.0);
       const bool road = bx < 10.0 || by < 10.0;
       const ClassId k = road ? ClassId::kRoad : ClassId::kGrass;
       w.class_id.at<std::uint8_t>(r, c) = ag::raw(k);
@@ -187,9 +187,9 @@ int main(int argc, char** argv) {
   std::printf("world: 2000x2000 cells at 0.25 m (500 m square), built with its max pyramid in %.2f s\n",
               thread_cpu_s() - t_world);
 
-  // The camera over a street corner, 50 m above the ground, yawed.
-  const double ground = static_cast<double>(town.terrain.at<float>(town.grid().row(5.0), town.grid().col(5.0)));
-  const Pose3 cam_pose{5.0, 5.0, ground + 50.0, 0.02, -0.01, 0.3};
+  // The camera 50 m above a crossing (streets x, y in [-10, 0]), yawed, slightly tilted.
+  const double ground = static_cast<double>(town.terrain.at<float>(town.grid().row(-5.0), town.grid().col(-5.0)));
+  const Pose3 cam_pose{-3.0, -4.0, ground + 50.0, 0.02, -0.01, 0.3};
   std::string json = "{\"bench\":\"sim_sensors\"";
   char buf[256];
   for (const bool shadows : {true, false}) {
@@ -211,9 +211,10 @@ int main(int argc, char** argv) {
     }
   }
 
-  // The LiDAR 1 m above a street, looking along it (buildings, trees and cars on both sides).
-  const double street = static_cast<double>(town.terrain.at<float>(town.grid().row(5.0), town.grid().col(-40.0)));
-  const Pose3 lidar_pose{-40.0, 5.0, street + 1.0, 0.0, 0.0, 0.05};
+  // The LiDAR 1 m above the middle of a street, looking along it (blocks with buildings and trees on
+  // both sides, a crossing behind).
+  const double street = static_cast<double>(town.terrain.at<float>(town.grid().row(20.0), town.grid().col(-5.0)));
+  const Pose3 lidar_pose{-5.0, 20.0, street + 1.0, 0.0, 0.0, 1.62};
   auto beams_or = ag::sim::OusterBeamModel::load_default(1024);
   if (!beams_or) {
     std::fprintf(stderr, "%s\n", beams_or.error().message.c_str());

@@ -242,6 +242,7 @@ TEST(Camera, WallsAreDarkerThanRoofsAndShadowsFallAwayFromTheSun) {
   const CameraModel m = half_model();
   CameraShading sh;
   sh.detail_texture = false;  // exact intensities
+  sh.shadows = true;
   const CameraRenderer cam(w, m, sh);
   CameraFrame f;
 
@@ -298,6 +299,7 @@ TEST(Camera, ShadowCullingChangesNothing) {
   const CameraModel m = half_model();
   for (const double azimuth : {150.0, 20.0, 270.0}) {
     CameraShading culled;
+    culled.shadows = true;
     culled.sun_azimuth_deg = azimuth;
     culled.sun_elevation_deg = azimuth == 20.0 ? 25.0 : 50.0;
     CameraShading exact = culled;
@@ -411,7 +413,7 @@ TEST(Camera, ModelScalingAndYaml) {
   k1: -0.04
   k2: 0.008
 camera_shading:
-  shadows: false
+  shadows: true
   sun_elevation_deg: 35
 )";
   auto m = CameraModel::load_string(yaml, "test.yaml");
@@ -422,7 +424,7 @@ camera_shading:
   EXPECT_DOUBLE_EQ(m->p1, 0.0);
   auto sh = CameraShading::load_string(yaml, "test.yaml");
   ASSERT_TRUE(sh.ok()) << sh.error().message;
-  EXPECT_FALSE(sh->shadows);
+  EXPECT_TRUE(sh->shadows);
   EXPECT_DOUBLE_EQ(sh->sun_elevation_deg, 35.0);
   EXPECT_TRUE(sh->detail_texture);
 

@@ -23,7 +23,7 @@ struct RayHit {
 };
 
 struct RaycastOptions {
-  // Max-height pyramid over blocks of 4, 16 and 64 cells: a ray skips any block it passes above.
+  // Max-height pyramid over blocks of 4 to 64 cells: a ray skips any block it passes above.
   // Off = plain cell-by-cell traversal (the reference the pyramid is tested against).
   bool hierarchical{true};
 };
@@ -55,13 +55,14 @@ class HeightfieldRaycaster {
     std::int32_t width{0}, height{0};
     std::vector<float> max;  // highest surface in each block, row-major
   };
-  static constexpr int kMaxLevels = 3;
+  static constexpr int kMaxLevels = 5;
   // A ray clipped to the world's box, in grid coordinates (u east, v south, per metre of range).
   struct Ray {
     const Eigen::Vector3d& origin;
     const Eigen::Vector3d& dir;
     double u0, v0, z0, du, dv, dz;
-    double t0, t1;  // the part of the ray inside the box
+    double idu, idv;  // 1/du, 1/dv; +inf for a zero component
+    double t0, t1;    // the part of the ray inside the box
     int axis;       // how it enters: 0 from above or at the origin, 1 across a u face, 2 across a v face
   };
   template <bool kPosU, bool kPosV, int kLevels>
