@@ -16,6 +16,12 @@
 
 #include "airground/platform/log.hpp"
 #include "airground/sim/camera.hpp"
+#include "airground/sim/diff_drive.hpp"
+#include "airground/sim/gps.hpp"
+#include "airground/sim/quadrotor.hpp"
+#include "airground/sim/radio.hpp"
+#include "airground/sim/visual_odometry.hpp"
+#include "airground/sim/wheel_odometry.hpp"
 #include "airground/sim/generator.hpp"
 #include "airground/sim/importer.hpp"
 #include "airground/sim/lidar.hpp"
@@ -39,7 +45,9 @@ constexpr const char* kUsage =
     "  airground-sim world show DIR --out DIR\n"
     "  airground-sim render --world W --pose X Y Z ROLL PITCH YAW --out DIR [--scale 0.5] [--config camera.yaml]\n"
     "  airground-sim scan --world W --pose X Y YAW --out DIR [--columns 512|1024|2048] [--height 0.6]\n"
-    "  airground-sim run --world W --ugvs N --seed S --duration T --out DIR [options]\n\n"
+    "  airground-sim run --world W --ugvs N --seed S --duration T --out DIR [options]\n"
+    "  airground-sim config --out DIR   (every simulator model's parameters with units and ranges, as\n"
+    "                                    YAML files that 'run --config-dir DIR' reads back)\n\n"
     "--world W is a world directory or 'default' (the built-in 400 m world, seed 42).\n"
     "Angles in radians, positions in metres in the world's map frame (x east, y north, origin at the centre).\n"
     "'airground-sim COMMAND --help' shows a command's options. Exit status: 0 ok, 1 failed, 2 bad usage.\n";
@@ -59,7 +67,8 @@ constexpr const char* kRunHelp =
     "  --altitude M             survey altitude (40)             --uav-speed V      (5 m/s)\n"
     "  --ugv-speed V            scripted ground speed (1.2 m/s)  --overlap F        survey side overlap (0.6)\n"
     "  --config-dir DIR         model parameters: gps.yaml, visual_odometry.yaml, wheel_odometry.yaml,\n"
-    "                           radio.yaml, diff_drive.yaml, quadrotor.yaml, camera.yaml, lidar.yaml\n"
+    "                           radio.yaml, diff_drive.yaml, quadrotor.yaml, camera.yaml, lidar_noise.yaml\n"
+    "                           (airground-sim config --out DIR writes the defaults)\n"
     "  --record none|light|full what to record (light: CSV streams + every 20th camera frame)\n"
     "  --threads N              sensor worker threads (all cores)\n"
     "  --quiet                  no progress line\n";
@@ -282,6 +291,30 @@ int scan(const Args& a) {
   return 0;
 }
 
+int write_model_configs(const Args& a) {
+  const std::string out = required(a, "out");
+  fs::create_directories(out);
+  struct Model {
+    const char* file;
+    std::span<const ParamSection> schema;
+  };
+  const Model models[] = {{"gps.yaml", gps_config_schema()},
+                          {"visual_odometry.yaml", vo_config_schema()},
+                          {"wheel_odometry.yaml", wheel_odometry_config_schema()},
+                          {"diff_drive.yaml", diff_drive_config_schema()},
+                          {"quadrotor.yaml", quadrotor_config_schema()},
+                          {"radio.yaml", radio_config_schema()}};
+  for (const auto& m : models) {
+    std::ofstream f(fs::path(out) / m.file);
+    f << "# airground-sim model parameters (defaults); edit and pass the folder as run --config-dir\n"
+      << Config::defaults(m.schema).to_yaml();
+    if (!f) return fail(Error::make(ErrorCode::kIo, "cannot write " + (fs::path(out) / m.file).string()));
+  }
+  std::printf("wrote gps, visual_odometry, wheel_odometry, diff_drive, quadrotor and radio parameters to %s\n"
+              "(camera and LiDAR: config/sensors/camera.yaml and lidar_noise.yaml in the source tree)\n", out.c_str());
+  return 0;
+}
+
 int run(const Args& a) {
   RunOptions o;
   o.world = a.get("world", o.world);
@@ -377,6 +410,7 @@ int main(int argc, char** argv) {
     if (cmd == "render") return render(a);
     if (cmd == "scan") return scan(a);
     if (cmd == "run") return run(a);
+    if (cmd == "config") return write_model_configs(a);
     if (cmd == "--version") {
       std::printf("airground-sim 0.1.0\n");
       return 0;

@@ -1,6 +1,8 @@
 // The lockstep team runner: robots' role tables and the simulated world on one SimClock.
 #include "airground/sim/runner.hpp"
 
+#include <yaml-cpp/yaml.h>
+
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -46,16 +48,22 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// Optional model overrides from --config-dir: <dir>/<name> when it exists.
+// Optional model overrides from --config-dir: <dir>/<name> when it exists. The file holds the model's
+// mapping either at the top level or under its section name (as `airground-sim config` writes it).
 template <typename T, typename Loader>
-Result<T> model_config(const std::string& dir, const char* name, Loader load) {
+Result<T> model_config(const std::string& dir, const char* name, std::string_view section, Loader load) {
   if (dir.empty()) return T{};
   const fs::path p = fs::path(dir) / name;
   if (!fs::exists(p)) return T{};
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return load(ss.str(), p.string());
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(p.string());
+  } catch (const YAML::Exception& e) {
+    return Error::make(ErrorCode::kConfig, "config error: " + p.string() + ":" + std::to_string(e.mark.line + 1) + ": malformed YAML: " + e.msg);
+  }
+  const std::string sec(section);
+  if (root.IsMap() && root.size() == 1 && root[sec]) return load(root[sec], p.string());
+  return load(root, p.string());
 }
 
 class CsvLog {
@@ -376,12 +384,14 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   fs::create_directories(t.out / "camera", ec);
   if (ec) return Error::make(ErrorCode::kIo, "cannot create " + t.out.string() + ": " + ec.message());
 
-  auto gps_cfg = model_config<GpsConfig>(opt.config_dir, "gps.yaml", [](std::string_view y, std::string_view o) { return load_gps_config(y, o); });
-  auto vo_cfg = model_config<VoConfig>(opt.config_dir, "visual_odometry.yaml", [](std::string_view y, std::string_view o) { return load_vo_config(y, o); });
-  auto od_cfg = model_config<WheelOdometryConfig>(opt.config_dir, "wheel_odometry.yaml", [](std::string_view y, std::string_view o) { return load_wheel_odometry_config(y, o); });
-  auto radio_cfg = model_config<RadioConfig>(opt.config_dir, "radio.yaml", [](std::string_view y, std::string_view o) { return load_radio_config(y, o); });
-  auto dd_cfg = model_config<DiffDriveConfig>(opt.config_dir, "diff_drive.yaml", [](std::string_view y, std::string_view o) { return load_diff_drive_config(y, o); });
-  auto quad_cfg = model_config<QuadrotorConfig>(opt.config_dir, "quadrotor.yaml", [](std::string_view y, std::string_view o) { return load_quadrotor_config(y, o); });
+  using N = const YAML::Node&;
+  using O = std::string_view;
+  auto gps_cfg = model_config<GpsConfig>(opt.config_dir, "gps.yaml", "gps", [](N y, O o) { return load_gps_config(y, o); });
+  auto vo_cfg = model_config<VoConfig>(opt.config_dir, "visual_odometry.yaml", "visual_odometry", [](N y, O o) { return load_vo_config(y, o); });
+  auto od_cfg = model_config<WheelOdometryConfig>(opt.config_dir, "wheel_odometry.yaml", "wheel_odometry", [](N y, O o) { return load_wheel_odometry_config(y, o); });
+  auto radio_cfg = model_config<RadioConfig>(opt.config_dir, "radio.yaml", "radio", [](N y, O o) { return load_radio_config(y, o); });
+  auto dd_cfg = model_config<DiffDriveConfig>(opt.config_dir, "diff_drive.yaml", "diff_drive", [](N y, O o) { return load_diff_drive_config(y, o); });
+  auto quad_cfg = model_config<QuadrotorConfig>(opt.config_dir, "quadrotor.yaml", "quadrotor", [](N y, O o) { return load_quadrotor_config(y, o); });
   for (const Error* e : {gps_cfg ? nullptr : &gps_cfg.error(), vo_cfg ? nullptr : &vo_cfg.error(), od_cfg ? nullptr : &od_cfg.error(),
                          radio_cfg ? nullptr : &radio_cfg.error(), dd_cfg ? nullptr : &dd_cfg.error(), quad_cfg ? nullptr : &quad_cfg.error()})
     if (e != nullptr) return *e;
@@ -399,7 +409,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
       if (!s) return s.error();
       shading = s.value();
     }
-    const fs::path li = fs::path(opt.config_dir) / "lidar.yaml";
+    const fs::path li = fs::path(opt.config_dir) / "lidar_noise.yaml";
     if (fs::exists(li)) {
       auto n = LidarNoise::load_file(li.string());
       if (!n) return n.error();

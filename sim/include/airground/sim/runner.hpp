@@ -33,7 +33,7 @@ struct RunOptions {
   double survey_overlap{0.6};
   double ugv_speed_mps{1.2};
   double heartbeat_hz{1};         // radio: each robot's status datagram
-  std::string config_dir{};       // optional YAML overrides: gps.yaml, visual_odometry.yaml, wheel_odometry.yaml, radio.yaml, diff_drive.yaml, quadrotor.yaml, camera.yaml, lidar.yaml
+  std::string config_dir{};       // optional YAML overrides: gps.yaml, visual_odometry.yaml, wheel_odometry.yaml, radio.yaml, diff_drive.yaml, quadrotor.yaml, camera.yaml, lidar_noise.yaml
   RecordLevel record{RecordLevel::kLight};
   int threads{0};                 // sensor worker threads, 0 = all cores
   bool progress{true};

@@ -1,0 +1,76 @@
+// airground-sim as a user runs it: every command's files, bad usage, corrupt worlds and configs.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "process.hpp"
+
+namespace ag::test {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string sim_bin() { return binary_dir() + "/sim/airground-sim"; }
+std::string tmp(const std::string& name) { return (fs::path(::testing::TempDir()) / ("simcli-" + name)).string(); }
+
+TEST(SimCli, HelpAndBadUsage) {
+  const auto help = run({sim_bin(), "--help"});
+  EXPECT_EQ(help.exit_code, 0);
+  EXPECT_NE(help.out.find("world generate --seed S"), std::string::npos);
+  EXPECT_NE(run({sim_bin(), "run", "--help"}).out.find("--duration"), std::string::npos);
+  EXPECT_EQ(run({sim_bin()}).exit_code, 2);
+  EXPECT_EQ(run({sim_bin(), "frobnicate"}).exit_code, 2);
+  EXPECT_EQ(run({sim_bin(), "render", "--pose", "1", "2"}).exit_code, 2) << "--pose needs six numbers";
+  EXPECT_EQ(run({sim_bin(), "run", "--duration", "abc"}).exit_code, 2);
+}
+
+TEST(SimCli, GenerateShowRenderScanOnASmallWorld) {
+  const std::string w = tmp("world");
+  fs::remove_all(w);
+  const auto gen = run({sim_bin(), "world", "generate", "--seed", "3", "--size", "200", "--targets", "4", "--out", w}, 120);
+  ASSERT_EQ(gen.exit_code, 0) << gen.err;
+  for (const char* f : {"world.yaml", "class.png", "albedo.png", "height.tif", "terrain.tif", "targets.yaml", "png/class.png", "png/hillshade.png"})
+    EXPECT_TRUE(fs::exists(fs::path(w) / f)) << f;
+  const auto show = run({sim_bin(), "world", "show", w, "--out", tmp("show")}, 60);
+  EXPECT_EQ(show.exit_code, 0) << show.err;
+  EXPECT_TRUE(fs::exists(fs::path(tmp("show")) / "albedo.png"));
+  const auto render = run({sim_bin(), "render", "--world", w, "--pose", "0", "0", "40", "0", "0", "0.5", "--scale", "0.25", "--out", tmp("render")}, 60);
+  ASSERT_EQ(render.exit_code, 0) << render.err;
+  for (const char* f : {"rgb.png", "class.png", "depth_mm.png"}) EXPECT_TRUE(fs::exists(fs::path(tmp("render")) / f)) << f;
+  const auto scan = run({sim_bin(), "scan", "--world", w, "--pose", "-60", "-60", "0.3", "--columns", "512", "--out", tmp("scan")}, 60);
+  ASSERT_EQ(scan.exit_code, 0) << scan.err;
+  std::ifstream ply(fs::path(tmp("scan")) / "scan.ply");
+  std::string first;
+  std::getline(ply, first);
+  EXPECT_EQ(first, "ply");
+}
+
+TEST(SimCli, CorruptWorldIsAClearError) {
+  const std::string w = tmp("corrupt");
+  fs::remove_all(w);
+  ASSERT_EQ(run({sim_bin(), "world", "generate", "--seed", "5", "--size", "200", "--targets", "2", "--out", w}, 120).exit_code, 0);
+  fs::resize_file(fs::path(w) / "class.png", 100);
+  const auto r = run({sim_bin(), "render", "--world", w, "--pose", "0", "0", "40", "0", "0", "0", "--out", tmp("r2")}, 60);
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("class.png"), std::string::npos) << r.err;
+}
+
+TEST(SimCli, ModelConfigsRoundTripAndBadValuesAreRefused) {
+  const std::string c = tmp("cfg");
+  fs::remove_all(c);
+  ASSERT_EQ(run({sim_bin(), "config", "--out", c}).exit_code, 0);
+  const auto ok = run({sim_bin(), "run", "--ugvs", "1", "--duration", "1", "--camera-scale", "0.25", "--lidar-columns", "512",
+                       "--record", "none", "--quiet", "--config-dir", c, "--out", tmp("run-ok")}, 120);
+  EXPECT_EQ(ok.exit_code, 0) << ok.err;
+  EXPECT_TRUE(fs::exists(fs::path(tmp("run-ok")) / "summary.json"));
+  std::ofstream(fs::path(c) / "gps.yaml") << "gps:\n  sigma_m: -3\n";
+  const auto bad = run({sim_bin(), "run", "--ugvs", "1", "--duration", "1", "--quiet", "--config-dir", c, "--out", tmp("run-bad")}, 120);
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_NE(bad.err.find("gps.sigma_m"), std::string::npos) << bad.err;
+  EXPECT_NE(bad.err.find("gps.yaml"), std::string::npos) << bad.err;
+}
+
+}  // namespace
+}  // namespace ag::test
