@@ -7,4 +7,6 @@ target_compile_options(airground_warnings INTERFACE
   -Wformat=2 -Wimplicit-fallthrough -Wmisleading-indentation -Wduplicated-cond
   -Wduplicated-branches -Wlogical-op
   # std::hardware_destructive_interference_size is ABI-unstable; we pin the line size ourselves.
-  -Wno-interference-size)
+  -Wno-interference-size
+  # GCC 12 false positive inside std::string at -O3 (GCC bug 105329).
+  -Wno-restrict)

@@ -62,7 +62,7 @@ constexpr const char* kRunHelp =
     "Options:\n"
     "  --no-uav                 ground robots only\n"
     "  --physics-hz F           vehicle/odometry/GPS step (50)\n"
-    "  --camera-hz F            quadrotor camera frames (2)      --camera-scale S   1 = 1280x800 (1)\n"
+    "  --camera-hz F            quadrotor camera frames (2)      --camera-scale S   0.5 = 640x400 (0.5)\n"
     "  --lidar-hz F             LiDAR scans (10)                 --lidar-columns C  512|1024|2048 (1024)\n"
     "  --altitude M             survey altitude (40)             --uav-speed V      (5 m/s)\n"
     "  --ugv-speed V            scripted ground speed (1.2 m/s)  --overlap F        survey side overlap (0.6)\n"

@@ -24,7 +24,7 @@ struct RunOptions {
   double duration_s{60};          // simulated seconds
   double physics_hz{50};          // vehicle dynamics, odometry, GPS/VO sampling
   double camera_hz{2};            // quadrotor camera frames (keyframes need ~2 m spacing at 5 m/s)
-  double camera_scale{1.0};       // 1.0 = 1280x800, 0.5 = 640x400
+  double camera_scale{0.5};       // 0.5 = 640x400, the size the mapper matches stereo at; 1.0 = 1280x800
   double lidar_hz{10};
   int lidar_columns{1024};        // 512, 1024 or 2048
   double lidar_mount_height_m{0.6};
