@@ -2,6 +2,7 @@
 #pragma once
 
 #include <atomic>
+#include <cassert>
 #include <bit>
 #include <cstddef>
 #include <cstdint>
@@ -64,6 +65,7 @@ class SpscRing {
   // Destroys the front element; only call after front() returned non-null.
   void pop() noexcept {
     const std::uint64_t r = cons_.read.load(std::memory_order_relaxed);
+    assert(r != cons_.cached_write && "pop() without a successful front()");
     std::launder(reinterpret_cast<T*>(&slots_[r & kMask]))->~T();
     cons_.read.store(r + 1, std::memory_order_release);
   }
