@@ -39,6 +39,8 @@ Result<std::unique_ptr<RoleInstance>> RoleInstance::create(const RoleDescription
   r->name_ = std::move(instance_name);
   r->stages_.reserve(role.stages.size());
   for (const auto& spec : role.stages) {
+    // Not in the compile-time check: sanitizer builds cannot compare function addresses there.
+    if (spec.make == nullptr) return Error::make(ErrorCode::kInvalidArgument, "stage '" + std::string(spec.name) + "' has no factory");
     StagePerf& perf = r->perf_.add(std::string(spec.name), static_cast<TimeNs>(spec.budget_us) * kNsPerUs,
                                    period_from_hz(spec.rate_hz));
     r->stages_.push_back(StageSlot{&spec, spec.make(), &perf});

@@ -37,7 +37,6 @@ void stage_budget_must_be_positive_and_below_its_period();
 void stage_priority_must_be_in_1_to_98();
 void stage_names_must_be_unique();
 void budgets_of_one_thread_exceed_its_time();
-void stage_needs_a_factory();
 
 constexpr bool same_thread(const StageSpec& a, const StageSpec& b) { return a.priority == b.priority && a.cpu == b.cpu; }
 }  // namespace table_check
@@ -47,7 +46,6 @@ template <std::size_t N>
 consteval bool role_table_ok(const StageSpec (&t)[N]) {
   for (std::size_t i = 0; i < N; ++i) {
     const StageSpec& s = t[i];
-    if (s.make == nullptr) table_check::stage_needs_a_factory();
     if (!(s.rate_hz > 0.0 && s.rate_hz <= 1000.0)) table_check::stage_rate_must_be_positive_and_at_most_1kHz();
     if (s.budget_us == 0 || static_cast<double>(s.budget_us) >= 1e6 / s.rate_hz)
       table_check::stage_budget_must_be_positive_and_below_its_period();
