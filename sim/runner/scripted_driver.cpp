@@ -28,6 +28,14 @@ RoadRouter::RoadRouter(const World& world, double cell_m, double clearance_m) {
   cv::resize(fine, coarse, cv::Size(geo_.width, geo_.height), 0, 0, cv::INTER_AREA);
   free_ = coarse > 250;  // all (or nearly all) fine cells drivable
   free_ /= 255;
+  // Keep only the largest connected network, so any two drivable points have a route between them.
+  cv::Mat labels, stats, centroids;
+  const int n = cv::connectedComponentsWithStats(free_, labels, stats, centroids, 8, CV_32S);
+  int best = 0;
+  for (int i = 1; i < n; ++i)
+    if (best == 0 || stats.at<int>(i, cv::CC_STAT_AREA) > stats.at<int>(best, cv::CC_STAT_AREA)) best = i;
+  free_ = labels == best;
+  free_ /= 255;
   for (int r = 0; r < geo_.height; ++r)
     for (int c = 0; c < geo_.width; ++c)
       if (free_.at<std::uint8_t>(r, c) != 0) free_cells_.push_back(r * geo_.width + c);
@@ -132,21 +140,53 @@ void PurePursuit::command(const Pose2& pose, double& v, double& w) {
   v = w = 0;
   if (done()) return;
   const Eigen::Vector2d p(pose.x, pose.y);
-  // Advance past points already within the lookahead; stop at the goal.
-  while (next_ + 1 < path_.size() && (path_[next_] - p).norm() < p_.lookahead_m) ++next_;
-  const Eigen::Vector2d target = path_[next_];
-  const double dist = (target - p).norm();
-  if (next_ + 1 == path_.size() && dist < p_.goal_tolerance_m) {
+  if (path_.size() == 1) path_.insert(path_.begin(), p);
+  // Progress: the closest point on the next few segments (never going back).
+  double best = std::numeric_limits<double>::max();
+  std::size_t best_seg = next_;
+  double best_t = 0;
+  for (std::size_t k = next_; k + 1 < path_.size() && k < next_ + 4; ++k) {
+    const Eigen::Vector2d a = path_[k], d = path_[k + 1] - a;
+    const double len2 = std::max(d.squaredNorm(), 1e-9);
+    const double tt = std::clamp((p - a).dot(d) / len2, 0.0, 1.0);
+    const double dist = (a + tt * d - p).norm();
+    if (dist < best) {
+      best = dist;
+      best_seg = k;
+      best_t = tt;
+    }
+  }
+  next_ = best_seg;
+  // The carrot: lookahead metres further along the path from that point.
+  Eigen::Vector2d target = path_.back();
+  double left = p_.lookahead_m;
+  Eigen::Vector2d from = path_[next_] + best_t * (path_[next_ + 1] - path_[next_]);
+  for (std::size_t k = next_; k + 1 < path_.size(); ++k) {
+    const Eigen::Vector2d to = path_[k + 1];
+    const double seg = (to - from).norm();
+    if (seg >= left) {
+      target = from + (to - from) * (left / std::max(seg, 1e-9));
+      break;
+    }
+    left -= seg;
+    from = to;
+  }
+  const double to_goal = (path_.back() - p).norm();
+  if (next_ + 2 >= path_.size() && to_goal < p_.goal_tolerance_m) {
     next_ = path_.size();
     return;
   }
+  const double dist = std::max((target - p).norm(), 1e-3);
   const double heading_err = wrap_angle(std::atan2(target.y() - p.y(), target.x() - p.x()) - pose.yaw);
-  // Curvature of the arc through the target; slow down for sharp turns and near the goal.
-  const double curvature = 2.0 * std::sin(heading_err) / std::max(dist, 1e-3);
+  // Curvature of the arc through the carrot; slow down for sharp turns and near the goal.
+  const double curvature = 2.0 * std::sin(heading_err) / dist;
   v = p_.max_speed_mps * std::max(0.0, std::cos(heading_err));
-  if (next_ + 1 == path_.size()) v = std::min(v, 0.8 * dist + 0.2);
+  v = std::min(v, 0.8 * to_goal + 0.2);
   w = std::clamp(v * curvature, -p_.max_yaw_rate, p_.max_yaw_rate);
-  if (std::abs(heading_err) > 1.0) w = std::copysign(p_.max_yaw_rate, heading_err);  // turn in place first
+  if (std::abs(heading_err) > 0.8) {  // turn in place first
+    v = 0;
+    w = std::copysign(p_.max_yaw_rate, heading_err);
+  }
 }
 
 }  // namespace ag::sim

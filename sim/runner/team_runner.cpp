@@ -88,6 +88,8 @@ class CsvLog {
 };
 
 struct Ugv {
+  Ugv(std::string n, int nd, DiffDriveRobot v, WheelOdometrySimulator o, PurePursuit p, const Pose2& s)
+      : name(std::move(n)), node(nd), vehicle(std::move(v)), odometry(std::move(o)), pursuit(std::move(p)), start(s) {}
   std::string name;
   int node{0};
   DiffDriveRobot vehicle;
@@ -95,6 +97,8 @@ struct Ugv {
   PurePursuit pursuit;
   std::uint64_t leg{0};
   std::uint64_t goals_reached{0};
+  bool on_route{false};     // following a planned route (not waiting for one)
+  TimeNs retry_at{0};       // when to try planning again after no route was found
   std::uint64_t scans{0};
   std::uint64_t odom_samples{0};
   Pose2 start;
@@ -145,19 +149,24 @@ Pose3 lidar_pose(const Ugv& u, double mount) {
   return p;
 }
 
-void new_leg(Team& t, Ugv& u) {
+void new_leg(Team& t, Ugv& u, TimeNs now) {
   std::vector<Eigen::Vector2d> path;
+  u.on_route = false;
   for (int attempt = 0; attempt < 20; ++attempt) {
     const std::uint64_t key = t.opt.seed * std::uint64_t{1000003} + static_cast<std::uint64_t>(u.node) * std::uint64_t{10007} + u.leg++;
     const Eigen::Vector2d goal = t.router->pick_drivable(key);
     const Pose2& p = u.vehicle.pose();
-    if ((goal - Eigen::Vector2d(p.x, p.y)).norm() < 20.0) continue;
+    const double d = (goal - Eigen::Vector2d(p.x, p.y)).norm();
+    if (d < 20.0 || (d > 150.0 && attempt < 15)) continue;  // legs of 20-150 m, like an errand across the block
     if (t.router->route(p.x, p.y, goal.x(), goal.y(), path) && path.size() >= 2) {
       u.pursuit.set_path(std::move(path));
+      u.on_route = true;
       return;
     }
   }
   u.pursuit.set_path({});
+  u.retry_at = now + 2 * kNsPerS;  // stay put and try again later rather than search every tick
+  AG_LOG_WARN("sim", "%s: no road route from (%.1f, %.1f); retrying in 2 s", u.name.c_str(), u.vehicle.pose().x, u.vehicle.pose().y);
 }
 
 // The world side of the lockstep tick: vehicles, odometry, GPS, VO, camera, LiDAR, radio, recording.
@@ -182,14 +191,18 @@ void SimWorldStage::step(TimeNs now) noexcept {
   // Ground robots: scripted pursuit from ground truth, exact arcs, wheel odometry.
   for (auto& up : t.ugvs) {
     Ugv& u = *up;
-    if (u.pursuit.done()) {
-      if (u.leg > 0) ++u.goals_reached;
-      new_leg(t, u);
+    if (u.pursuit.done() && now >= u.retry_at) {
+      if (u.on_route) ++u.goals_reached;
+      new_leg(t, u, now);
     }
     double v = 0, w = 0;
     u.pursuit.command(u.vehicle.pose(), v, w);
     u.vehicle.command_twist(v, w);
-    if (dt > 0 && u.vehicle.step(dt, *t.world)) new_leg(t, u);  // a collision: replan from here
+    if (dt > 0 && u.vehicle.step(dt, *t.world)) {  // a collision: the vehicle stopped; replan from here
+      AG_LOG_WARN("sim", "%s: collision at (%.2f, %.2f) yaw %.2f; replanning", u.name.c_str(), u.vehicle.pose().x,
+                  u.vehicle.pose().y, u.vehicle.pose().yaw);
+      new_leg(t, u, now);
+    }
     const OdometrySample od = u.odometry.step(now, u.vehicle.pose(), u.vehicle.wheel_left_rad_s(), u.vehicle.wheel_right_rad_s());
     ++u.odom_samples;
     u.odom_last = od.pose;
@@ -484,9 +497,9 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     const double off = (i - (opt.ugvs - 1) / 2.0) * 2.5;
     start.x += -std::sin(staging.yaw) * off;
     start.y += std::cos(staging.yaw) * off;
-    auto u = std::make_unique<Ugv>(Ugv{name, (opt.uav ? 1 : 0) + i, DiffDriveRobot(dd_cfg.value(), start),
-                                       WheelOdometrySimulator(od_cfg.value(), opt.seed * 31 + static_cast<std::uint64_t>(i)),
-                                       PurePursuit(PursuitParams{1.5, opt.ugv_speed_mps, 1.2, 0.8}), 0, 0, 0, 0, start, {}, {}, {}, {}, {}, {}, nullptr, nullptr});
+    auto u = std::make_unique<Ugv>(name, (opt.uav ? 1 : 0) + i, DiffDriveRobot(dd_cfg.value(), start),
+                                   WheelOdometrySimulator(od_cfg.value(), opt.seed * 31 + static_cast<std::uint64_t>(i)),
+                                   PurePursuit(PursuitParams{1.0, opt.ugv_speed_mps, 1.2, 0.8}), start);
     u->scan.reserve(static_cast<std::size_t>(64 * opt.lidar_columns));
     if (rec) {
       u->truth_log = CsvLog(t.out / ("truth_" + name + ".csv"), "t_s,x_m,y_m,z_m,roll_rad,pitch_rad,yaw_rad");

@@ -33,8 +33,8 @@ struct WheelOdometryConfig {
   OdometryMode mode{OdometryMode::kWheels};
   double wheel_radius_m{0.098};          // [m] nominal radius the odometry integrates with
   double track_width_m{0.37};            // [m] nominal track width the odometry integrates with
-  double wheel_radius_error{0.002};      // [-] std of each wheel's relative radius error, drawn once
-  double track_width_error{0.02};        // [-] std of the relative track-width error, drawn once
+  double wheel_radius_error{0.0005};     // [-] std of each wheel's relative radius error, drawn once (a calibrated robot)
+  double track_width_error{0.01};        // [-] std of the relative track-width error, drawn once
   double slip_sigma_per_sqrt_m{0.005};   // [m/sqrt(m)] white distance error of each wheel, per sqrt(m) rolled
   double yaw_drift_rad_per_s{0.0};       // [rad/s] constant yaw-rate bias while moving
   double yaw_drift_at_rest_rad_per_s{0.0};  // [rad/s] constant yaw-rate bias while standing still
