@@ -188,9 +188,9 @@ RayHit HeightfieldRaycaster::cast_impl(const Eigen::Vector3d& origin, const Eige
     if (du >= 0.0) return dv >= 0.0 ? traverse<true, true, 0>(ray) : traverse<true, false, 0>(ray);
     return dv >= 0.0 ? traverse<false, true, 0>(ray) : traverse<false, false, 0>(ray);
   }
-  if (near) {  // a few cells to go: the finest block level only, no descent from the top each time
-    if (du >= 0.0) return dv >= 0.0 ? traverse<true, true, 1>(ray) : traverse<true, false, 1>(ray);
-    return dv >= 0.0 ? traverse<false, true, 1>(ray) : traverse<false, false, 1>(ray);
+  if (near) {  // a few cells to go: plain cell stepping beats testing blocks on the way down
+    if (du >= 0.0) return dv >= 0.0 ? traverse<true, true, 0>(ray) : traverse<true, false, 0>(ray);
+    return dv >= 0.0 ? traverse<false, true, 0>(ray) : traverse<false, false, 0>(ray);
   }
   if (du >= 0.0) return dv >= 0.0 ? traverse<true, true, kMaxLevels>(ray) : traverse<true, false, kMaxLevels>(ray);
   return dv >= 0.0 ? traverse<false, true, kMaxLevels>(ray) : traverse<false, false, kMaxLevels>(ray);

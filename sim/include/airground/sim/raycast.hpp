@@ -52,7 +52,7 @@ class HeightfieldRaycaster {
                             double max_range) const noexcept;
   // The same ray, known to meet no surface before range t_start: the traversal starts there. Gives the
   // same hit as cast() (up to rounding of the range) whenever that promise holds. `near`: the hit is
-  // expected within a few cells, so only the finest pyramid level is worth testing.
+  // expected within a few cells, so the pyramid is not worth testing (plain cell stepping, same hits).
   [[nodiscard]] RayHit cast_from(const Eigen::Vector3d& origin, const Eigen::Vector3d& unit_dir, double max_range,
                                  double t_start, bool near = false) const noexcept;
 
