@@ -4,8 +4,11 @@
 #include <Eigen/LU>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
@@ -18,6 +21,8 @@ namespace {
 using nlohmann::json;
 
 constexpr LidarNoise kDefaultNoise{};
+constexpr std::size_t kMaxRings = 256;  // the metadata loader's limit; the fast scan's stack arrays
+constexpr double kInfinity = std::numeric_limits<double>::infinity();
 constexpr ParamSpec kNoiseParams[] = {
     ParamSpec::real("range_sigma_m", kDefaultNoise.range_sigma_m, 0.0, 1.0, "m", "Gaussian range noise"),
     ParamSpec::real("min_range_m", kDefaultNoise.min_range_m, 0.0, 10.0, "m", "closer returns are dropped"),
@@ -208,34 +213,170 @@ LidarSimulator::LidarSimulator(const World& world, const OusterBeamModel& beams,
       ray_dir_[c * rings + i] = (rot * dir).normalized();
     }
   }
+
+  // Group rings by azimuth: sorted by it, a gap of more than 0.5 deg starts a new group.
+  std::vector<int> by_azimuth(rings);
+  for (std::size_t i = 0; i < rings; ++i) by_azimuth[i] = static_cast<int>(i);
+  std::stable_sort(by_azimuth.begin(), by_azimuth.end(), [&](int a, int b) {
+    return beams_.azimuth_deg[static_cast<std::size_t>(a)] < beams_.azimuth_deg[static_cast<std::size_t>(b)];
+  });
+  std::vector<std::vector<int>> groups;
+  for (std::size_t j = 0; j < rings; ++j) {
+    const auto r = static_cast<std::size_t>(by_azimuth[j]);
+    if (j == 0 || beams_.azimuth_deg[r] - beams_.azimuth_deg[static_cast<std::size_t>(by_azimuth[j - 1])] > 0.5)
+      groups.emplace_back();
+    groups.back().push_back(static_cast<int>(r));
+  }
+  group_start_.push_back(0);
+  for (auto& gr : groups) {
+    std::sort(gr.begin(), gr.end(), [&](int a, int b) {
+      return beams_.altitude_deg[static_cast<std::size_t>(a)] < beams_.altitude_deg[static_cast<std::size_t>(b)];
+    });
+    group_rings_.insert(group_rings_.end(), gr.begin(), gr.end());
+    group_start_.push_back(static_cast<int>(group_rings_.size()));
+  }
 }
 
-void LidarSimulator::scan(const Pose3& pose, std::uint64_t seed, std::vector<LidarPoint>& out) const {
+void LidarSimulator::emit(std::size_t k, double hit_range, std::int32_t cell_col, std::int32_t cell_row,
+                          std::uint64_t key, std::vector<LidarPoint>& out) const {
+  const auto rings = static_cast<std::size_t>(beams_.rings());
+  const double sigma = noise_.range_sigma_m;
+  const auto col = static_cast<std::uint16_t>(k / rings), ring = static_cast<std::uint16_t>(k % rings);
+  double range = hit_range + beam_offset_m_;
+  if (sigma > 0.0 || noise_.dropout_prob > 0.0) {
+    std::uint64_t state = key ^ ((static_cast<std::uint64_t>(col) << 32) | ring);
+    const double u1 = unit_open(splitmix64(state)), u2 = unit_open(splitmix64(state));
+    if (noise_.dropout_prob > 0.0 && unit_open(splitmix64(state)) <= noise_.dropout_prob) return;
+    range += sigma * std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * kPi * u2);  // Box-Muller
+  }
+  if (range < noise_.min_range_m || range > noise_.max_range_m) return;
+  const Eigen::Vector3d p = ray_origin_[k] + (range - beam_offset_m_) * ray_dir_[k];
+  out.push_back(LidarPoint{static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()),
+                           static_cast<float>(range), world_.class_id.at<std::uint8_t>(cell_row, cell_col), ring, col});
+}
+
+void LidarSimulator::scan_per_ray(const Pose3& pose, std::uint64_t seed, std::vector<LidarPoint>& out) const {
   out.clear();
   out.reserve(ray_dir_.size());
   const Eigen::Matrix3d rot = rotation_of(pose);
   const Eigen::Vector3d pos(pose.x, pose.y, pose.z);
   const HeightfieldRaycaster& rc = *raycaster_;
-  const double sigma = noise_.range_sigma_m;
-  const double cast_range = noise_.max_range_m + 6.0 * sigma;
-  const auto rings = static_cast<std::size_t>(beams_.rings());
+  const double cast_range = noise_.max_range_m + 6.0 * noise_.range_sigma_m;
   const std::uint64_t key = seed * 0xD1B54A32D192ED03ULL;
-
   for (std::size_t k = 0; k < ray_dir_.size(); ++k) {
     const RayHit hit = rc.cast(rot * ray_origin_[k] + pos, rot * ray_dir_[k], cast_range);
-    if (!hit.hit) continue;
-    const auto col = static_cast<std::uint16_t>(k / rings), ring = static_cast<std::uint16_t>(k % rings);
-    double range = hit.range + beam_offset_m_;
-    if (sigma > 0.0 || noise_.dropout_prob > 0.0) {
-      std::uint64_t state = key ^ ((static_cast<std::uint64_t>(col) << 32) | ring);
-      const double u1 = unit_open(splitmix64(state)), u2 = unit_open(splitmix64(state));
-      if (noise_.dropout_prob > 0.0 && unit_open(splitmix64(state)) <= noise_.dropout_prob) continue;
-      range += sigma * std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * kPi * u2);  // Box-Muller
+    if (hit.hit) emit(k, hit.range, hit.col, hit.row, key, out);
+  }
+}
+
+void LidarSimulator::scan(const Pose3& pose, std::uint64_t seed, std::vector<LidarPoint>& out) const {
+  const HeightfieldRaycaster& rc = *raycaster_;
+  const GridGeometry& g = rc.grid();
+  const auto rings = static_cast<std::size_t>(beams_.rings());
+  const double inv_res = 1.0 / g.resolution;
+  const double u_pos = (pose.x - g.origin_x) * inv_res, v_pos = (g.origin_y - pose.y) * inv_res;
+  // The fan needs every column's origin inside the grid: keep a margin for the beam offsets.
+  if (!rc.has_fan_bounds() || !(u_pos >= 2.0 && v_pos >= 2.0 && u_pos < g.width - 2.0 && v_pos < g.height - 2.0) ||
+      rings > kMaxRings) {
+    scan_per_ray(pose, seed, out);
+    return;
+  }
+  out.clear();
+  out.reserve(ray_dir_.size());
+  const Eigen::Matrix3d rot = rotation_of(pose);
+  const Eigen::Vector3d pos(pose.x, pose.y, pose.z);
+  const double cast_range = noise_.max_range_m + 6.0 * noise_.range_sigma_m;
+  const std::uint64_t key = seed * 0xD1B54A32D192ED03ULL;
+  // A beam may follow the centre line of its chunk for 1 / |its horizontal direction - the centre's|
+  // cells before it can leave the dilation's one cell; chunks are kept narrow enough for ~75 m.
+  constexpr double kChunkSpread = 1.0 / 300.0;
+  constexpr double kLateral = 0.999;  // [cells] a hair under one cell, for rounding
+  constexpr double kBackOff = 1e-7;   // [m] start the exact cast just inside the proven-free part
+
+  struct Beam {
+    Eigen::Vector3d dir;  // map frame, unit
+    double hu, hv;        // unit horizontal direction, grid coordinates
+    double h;             // horizontal cells per metre of range
+    double slope;         // [m] of z per horizontal cell
+  };
+  std::array<Beam, kMaxRings> beam;
+  std::array<int, kMaxRings> order;
+  std::array<FanBeam, kMaxRings> fan;
+  struct Hit {
+    double range;
+    std::int32_t col, row;
+    bool hit;
+  };
+  std::array<Hit, kMaxRings> hits;
+
+  for (std::size_t c = 0; c < static_cast<std::size_t>(beams_.columns); ++c) {
+    const std::size_t k0 = c * rings;
+    const Eigen::Vector3d origin = rot * ray_origin_[k0] + pos;  // the same for every ring of the column
+    for (std::size_t i = 0; i < rings; ++i) {
+      Beam& b = beam[i];
+      b.dir = rot * ray_dir_[k0 + i];
+      const double du = b.dir.x() * inv_res, dv = -b.dir.y() * inv_res;
+      b.h = std::sqrt(du * du + dv * dv);  // not hypot: slow, and a bound has margin for rounding
+      b.hu = b.h > 0.0 ? du / b.h : 1.0;
+      b.hv = b.h > 0.0 ? dv / b.h : 0.0;
+      b.slope = b.h > 0.0 ? b.dir.z() / b.h : (b.dir.z() > 0.0 ? kInfinity : -kInfinity);
+      hits[i].hit = false;
     }
-    if (range < noise_.min_range_m || range > noise_.max_range_m) continue;
-    const Eigen::Vector3d p = ray_origin_[k] + (range - beam_offset_m_) * ray_dir_[k];
-    out.push_back(LidarPoint{static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()),
-                             static_cast<float>(range), world_.class_id.at<std::uint8_t>(hit.row, hit.col), ring, col});
+    for (std::size_t gi = 0; gi + 1 < group_start_.size(); ++gi) {
+      const int g0 = group_start_[gi], g1 = group_start_[gi + 1], n = g1 - g0;
+      // Ascending slope: the stored order (ascending altitude) is right for a level sensor; a tilt can
+      // only swap neighbours, which insertion sort fixes in a pass.
+      for (int j = 0; j < n; ++j) {
+        const int r = group_rings_[static_cast<std::size_t>(g0 + j)];
+        int q = j;
+        while (q > 0 && beam[static_cast<std::size_t>(order[static_cast<std::size_t>(q - 1)])].slope >
+                            beam[static_cast<std::size_t>(r)].slope) {
+          order[static_cast<std::size_t>(q)] = order[static_cast<std::size_t>(q - 1)];
+          --q;
+        }
+        order[static_cast<std::size_t>(q)] = r;
+      }
+      for (int a = 0; a < n;) {
+        const Beam& first = beam[static_cast<std::size_t>(order[static_cast<std::size_t>(a)])];
+        int e = a + 1;
+        while (e < n) {
+          const Beam& o = beam[static_cast<std::size_t>(order[static_cast<std::size_t>(e)])];
+          const double ddu = o.hu - first.hu, ddv = o.hv - first.hv;
+          if (ddu * ddu + ddv * ddv > 4.0 * kChunkSpread * kChunkSpread) break;
+          ++e;
+        }
+        const Beam& centre = beam[static_cast<std::size_t>(order[static_cast<std::size_t>((a + e - 1) / 2)])];
+        double s_stop = 0.0;
+        for (int j = a; j < e; ++j) {
+          const Beam& o = beam[static_cast<std::size_t>(order[static_cast<std::size_t>(j)])];
+          fan[static_cast<std::size_t>(j - a)].slope = o.slope;
+          s_stop = std::max(s_stop, cast_range * o.h);
+        }
+        double walked = 0.0;
+        const bool fanned = rc.fan_free_bounds(origin, centre.hu, centre.hv, s_stop, fan.data(), e - a, walked);
+        for (int j = a; j < e; ++j) {
+          const auto r = static_cast<std::size_t>(order[static_cast<std::size_t>(j)]);
+          const Beam& o = beam[r];
+          double bound = fanned ? fan[static_cast<std::size_t>(j - a)].bound : 0.0;
+          const double dev = std::sqrt((o.hu - centre.hu) * (o.hu - centre.hu) + (o.hv - centre.hv) * (o.hv - centre.hv));
+          const double s_max = dev > 0.0 ? kLateral / dev : kInfinity;  // where the beam may leave the fan
+          bool near = false;
+          if (bound == kInfinity) {  // rose above every surface at `walked`, checked before
+            bound = s_max < walked ? s_max : kInfinity;
+          } else {
+            near = fan[static_cast<std::size_t>(j - a)].blocked && bound < s_max;  // the hit is likely close
+            bound = std::min(bound, s_max);
+          }
+          const double t_start = o.h > 0.0 ? bound / o.h : (bound == kInfinity ? kInfinity : 0.0);
+          if (t_start > cast_range) continue;  // free over its whole range
+          const RayHit hit = rc.cast_from(origin, o.dir, cast_range, std::max(0.0, t_start - kBackOff), near);
+          if (hit.hit) hits[r] = Hit{hit.range, hit.col, hit.row, true};
+        }
+        a = e;
+      }
+    }
+    for (std::size_t i = 0; i < rings; ++i)
+      if (hits[i].hit) emit(k0 + i, hits[i].range, hits[i].col, hits[i].row, key, out);
   }
 }
 

@@ -64,28 +64,64 @@ HeightfieldRaycaster::HeightfieldRaycaster(const World& world, RaycastOptions op
 
   if (!options.hierarchical) return;
   static_assert(std::size(kLevelShifts) == kMaxLevels);
-  for (const int shift : kLevelShifts) {
-    Level lv;
-    lv.shift = shift;
-    const std::int32_t side = std::int32_t{1} << shift;
-    lv.width = (w + side - 1) >> shift;
-    lv.height = (h + side - 1) >> shift;
-    lv.max.assign(static_cast<std::size_t>(lv.width) * static_cast<std::size_t>(lv.height),
-                  -std::numeric_limits<float>::infinity());
-    for (std::int32_t r = 0; r < h; ++r) {
-      const float* sr = surface_.data() + static_cast<std::size_t>(r) * uw;
-      float* mr = lv.max.data() + static_cast<std::size_t>(r >> shift) * static_cast<std::size_t>(lv.width);
-      for (std::int32_t c = 0; c < w; ++c) {
-        float& m = mr[c >> shift];
-        m = std::max(m, sr[c]);
+  const auto build_levels = [&](const std::vector<float>& src, std::vector<Level>& out) {
+    for (const int shift : kLevelShifts) {
+      Level lv;
+      lv.shift = shift;
+      const std::int32_t side = std::int32_t{1} << shift;
+      lv.width = (w + side - 1) >> shift;
+      lv.height = (h + side - 1) >> shift;
+      lv.max.assign(static_cast<std::size_t>(lv.width) * static_cast<std::size_t>(lv.height),
+                    -std::numeric_limits<float>::infinity());
+      for (std::int32_t r = 0; r < h; ++r) {
+        const float* sr = src.data() + static_cast<std::size_t>(r) * uw;
+        float* mr = lv.max.data() + static_cast<std::size_t>(r >> shift) * static_cast<std::size_t>(lv.width);
+        for (std::int32_t c = 0; c < w; ++c) {
+          float& m = mr[c >> shift];
+          m = std::max(m, sr[c]);
+        }
       }
+      out.push_back(std::move(lv));
     }
-    levels_.push_back(std::move(lv));
+  };
+  build_levels(surface_, levels_);
+  if (!options.fan_bounds) return;
+
+  // 3x3 max, separably: rows first, then columns.
+  std::vector<float> rowmax(surface_.size());
+  for (std::int32_t r = 0; r < h; ++r) {
+    const float* sr = surface_.data() + static_cast<std::size_t>(r) * uw;
+    float* dr = rowmax.data() + static_cast<std::size_t>(r) * uw;
+    for (std::int32_t c = 0; c < w; ++c) {
+      float m = sr[c];
+      if (c > 0) m = std::max(m, sr[c - 1]);
+      if (c + 1 < w) m = std::max(m, sr[c + 1]);
+      dr[c] = m;
+    }
   }
+  dilated_.resize(surface_.size());
+  for (std::int32_t r = 0; r < h; ++r) {
+    const float* a = rowmax.data() + static_cast<std::size_t>(std::max(r - 1, 0)) * uw;
+    const float* b = rowmax.data() + static_cast<std::size_t>(r) * uw;
+    const float* c = rowmax.data() + static_cast<std::size_t>(std::min(r + 1, h - 1)) * uw;
+    float* d = dilated_.data() + static_cast<std::size_t>(r) * uw;
+    for (std::size_t i = 0; i < uw; ++i) d[i] = std::max(a[i], std::max(b[i], c[i]));
+  }
+  build_levels(dilated_, dlevels_);
 }
 
 RayHit HeightfieldRaycaster::cast(const Eigen::Vector3d& origin, const Eigen::Vector3d& unit_dir,
                                   double max_range) const noexcept {
+  return cast_impl(origin, unit_dir, max_range, 0.0, false);
+}
+
+RayHit HeightfieldRaycaster::cast_from(const Eigen::Vector3d& origin, const Eigen::Vector3d& unit_dir, double max_range,
+                                       double t_start, bool near) const noexcept {
+  return cast_impl(origin, unit_dir, max_range, t_start, near);
+}
+
+RayHit HeightfieldRaycaster::cast_impl(const Eigen::Vector3d& origin, const Eigen::Vector3d& unit_dir,
+                                       double max_range, double t_start, bool near) const noexcept {
   RayHit out;
   const std::int32_t w = grid_.width, h = grid_.height;
   const double inv_res = 1.0 / grid_.resolution;
@@ -140,11 +176,19 @@ RayHit HeightfieldRaycaster::cast(const Eigen::Vector3d& origin, const Eigen::Ve
   } else if (z0 > zmax) {
     return out;
   }
+  if (t_start > t0) {  // the caller vouches for [t0, t_start): start mid-air, as if entered from above
+    t0 = t_start;
+    axis = 0;
+  }
   if (!(t0 <= t1)) return out;
 
   const Ray ray{origin, unit_dir, u0, v0, z0, du, dv, dz, idu, idv, t0, t1, axis};
   // One traversal per sign of the horizontal direction: the stepping has no direction branches.
   if (levels_.empty()) {
+    if (du >= 0.0) return dv >= 0.0 ? traverse<true, true, 0>(ray) : traverse<true, false, 0>(ray);
+    return dv >= 0.0 ? traverse<false, true, 0>(ray) : traverse<false, false, 0>(ray);
+  }
+  if (near) {  // a few cells to go: plain cell stepping beats testing blocks on the way down
     if (du >= 0.0) return dv >= 0.0 ? traverse<true, true, 0>(ray) : traverse<true, false, 0>(ray);
     return dv >= 0.0 ? traverse<false, true, 0>(ray) : traverse<false, false, 0>(ray);
   }
@@ -236,6 +280,126 @@ RayHit HeightfieldRaycaster::traverse(const Ray& ray) const noexcept {
     axis = across_u ? 1 : 2;
     t = te;
     if (ci < 0 || cj < 0 || ci >= w || cj >= h) return out;
+  }
+}
+
+bool HeightfieldRaycaster::fan_free_bounds(const Eigen::Vector3d& origin, double cu, double cv, double s_stop,
+                                           FanBeam* beams, int n, double& walked) const noexcept {
+  walked = 0.0;
+  for (int i = 0; i < n; ++i) beams[i].bound = 0.0, beams[i].blocked = false;
+  if (dilated_.empty() || n <= 0) return false;
+  const double inv_res = 1.0 / grid_.resolution;
+  const double u0 = (origin.x() - grid_.origin_x) * inv_res;
+  const double v0 = (grid_.origin_y - origin.y()) * inv_res;
+  const double z0 = origin.z();
+  if (!std::isfinite(u0 + v0 + z0 + cu + cv + s_stop)) return false;
+  // Outside the grid the centre line's cells do not exist, while a beam beside it may be inside.
+  if (!(u0 >= 0.0 && v0 >= 0.0 && u0 < static_cast<double>(grid_.width) && v0 < static_cast<double>(grid_.height)))
+    return false;
+  if (cu >= 0.0) {
+    if (cv >= 0.0) fan_walk<true, true>(u0, v0, z0, cu, cv, s_stop, beams, n, walked);
+    else fan_walk<true, false>(u0, v0, z0, cu, cv, s_stop, beams, n, walked);
+  } else {
+    if (cv >= 0.0) fan_walk<false, true>(u0, v0, z0, cu, cv, s_stop, beams, n, walked);
+    else fan_walk<false, false>(u0, v0, z0, cu, cv, s_stop, beams, n, walked);
+  }
+  return true;
+}
+
+// The centre line's cells are visited as in traverse(), against the dilated surface: a beam whose line
+// stays within one cell of the centre line meets, at horizontal distance s, a cell no higher than the
+// dilated value of the centre cell at s. The beams share the origin, so at any s >= 0 a steeper beam is
+// higher: the beams still unbounded are always the steepest ones, and the lowest of them decides.
+template <bool kPosU, bool kPosV>
+void HeightfieldRaycaster::fan_walk(double u0, double v0, double z0, double cu, double cv, double s_stop,
+                                    FanBeam* beams, int n, double& walked) const noexcept {
+  constexpr double kEps = 1e-6;  // [m] height margin: rounding can only make a bound shorter
+  const std::int32_t w = grid_.width, h = grid_.height;
+  const double icu = cu != 0.0 ? 1.0 / cu : kInf;
+  const double icv = cv != 0.0 ? 1.0 / cv : kInf;
+  const double zmax = static_cast<double>(max_surface_);
+  constexpr std::int32_t su = kPosU ? 1 : -1, sv = kPosV ? 1 : -1;
+  std::int32_t ci = floor_clamped(u0, 0, w - 1), cj = floor_clamped(v0, 0, h - 1);
+  for (int i = 0; i < n; ++i) beams[i].bound = kInf;
+  int next = 0;
+  double s = 0.0;
+  // Beams left unbounded when the walk ends early were checked up to s.
+  const auto stop_at = [&](double s_end) noexcept {
+    walked = s_end;
+    for (int i = next; i < n; ++i) beams[i].bound = s_end;
+  };
+  const auto zlow = [&](double m, double a, double b) noexcept { return z0 + std::min(m * a, m * b); };
+
+  std::int32_t dip_bx[kMaxLevels], dip_by[kMaxLevels];
+  std::fill(std::begin(dip_bx), std::end(dip_bx), -1);
+  std::fill(std::begin(dip_by), std::end(dip_by), -1);
+  for (;;) {
+    if (next == n) {
+      walked = s;
+      return;
+    }
+    const double m = beams[next].slope;
+    if (m >= 0.0 && z0 + m * s > zmax + kEps) {  // every beam left rises above the highest surface from here
+      walked = s;
+      return;
+    }
+    if (s >= s_stop) return stop_at(s);
+    bool skipped = false;
+    for (int l = kMaxLevels - 1; l >= 0; --l) {
+      const Level& lv = dlevels_[static_cast<std::size_t>(l)];
+      const int shift = kLevelShifts[l];
+      const std::int32_t bx = ci >> shift, by = cj >> shift;
+      if (bx == dip_bx[l] && by == dip_by[l]) continue;
+      const std::int32_t side = std::int32_t{1} << shift;
+      const std::int32_t bu = bx << shift, bv = by << shift;
+      const double tu = (static_cast<double>(kPosU ? bu + side : bu) - u0) * icu;
+      const double tv = (static_cast<double>(kPosV ? bv + side : bv) - v0) * icv;
+      const double te = std::max(s, std::min(tu, tv));
+      if (zlow(m, s, std::min(te, s_stop)) >
+          static_cast<double>(lv.max[static_cast<std::size_t>(by) * static_cast<std::size_t>(lv.width) +
+                                     static_cast<std::size_t>(bx)]) + kEps) {
+        if (te >= s_stop) return stop_at(s_stop);
+        const bool across_u = tu <= tv;
+        std::int32_t ni = floor_clamped(u0 + te * cu, bu, bu + side - 1);
+        std::int32_t nj = floor_clamped(v0 + te * cv, bv, bv + side - 1);
+        ni = kPosU ? std::max(ni, ci) : std::min(ni, ci);
+        nj = kPosV ? std::max(nj, cj) : std::min(nj, cj);
+        ci = across_u ? (kPosU ? bu + side : bu - 1) : ni;
+        cj = across_u ? nj : (kPosV ? bv + side : bv - 1);
+        s = te;
+        skipped = true;
+        break;
+      }
+      dip_bx[l] = bx;
+      dip_by[l] = by;
+    }
+    if (skipped) {
+      if (ci < 0 || cj < 0 || ci >= w || cj >= h) return stop_at(s);
+      continue;
+    }
+
+    const double top = static_cast<double>(dilated_[static_cast<std::size_t>(cj) * static_cast<std::size_t>(w) +
+                                                    static_cast<std::size_t>(ci)]) + kEps;
+    const double tu = (static_cast<double>(kPosU ? ci + 1 : ci) - u0) * icu;
+    const double tv = (static_cast<double>(kPosV ? cj + 1 : cj) - v0) * icv;
+    const double te = std::max(s, std::min(tu, tv));
+    const double so = std::min(te, s_stop);
+    const int before = next;
+    while (next < n && zlow(beams[next].slope, s, so) <= top) {
+      beams[next].bound = s;
+      beams[next++].blocked = true;
+    }
+    if (next == n) continue;
+    if (next != before) {  // a higher beam decides now: blocks the last one dipped into may be skipped
+      std::fill(std::begin(dip_bx), std::end(dip_bx), -1);
+      std::fill(std::begin(dip_by), std::end(dip_by), -1);
+    }
+    if (te >= s_stop) return stop_at(s_stop);
+    const bool across_u = tu <= tv;
+    ci += across_u ? su : 0;
+    cj += across_u ? 0 : sv;
+    s = te;
+    if (ci < 0 || cj < 0 || ci >= w || cj >= h) return stop_at(s);
   }
 }
 

@@ -11,6 +11,7 @@
 #include <fstream>
 #include <map>
 #include <new>
+#include <random>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -393,6 +394,129 @@ TEST(Lidar, RepeatedScansReuseTheBuffer) {
 #endif
   EXPECT_EQ(pts.data(), data);
   EXPECT_EQ(pts.capacity(), capacity);
+}
+
+// A 150 m town on sloped, rolling terrain: streets with curbs, buildings, domed tree crowns, parked cars,
+// one-cell poles; the world edge is within range of some poses.
+World town_world() {
+  World w = flat_world(600, 600, 0.25, -75.0, 75.0, ClassId::kGrass);
+  const GridGeometry& g = w.grid();
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  for (std::int32_t r = 0; r < g.height; ++r) {
+    for (std::int32_t c = 0; c < g.width; ++c) {
+      const double x = g.x_of(c), y = g.y_of(r);
+      w.terrain.at<float>(r, c) = static_cast<float>(0.04 * x + 0.02 * y + 1.5 * std::sin(x / 17.0) * std::cos(y / 23.0));
+      const double bx = std::fmod(x + 75.0, 40.0), by = std::fmod(y + 75.0, 40.0);
+      if (bx < 8.0 || by < 8.0) {
+        w.class_id.at<std::uint8_t>(r, c) = raw(ClassId::kRoad);
+      } else if (bx < 8.5 || by < 8.5) {
+        w.class_id.at<std::uint8_t>(r, c) = raw(ClassId::kDirt);
+        w.height.at<float>(r, c) = 0.15f;  // curb
+      }
+    }
+  }
+  const auto put = [&](double x, double y, ClassId k, float h) {
+    const std::int32_t c = g.col(x), r = g.row(y);
+    if (!g.contains(c, r)) return;
+    w.class_id.at<std::uint8_t>(r, c) = raw(k);
+    w.height.at<float>(r, c) = h;
+  };
+  for (int b = 0; b < 30; ++b) {
+    const double x0 = -75.0 + u01(rng) * 140.0, y0 = -75.0 + u01(rng) * 140.0, wx = 4 + u01(rng) * 14,
+                 wy = 4 + u01(rng) * 14, h = 3 + u01(rng) * 25;
+    for (double x = x0; x < x0 + wx; x += 0.25)
+      for (double y = y0; y < y0 + wy; y += 0.25) put(x, y, ClassId::kBuilding, static_cast<float>(h));
+  }
+  for (int t = 0; t < 60; ++t) {
+    const double cx = -75.0 + u01(rng) * 150.0, cy = -75.0 + u01(rng) * 150.0, rad = 1 + u01(rng) * 3, h = 4 + u01(rng) * 10;
+    for (double x = cx - rad; x <= cx + rad; x += 0.25) {
+      for (double y = cy - rad; y <= cy + rad; y += 0.25) {
+        const double d2 = ((x - cx) * (x - cx) + (y - cy) * (y - cy)) / (rad * rad);
+        if (d2 <= 1.0) put(x, y, ClassId::kTree, static_cast<float>(h * (0.6 + 0.4 * std::sqrt(1.0 - d2))));
+      }
+    }
+  }
+  for (int v = 0; v < 60; ++v) {
+    const double cx = -75.0 + u01(rng) * 150.0, cy = -75.0 + u01(rng) * 150.0;
+    const bool along_x = u01(rng) < 0.5;
+    for (double x = cx; x < cx + (along_x ? 4.5 : 1.75); x += 0.25)
+      for (double y = cy; y < cy + (along_x ? 1.75 : 4.5); y += 0.25) put(x, y, ClassId::kVehicle, 1.5f);
+  }
+  // One-cell poles (as buildings): thin obstacles a fan could step past.
+  for (int p = 0; p < 80; ++p) put(-75.0 + u01(rng) * 150.0, -75.0 + u01(rng) * 150.0, ClassId::kBuilding, 6.0f);
+  return w;
+}
+
+// Same returns, in the same order, up to float rounding.
+void expect_same_scan(const std::vector<LidarPoint>& fast, const std::vector<LidarPoint>& ref, const std::string& what) {
+  std::map<std::pair<int, int>, const LidarPoint*> by_pixel;
+  for (const LidarPoint& p : ref) by_pixel[{p.ring, p.col}] = &p;
+  std::size_t missing = 0;
+  for (const LidarPoint& p : fast) {
+    const auto it = by_pixel.find({p.ring, p.col});
+    if (it == by_pixel.end()) {
+      ADD_FAILURE() << what << ": extra return at ring " << p.ring << " col " << p.col << " range " << p.range;
+      continue;
+    }
+    const LidarPoint& q = *it->second;
+    EXPECT_NEAR(p.x, q.x, 1e-4) << what << " ring " << p.ring << " col " << p.col;
+    EXPECT_NEAR(p.y, q.y, 1e-4) << what << " ring " << p.ring << " col " << p.col;
+    EXPECT_NEAR(p.z, q.z, 1e-4) << what << " ring " << p.ring << " col " << p.col;
+    EXPECT_NEAR(p.range, q.range, 1e-4) << what << " ring " << p.ring << " col " << p.col;
+    EXPECT_EQ(p.cls, q.cls) << what << " ring " << p.ring << " col " << p.col;
+    by_pixel.erase(it);
+  }
+  for (const auto& [pixel, q] : by_pixel) {
+    ++missing;
+    if (missing < 10) ADD_FAILURE() << what << ": missing return at ring " << pixel.first << " col " << pixel.second << " range " << q->range;
+  }
+  EXPECT_EQ(missing, 0u) << what;
+  ASSERT_EQ(fast.size(), ref.size()) << what;
+  for (std::size_t i = 0; i < fast.size(); ++i) {
+    ASSERT_EQ(fast[i].ring, ref[i].ring) << what << " at " << i;
+    ASSERT_EQ(fast[i].col, ref[i].col) << what << " at " << i;
+  }
+}
+
+TEST(Lidar, FastScanEqualsPerRayCastsOnRandomTiltedPoses) {
+  const World w = town_world();
+  const GridGeometry& g = w.grid();
+  LidarNoise noise;  // noise and dropouts must follow (seed, ring, col) as well
+  noise.dropout_prob = 0.05;
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  const double tilt = 5.0 * kPi / 180.0;
+  std::size_t returns = 0;
+  int poses = 0;
+  for (const int cols : {512, 1024, 2048}) {
+    const LidarSimulator sim(w, beams(cols), noise);
+    const int n = cols == 512 ? 40 : 6;
+    for (int i = 0; i < n; ++i) {
+      Pose3 pose;
+      // Mostly inside the town; a few near the edge, where rays leave the world.
+      const double span = i % 7 == 3 ? 74.0 : 65.0;
+      pose.x = -span + 2.0 * span * u01(rng);
+      pose.y = -span + 2.0 * span * u01(rng);
+      const std::int32_t c = std::clamp(g.col(pose.x), 0, g.width - 1), r = std::clamp(g.row(pose.y), 0, g.height - 1);
+      pose.z = static_cast<double>(w.surface_at(c, r)) + (i % 5 == 0 ? 0.3 + 3.0 * u01(rng) : 0.8 + 0.6 * u01(rng));
+      pose.yaw = 2.0 * kPi * u01(rng);
+      if (i % 4 != 0) {  // a quarter level, the rest tilted up to 5 deg
+        pose.roll = tilt * (2.0 * u01(rng) - 1.0);
+        pose.pitch = tilt * (2.0 * u01(rng) - 1.0);
+      }
+      if (i == 1) pose.roll = tilt, pose.pitch = -tilt;
+      const std::uint64_t seed = 1000u + static_cast<std::uint64_t>(i);
+      std::vector<LidarPoint> fast, ref;
+      sim.scan(pose, seed, fast);
+      sim.scan_per_ray(pose, seed, ref);
+      expect_same_scan(fast, ref, std::to_string(cols) + " columns, pose " + std::to_string(i));
+      returns += ref.size();
+      ++poses;
+      if (HasFailure()) return;
+    }
+  }
+  EXPECT_GT(returns, static_cast<std::size_t>(poses) * 10000u);
 }
 
 TEST(Lidar, NoiseYamlIsValidated) {

@@ -243,6 +243,30 @@ TEST(Raycast, AgreesWithBruteForceMarchingOnRandomRays) {
   EXPECT_LT(grazing + ties, static_cast<int>(rays.size()) / 100);
 }
 
+// cast_from() promises the same hit once told a part of the ray that meets nothing; with `near` (plain
+// cell stepping) too.
+TEST(Raycast, CastFromAFreeStartGivesTheSameHit) {
+  const World w = random_town(7);
+  const HeightfieldRaycaster rc(w);
+  int hits = 0;
+  for (const Ray& ray : random_rays(w, 12)) {
+    const RayHit full = rc.cast(ray.o, ray.d, ray.max_range);
+    const double free_until = full.hit ? full.range : ray.max_range;
+    for (const double f : {0.0, 0.3, 0.9, 0.999}) {
+      for (const bool near : {false, true}) {
+        const RayHit h = rc.cast_from(ray.o, ray.d, ray.max_range, f * free_until, near);
+        ASSERT_EQ(h.hit, full.hit);
+        if (!h.hit) continue;
+        EXPECT_NEAR(h.range, full.range, 1e-9);
+        EXPECT_EQ(h.col, full.col);
+        EXPECT_EQ(h.row, full.row);
+      }
+    }
+    hits += full.hit ? 1 : 0;
+  }
+  EXPECT_GT(hits, 900);
+}
+
 // A wall two cells thick across the whole world: columns [40, 60) are 10 m tall.
 World wall_world() {
   World w = flat_world(120, 80, 0.25, 0.0, 20.0, ClassId::kRoad);

@@ -78,7 +78,12 @@ class LidarSimulator {
   // Replaces `out` with the returns (column by column, top ring first; pixels without a return are
   // absent). Range noise and dropouts come from a counter-based PRNG keyed by (seed, ring, col): the
   // same pose and seed give the same scan. Reuses out's capacity: no allocation after the first call.
+  // Each column's beams share one origin: beams of about the same horizontal direction are bounded
+  // together by one march of the raycaster (fan_free_bounds), then finished by an exact cast each.
   void scan(const Pose3& sensor_pose_in_map, std::uint64_t seed, std::vector<LidarPoint>& out) const;
+  // The same scan with one full cast per ray: the reference scan() is tested against (and the fallback
+  // when the raycaster has no fan pyramid or the sensor is outside the world).
+  void scan_per_ray(const Pose3& sensor_pose_in_map, std::uint64_t seed, std::vector<LidarPoint>& out) const;
 
   [[nodiscard]] const OusterBeamModel& beams() const noexcept { return beams_; }
   [[nodiscard]] const LidarNoise& noise() const noexcept { return noise_; }
@@ -93,6 +98,14 @@ class LidarSimulator {
   // Per ray (column-major: col * rings + ring), sensor frame: beam origin [m] and unit direction.
   std::vector<Eigen::Vector3d> ray_origin_;
   std::vector<Eigen::Vector3d> ray_dir_;
+  // Rings grouped by beam azimuth (an OS-1 has four values): one group's beams of one column are
+  // almost coplanar. Concatenated, ascending altitude within a group; group g is [group_start_[g], [g+1]).
+  std::vector<int> group_rings_;
+  std::vector<int> group_start_;
+
+  // Appends the return of ring/col for a hit at `hit_range` [m] on cell (cell_col, cell_row), after noise.
+  void emit(std::size_t k, double hit_range, std::int32_t cell_col, std::int32_t cell_row, std::uint64_t key,
+            std::vector<LidarPoint>& out) const;
 };
 
 }  // namespace ag::sim

@@ -26,6 +26,17 @@ struct RaycastOptions {
   // Max-height pyramid over blocks of 4 to 64 cells: a ray skips any block it passes above.
   // Off = plain cell-by-cell traversal (the reference the pyramid is tested against).
   bool hierarchical{true};
+  // A second max pyramid over the surface dilated by one cell (3x3 max, ~1 float per cell) for
+  // fan_free_bounds(): one march bounds many nearly parallel rays at once (the LiDAR's fast scan).
+  bool fan_bounds{true};
+};
+
+// Input of HeightfieldRaycaster::fan_free_bounds: rays from one origin whose horizontal directions lie
+// within one cell of lateral distance of a centre line (grid units) over the part that matters.
+struct FanBeam {
+  double slope;  // [m of z per cell of horizontal travel]: the rays must be sorted by it, ascending
+  double bound;  // out: horizontal distance [cells] before which the ray provably meets no surface
+  bool blocked;  // out: the bound is where it first dipped under the dilated surface (a hit is near)
 };
 
 // Built once per World (copies the surface and builds the pyramid); cast() is const, allocation-free and
@@ -39,6 +50,21 @@ class HeightfieldRaycaster {
   // unit_dir must have unit length (ranges are measured along it); max_range [m].
   [[nodiscard]] RayHit cast(const Eigen::Vector3d& origin, const Eigen::Vector3d& unit_dir,
                             double max_range) const noexcept;
+  // The same ray, known to meet no surface before range t_start: the traversal starts there. Gives the
+  // same hit as cast() (up to rounding of the range) whenever that promise holds. `near`: the hit is
+  // expected within a few cells, so the pyramid is not worth testing (plain cell stepping, same hits).
+  [[nodiscard]] RayHit cast_from(const Eigen::Vector3d& origin, const Eigen::Vector3d& unit_dir, double max_range,
+                                 double t_start, bool near = false) const noexcept;
+
+  // Marches the horizontal centre line origin + s (cu, cv) (grid coordinates: u east, v south, unit
+  // length, s in cells) and, for every beam z = origin.z + slope s whose own horizontal line stays within
+  // one cell (max norm) of the centre line, sets the distance before which it is above every surface
+  // (conservative: the dilated surface). Beams still unbounded at the end get `walked` (everything
+  // before was checked) or +inf when they rose above the highest surface. Returns false when the fan
+  // cannot be used (no dilated pyramid, origin outside the grid): bounds are then 0.
+  bool fan_free_bounds(const Eigen::Vector3d& origin, double cu, double cv, double s_stop, FanBeam* beams, int n,
+                       double& walked) const noexcept;
+  [[nodiscard]] bool has_fan_bounds() const noexcept { return !dilated_.empty(); }
 
   [[nodiscard]] const GridGeometry& grid() const noexcept { return grid_; }
   // terrain + height of a cell [m] (no bounds check).
@@ -67,10 +93,17 @@ class HeightfieldRaycaster {
   };
   template <bool kPosU, bool kPosV, int kLevels>
   RayHit traverse(const Ray& ray) const noexcept;
+  template <bool kPosU, bool kPosV>
+  void fan_walk(double u0, double v0, double z0, double cu, double cv, double s_stop, FanBeam* beams, int n,
+                double& walked) const noexcept;
+  RayHit cast_impl(const Eigen::Vector3d& origin, const Eigen::Vector3d& unit_dir, double max_range,
+                   double t_start, bool near) const noexcept;
 
   GridGeometry grid_;
   std::vector<float> surface_;  // terrain + height, row-major
   std::vector<Level> levels_;   // finest first
+  std::vector<float> dilated_;  // max of surface_ over each cell's 3x3 neighbourhood, row-major
+  std::vector<Level> dlevels_;  // max pyramid of dilated_, finest first
   float max_surface_{0};
   float min_surface_{0};
 };
