@@ -221,14 +221,7 @@ CameraRenderer::CameraRenderer(const World& world, const CameraModel& model, con
   if (world.class_id.type() != CV_8UC1 || world.class_id.rows != g.height || world.class_id.cols != g.width ||
       world.albedo.type() != CV_8UC3 || world.albedo.rows != g.height || world.albedo.cols != g.width)
     throw std::invalid_argument("CameraRenderer: the world's class_id (CV_8UC1) and albedo (CV_8UC3) must match its grid");
-  if (!raycaster_) {
-    raycaster_ = std::make_shared<const HeightfieldRaycaster>(world);
-  } else {
-    const GridGeometry& r = raycaster_->grid();
-    if (r.width != g.width || r.height != g.height || r.resolution != g.resolution || r.origin_x != g.origin_x ||
-        r.origin_y != g.origin_y)
-      throw std::invalid_argument("CameraRenderer: the shared raycaster was built for another world");
-  }
+  raycaster_ = raycaster_for(world, std::move(raycaster_), "CameraRenderer");
   const double az = shading_.sun_azimuth_deg * kPi / 180.0, el = shading_.sun_elevation_deg * kPi / 180.0;
   sun_ = Eigen::Vector3d(std::sin(az) * std::cos(el), std::cos(az) * std::cos(el), std::sin(el));
 

@@ -184,14 +184,7 @@ LidarSimulator::LidarSimulator(const World& world, const OusterBeamModel& beams,
   const GridGeometry& g = world.grid();
   if (world.class_id.type() != CV_8UC1 || world.class_id.rows != g.height || world.class_id.cols != g.width)
     throw std::invalid_argument("LidarSimulator: the world's class_id layer must be CV_8UC1 matching its grid");
-  if (!raycaster_) {
-    raycaster_ = std::make_shared<const HeightfieldRaycaster>(world);
-  } else {
-    const GridGeometry& r = raycaster_->grid();
-    if (r.width != g.width || r.height != g.height || r.resolution != g.resolution || r.origin_x != g.origin_x ||
-        r.origin_y != g.origin_y)
-      throw std::invalid_argument("LidarSimulator: the shared raycaster was built for another world");
-  }
+  raycaster_ = raycaster_for(world, std::move(raycaster_), "LidarSimulator");
 
   const double n = beams_.lidar_origin_to_beam_origin_mm * 1e-3, nz = beams_.beam_origin_z_mm * 1e-3;
   beam_offset_m_ = std::hypot(n, nz);

@@ -403,4 +403,16 @@ void HeightfieldRaycaster::fan_walk(double u0, double v0, double z0, double cu, 
   }
 }
 
+std::shared_ptr<const HeightfieldRaycaster> raycaster_for(const World& world,
+                                                          std::shared_ptr<const HeightfieldRaycaster> shared,
+                                                          const char* who) {
+  if (!shared) return std::make_shared<const HeightfieldRaycaster>(world);
+  const GridGeometry& g = world.grid();
+  const GridGeometry& r = shared->grid();
+  if (r.width != g.width || r.height != g.height || r.resolution != g.resolution || r.origin_x != g.origin_x ||
+      r.origin_y != g.origin_y)
+    throw std::invalid_argument(std::string(who) + ": the shared raycaster was built for another world");
+  return shared;
+}
+
 }  // namespace ag::sim

@@ -1,6 +1,8 @@
 // Exact ray casting against the World's 2.5D surface, shared by the simulated camera and LiDAR.
 #pragma once
 
+#include <memory>
+
 #include <Eigen/Core>
 
 #include <cstdint>
@@ -107,6 +109,12 @@ class HeightfieldRaycaster {
   float max_surface_{0};
   float min_surface_{0};
 };
+
+// The raycaster a sensor shares with others: `shared` when given (checked to be built for this world's
+// grid, else std::invalid_argument naming `who`), otherwise a new one for `world`.
+[[nodiscard]] std::shared_ptr<const HeightfieldRaycaster> raycaster_for(const World& world,
+                                                                        std::shared_ptr<const HeightfieldRaycaster> shared,
+                                                                        const char* who);
 
 // Map-from-frame rotation of a pose (R = Rz(yaw) Ry(pitch) Rx(roll)).
 [[nodiscard]] Eigen::Matrix3d rotation_of(const Pose3& pose) noexcept;
