@@ -7,6 +7,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -104,6 +105,7 @@ struct Ugv {
   Pose2 start;
   Pose2 odom_last;
   std::vector<LidarPoint> scan;
+  std::array<std::vector<LidarPoint>, 4> scan_parts;  // column quarters, simulated in parallel
   std::vector<Eigen::Vector2d> trail;
   CsvLog truth_log, odom_log, scan_log;
   std::FILE* scan_bin{nullptr};
@@ -247,7 +249,8 @@ void SimWorldStage::step(TimeNs now) noexcept {
   if (camera_due || lidar_due) {
     constexpr int kBands = 16;
     const int bands = camera_due ? kBands : 0;
-    const std::size_t jobs = static_cast<std::size_t>(bands) + (lidar_due ? t.ugvs.size() : 0);
+    constexpr std::size_t kParts = 4;  // per scan: keeps both cores busy when only LiDAR is due
+    const std::size_t jobs = static_cast<std::size_t>(bands) + (lidar_due ? kParts * t.ugvs.size() : 0);
     const TimeNs cpu0 = thread_cpu_now();
     if (camera_due) t.camera->prepare(t.uav->vehicle.pose(), t.uav->frame, now);
     const Pose3 uav_pose = t.uav ? t.uav->vehicle.pose() : Pose3{};
@@ -257,9 +260,13 @@ void SimWorldStage::step(TimeNs now) noexcept {
         const int b = static_cast<int>(j);
         t.camera->render_rows(uav_pose, h * b / bands, h * (b + 1) / bands, t.uav->frame);
       } else {
-        Ugv& u = *t.ugvs[j - static_cast<std::size_t>(bands)];
+        const std::size_t idx = j - static_cast<std::size_t>(bands);
+        Ugv& u = *t.ugvs[idx / kParts];
+        const auto part = static_cast<int>(idx % kParts);
+        const int cols = t.opt.lidar_columns;
         const std::uint64_t seed = t.opt.seed ^ (static_cast<std::uint64_t>(now) * std::uint64_t{0x9E3779B97F4A7C15}) ^ static_cast<std::uint64_t>(u.node);
-        t.lidar->scan(lidar_pose(u, t.opt.lidar_mount_height_m), seed, u.scan);
+        t.lidar->scan_columns(lidar_pose(u, t.opt.lidar_mount_height_m), seed, cols * part / static_cast<int>(kParts),
+                              cols * (part + 1) / static_cast<int>(kParts), u.scan_parts[static_cast<std::size_t>(part)]);
       }
     };
     t.pool->run(jobs, job);
@@ -285,6 +292,8 @@ void SimWorldStage::step(TimeNs now) noexcept {
       t.next_lidar += t.lidar_period;
       for (auto& up : t.ugvs) {
         Ugv& u = *up;
+        u.scan.clear();
+        for (const auto& part : u.scan_parts) u.scan.insert(u.scan.end(), part.begin(), part.end());
         ++u.scans;
         if (u.scan_log) std::fprintf(u.scan_log.get(), "%.3f,%llu,%zu\n", to_seconds(now), static_cast<unsigned long long>(u.scans), u.scan.size());
         if (u.scan_bin != nullptr) {  // per scan: int64 stamp, uint32 count, then packed points
@@ -501,6 +510,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
                                    WheelOdometrySimulator(od_cfg.value(), opt.seed * 31 + static_cast<std::uint64_t>(i)),
                                    PurePursuit(PursuitParams{1.0, opt.ugv_speed_mps, 1.2, 0.8}), start);
     u->scan.reserve(static_cast<std::size_t>(64 * opt.lidar_columns));
+    for (auto& part : u->scan_parts) part.reserve(static_cast<std::size_t>(16 * opt.lidar_columns));
     if (rec) {
       u->truth_log = CsvLog(t.out / ("truth_" + name + ".csv"), "t_s,x_m,y_m,z_m,roll_rad,pitch_rad,yaw_rad");
       u->odom_log = CsvLog(t.out / ("odom_" + name + ".csv"), "t_s,x_m,y_m,yaw_rad,wheel_left_rad_s,wheel_right_rad_s");

@@ -249,6 +249,13 @@ void LidarSimulator::emit(std::size_t k, double hit_range, std::int32_t cell_col
 }
 
 void LidarSimulator::scan_per_ray(const Pose3& pose, std::uint64_t seed, std::vector<LidarPoint>& out) const {
+  scan_per_ray_columns(pose, seed, 0, beams_.columns, out);
+}
+
+void LidarSimulator::scan_per_ray_columns(const Pose3& pose, std::uint64_t seed, int col_begin, int col_end,
+                                          std::vector<LidarPoint>& out) const {
+  col_begin = std::clamp(col_begin, 0, beams_.columns);
+  col_end = std::clamp(col_end, col_begin, beams_.columns);
   out.clear();
   out.reserve(ray_dir_.size());
   const Eigen::Matrix3d rot = rotation_of(pose);
@@ -256,13 +263,21 @@ void LidarSimulator::scan_per_ray(const Pose3& pose, std::uint64_t seed, std::ve
   const HeightfieldRaycaster& rc = *raycaster_;
   const double cast_range = noise_.max_range_m + 6.0 * noise_.range_sigma_m;
   const std::uint64_t key = seed * 0xD1B54A32D192ED03ULL;
-  for (std::size_t k = 0; k < ray_dir_.size(); ++k) {
+  const auto rings = static_cast<std::size_t>(beams_.rings());
+  for (std::size_t k = static_cast<std::size_t>(col_begin) * rings; k < static_cast<std::size_t>(col_end) * rings; ++k) {
     const RayHit hit = rc.cast(rot * ray_origin_[k] + pos, rot * ray_dir_[k], cast_range);
     if (hit.hit) emit(k, hit.range, hit.col, hit.row, key, out);
   }
 }
 
 void LidarSimulator::scan(const Pose3& pose, std::uint64_t seed, std::vector<LidarPoint>& out) const {
+  scan_columns(pose, seed, 0, beams_.columns, out);
+}
+
+void LidarSimulator::scan_columns(const Pose3& pose, std::uint64_t seed, int col_begin, int col_end,
+                                  std::vector<LidarPoint>& out) const {
+  col_begin = std::clamp(col_begin, 0, beams_.columns);
+  col_end = std::clamp(col_end, col_begin, beams_.columns);
   const HeightfieldRaycaster& rc = *raycaster_;
   const GridGeometry& g = rc.grid();
   const auto rings = static_cast<std::size_t>(beams_.rings());
@@ -271,7 +286,7 @@ void LidarSimulator::scan(const Pose3& pose, std::uint64_t seed, std::vector<Lid
   // The fan needs every column's origin inside the grid: keep a margin for the beam offsets.
   if (!rc.has_fan_bounds() || !(u_pos >= 2.0 && v_pos >= 2.0 && u_pos < g.width - 2.0 && v_pos < g.height - 2.0) ||
       rings > kMaxRings) {
-    scan_per_ray(pose, seed, out);
+    scan_per_ray_columns(pose, seed, col_begin, col_end, out);
     return;
   }
   out.clear();
@@ -302,7 +317,7 @@ void LidarSimulator::scan(const Pose3& pose, std::uint64_t seed, std::vector<Lid
   };
   std::array<Hit, kMaxRings> hits;
 
-  for (std::size_t c = 0; c < static_cast<std::size_t>(beams_.columns); ++c) {
+  for (auto c = static_cast<std::size_t>(col_begin); c < static_cast<std::size_t>(col_end); ++c) {
     const std::size_t k0 = c * rings;
     const Eigen::Vector3d origin = rot * ray_origin_[k0] + pos;  // the same for every ring of the column
     for (std::size_t i = 0; i < rings; ++i) {

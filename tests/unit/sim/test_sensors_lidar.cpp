@@ -519,6 +519,35 @@ TEST(Lidar, FastScanEqualsPerRayCastsOnRandomTiltedPoses) {
   EXPECT_GT(returns, static_cast<std::size_t>(poses) * 10000u);
 }
 
+TEST(Lidar, ColumnChunksConcatenateToTheFullScan) {
+  const World w = town_world();
+  LidarNoise noise;
+  noise.dropout_prob = 0.05;
+  const LidarSimulator sim(w, beams(1024), noise);
+  const GridGeometry& g = w.grid();
+  for (Pose3 pose : {Pose3{3, -7, 0, 0.03, -0.02, 0.4}, Pose3{-20, 15, 0, 0, 0, -2.0}, Pose3{40, 30, 0, -0.05, 0.02, 1.0}}) {
+    pose.z = static_cast<double>(w.surface_at(g.col(pose.x), g.row(pose.y))) + 1.0;  // 1 m above whatever is there
+    std::vector<LidarPoint> full, part, joined;
+    sim.scan(pose, 9, full);
+    for (const auto& [c0, c1] : {std::pair{0, 100}, std::pair{100, 517}, std::pair{517, 1024}}) {
+      sim.scan_columns(pose, 9, c0, c1, part);
+      for (const auto& p : part) {
+        ASSERT_GE(p.col, c0);
+        ASSERT_LT(p.col, c1);
+      }
+      joined.insert(joined.end(), part.begin(), part.end());
+    }
+    ASSERT_GT(full.size(), 1000u);
+    ASSERT_EQ(joined.size(), full.size());
+    for (std::size_t i = 0; i < full.size(); ++i) {
+      ASSERT_EQ(joined[i].col, full[i].col);
+      ASSERT_EQ(joined[i].ring, full[i].ring);
+      ASSERT_EQ(joined[i].range, full[i].range);
+      ASSERT_EQ(joined[i].cls, full[i].cls);
+    }
+  }
+}
+
 TEST(Lidar, NoiseYamlIsValidated) {
   auto n = LidarNoise::load_string("lidar_noise:\n  range_sigma_m: 0.02\n  dropout_prob: 0.05\n", "lidar.yaml");
   ASSERT_TRUE(n.ok()) << n.error().message;

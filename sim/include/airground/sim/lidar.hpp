@@ -84,6 +84,12 @@ class LidarSimulator {
   // The same scan with one full cast per ray: the reference scan() is tested against (and the fallback
   // when the raycaster has no fan pyramid or the sensor is outside the world).
   void scan_per_ray(const Pose3& sensor_pose_in_map, std::uint64_t seed, std::vector<LidarPoint>& out) const;
+  // Only the measurement columns [col_begin, col_end) (clamped), replacing `out`: parts of one scan can be
+  // simulated in parallel and concatenated in column order to give exactly scan()'s result.
+  void scan_columns(const Pose3& sensor_pose_in_map, std::uint64_t seed, int col_begin, int col_end,
+                    std::vector<LidarPoint>& out) const;
+  void scan_per_ray_columns(const Pose3& sensor_pose_in_map, std::uint64_t seed, int col_begin, int col_end,
+                            std::vector<LidarPoint>& out) const;
 
   [[nodiscard]] const OusterBeamModel& beams() const noexcept { return beams_; }
   [[nodiscard]] const LidarNoise& noise() const noexcept { return noise_; }
