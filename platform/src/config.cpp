@@ -115,7 +115,7 @@ std::string known_keys(std::span<const ParamSection> schema, std::string_view se
 
 Config Config::defaults(std::span<const ParamSection> schema) {
   Config c;
-  c.schema_ = schema;
+  c.schema_.assign(schema.begin(), schema.end());
   for (const auto& sec : schema)
     for (const auto& p : sec.params) c.values_[std::string(sec.name) + "." + std::string(p.key)] = default_of(p);
   return c;

@@ -461,17 +461,14 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   SimClock clock(0);
   // Robot role instances: the real stage tables, quiet status stages (the runner reports instead).
   auto make_role = [&](const RoleDescription& role, int id, const std::string& name,
-                       std::vector<std::vector<ParamSection>>& schemas, std::vector<Config>& cfgs) -> Result<std::unique_ptr<RoleInstance>> {
-    schemas.push_back(role_schema(role));
-    Config c = Config::defaults(schemas.back());
+                       std::vector<Config>& cfgs) -> Result<std::unique_ptr<RoleInstance>> {
+    Config c = Config::defaults(role_schema(role));
     if (auto st = c.set("robot.id=" + std::to_string(id)); !st) return st.error();
     if (auto st = c.set("robot.name=" + name); !st) return st.error();
     if (auto st = c.set("status.log_counters=false"); !st) return st.error();
     cfgs.push_back(std::move(c));
     return RoleInstance::create(role, cfgs.back(), clock, name);
   };
-  std::vector<std::vector<ParamSection>> schemas;
-  schemas.reserve(static_cast<std::size_t>(opt.ugvs) + 2);
   std::vector<Config> cfgs;
   cfgs.reserve(static_cast<std::size_t>(opt.ugvs) + 2);
 
@@ -494,7 +491,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
       u->vo_log = CsvLog(t.out / "vo_uav.csv", "t_s,segment,tracking,x,y,z,roll_rad,pitch_rad,yaw_rad");
       u->frame_log = CsvLog(t.out / "camera_frames.csv", "t_s,frame,x_m,y_m,z_m,yaw_rad");
     }
-    auto role = make_role(uav_role(), 0, "uav", schemas, cfgs);
+    auto role = make_role(uav_role(), 0, "uav", cfgs);
     if (!role) return role.error();
     u->role = std::move(role).value();
     t.uav = std::move(u);
@@ -517,13 +514,13 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
       u->scan_log = CsvLog(t.out / ("lidar_" + name + ".csv"), "t_s,scan,points");
       if (opt.record == RecordLevel::kFull) u->scan_bin = std::fopen((t.out / ("lidar_" + name + ".bin")).c_str(), "wb");
     }
-    auto role = make_role(ugv_role(), i + 1, name, schemas, cfgs);
+    auto role = make_role(ugv_role(), i + 1, name, cfgs);
     if (!role) return role.error();
     u->role = std::move(role).value();
     t.ugvs.push_back(std::move(u));
   }
   {
-    auto role = make_role(base_role(), 250, "base", schemas, cfgs);
+    auto role = make_role(base_role(), 250, "base", cfgs);
     if (!role) return role.error();
     t.base = std::move(role).value();
   }

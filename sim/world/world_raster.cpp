@@ -89,9 +89,8 @@ GDALDataType gdal_type_of(int cv_depth) {
   }
 }
 
-}  // namespace
-
-Result<RasterShape> probe_raster(const std::string& path) {
+// Opens a raster read-only; a missing file, a directory or an unreadable file is an error naming it.
+Result<DatasetPtr> open_raster(const std::string& path) {
   register_gdal_drivers();
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) return Error::make(ErrorCode::kIo, path + ": missing (no such file)");
@@ -99,19 +98,25 @@ Result<RasterShape> probe_raster(const std::string& path) {
   GdalMessages messages;
   DatasetPtr ds(GDALDataset::FromHandle(GDALOpen(path.c_str(), GA_ReadOnly)));
   if (!ds) return Error::make(ErrorCode::kMalformed, path + ": not a readable raster (" + messages.failure_about(path) + ")");
+  return ds;
+}
+
+}  // namespace
+
+Result<RasterShape> probe_raster(const std::string& path) {
+  auto opened = open_raster(path);
+  if (!opened) return opened.error();
+  DatasetPtr ds = std::move(opened).value();
   RasterShape shape{ds->GetRasterXSize(), ds->GetRasterYSize(), ds->GetRasterCount(), ""};
   if (shape.bands > 0) shape.data_type = GDALGetDataTypeName(ds->GetRasterBand(1)->GetRasterDataType());
   return shape;
 }
 
 Result<Raster> read_raster(const std::string& path) {
-  register_gdal_drivers();
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec)) return Error::make(ErrorCode::kIo, path + ": missing (no such file)");
-  if (std::filesystem::is_directory(path, ec)) return Error::make(ErrorCode::kIo, path + ": is a directory, not a raster");
-  GdalMessages messages;
-  DatasetPtr ds(GDALDataset::FromHandle(GDALOpen(path.c_str(), GA_ReadOnly)));
-  if (!ds) return Error::make(ErrorCode::kMalformed, path + ": not a readable raster (" + messages.failure_about(path) + ")");
+  auto opened = open_raster(path);
+  if (!opened) return opened.error();
+  DatasetPtr ds = std::move(opened).value();
+  GdalMessages messages;  // what GDAL says while the bands are read
   const int w = ds->GetRasterXSize(), h = ds->GetRasterYSize(), bands = ds->GetRasterCount();
   if (bands < 1 || bands > 4) {
     return Error::make(ErrorCode::kMalformed, path + ": has " + std::to_string(bands) + " bands, expected 1 to 4");

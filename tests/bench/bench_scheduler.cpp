@@ -139,8 +139,7 @@ struct Pair {
 // their wake-ups do not coincide.
 Pair run_pair(const ag::RoleDescription& role, double seconds) {
   Pair out;
-  const std::vector<ag::ParamSection> schema = ag::role_schema(role);  // the Config keeps a view of it
-  const ag::Config config = ag::Config::defaults(schema);
+  const ag::Config config = ag::Config::defaults(ag::role_schema(role));
   ag::MonotonicClock clock;
   auto robot = ag::RoleInstance::create(role, config, clock, "bench");
   if (!robot) {

@@ -63,6 +63,16 @@ TEST(Config, DefaultsHoldEveryParameterAtItsDefault) {
   EXPECT_FALSE(c.has("camera.nope"));
 }
 
+TEST(Config, OutlivesTheSchemaListItWasBuiltFrom) {
+  // role_schema() returns a temporary list: the Config must keep its own copy of it.
+  Config c = Config::defaults(role_schema(ugv_role()));
+  std::vector<ParamSection> junk(64, ParamSection{"junk", {}, "overwrites the freed list's memory"});
+  ASSERT_TRUE(c.set("status.log_every=4").ok());
+  EXPECT_EQ(c.get_int("status.log_every"), 4);
+  EXPECT_NE(c.to_yaml().find("scheduler:"), std::string::npos);
+  EXPECT_EQ(c.schema().front().name, "robot");
+}
+
 TEST(Config, YamlOverridesOnlyTheKeysItNames) {
   Result<Config> r = Config::load_string(kSchema,
                                          "camera:\n"

@@ -1,4 +1,5 @@
 // The executors: lockstep runs are repeatable bit for bit; the real-time one counts overruns and slips.
+#include "test_robot.hpp"
 #include "airground/platform/executor.hpp"
 
 #include <gtest/gtest.h>
@@ -143,23 +144,8 @@ constexpr StageSpec kLockstepStages[] = {
 static_assert(role_table_ok(kLockstepStages));
 const RoleDescription kLockstepRole{"test", "three stages at three rates sharing two channels", kLockstepStages};
 
-// A robot and what it needs to outlive it (the schema the config points into).
-struct TestRobot {
-  std::vector<ParamSection> schema;
-  Config config;
-  std::unique_ptr<RoleInstance> robot;
-};
-
-std::unique_ptr<TestRobot> build(const RoleDescription& role, const Clock& clock, std::string name) {
-  auto b = std::make_unique<TestRobot>();
-  b->schema = role_schema(role);
-  b->config = Config::defaults(b->schema);
-  auto r = RoleInstance::create(role, b->config, clock, std::move(name));
-  EXPECT_TRUE(r.ok()) << r.error().message;
-  if (!r.ok()) return nullptr;
-  b->robot = std::move(r).value();
-  return b;
-}
+using test::build;
+using test::TestRobot;
 
 struct Release {
   TimeNs t;

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "test_robot.hpp"
 #include "airground/platform/executor.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "airground/platform/role_table.hpp"
@@ -209,22 +210,8 @@ constexpr StageSpec kChannelStages[] = {
 static_assert(role_table_ok(kChannelStages));
 const RoleDescription kChannelRole{"channels", "a writer and a reader of a latest and a ring channel", kChannelStages, {}};
 
-struct TestRobot {
-  std::vector<ParamSection> schema;
-  Config config;
-  std::unique_ptr<RoleInstance> robot;
-};
-
-std::unique_ptr<TestRobot> build(const RoleDescription& role, const Clock& clock, std::string name) {
-  auto b = std::make_unique<TestRobot>();
-  b->schema = role_schema(role);
-  b->config = Config::defaults(b->schema);
-  auto r = RoleInstance::create(role, b->config, clock, std::move(name));
-  EXPECT_TRUE(r.ok()) << r.error().message;
-  if (!r.ok()) return nullptr;
-  b->robot = std::move(r).value();
-  return b;
-}
+using test::build;
+using test::TestRobot;
 
 TEST(NoAllocation, LockstepStepsOfTheUgvRoleAndAChannelPairAllocateNothing) {
   SimClock clock;

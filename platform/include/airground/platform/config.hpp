@@ -80,7 +80,7 @@ class Config {
   const ParamSpec* find_spec(std::string_view full_key) const;
   Status assign(std::string_view full_key, std::string_view raw, std::string_view where);
 
-  std::span<const ParamSection> schema_;
+  std::vector<ParamSection> schema_;  // owned: Config::defaults(role_schema(role)) is safe
   std::map<std::string, Value, std::less<>> values_;
 };
 

@@ -13,7 +13,7 @@
 namespace ag::sim {
 
 // `node` is the model's own mapping (key: scalar); null or undefined means all defaults. `schema` holds
-// exactly one section (static storage: the Config keeps a view of it). Unknown keys, wrong types and
+// exactly one section. Unknown keys, wrong types and
 // out-of-range values are ErrorCode::kConfig errors naming origin:line, the key and the allowed range.
 inline Result<Config> load_model_params(std::span<const ParamSection> schema, const YAML::Node& node,
                                         std::string_view origin) {
