@@ -13,6 +13,7 @@ target_link_libraries(airground_options INTERFACE airground_warnings)
 # A role binary: one static executable per robot role.
 function(airground_role_binary target)
   if(AG_STATIC_ROLES AND NOT AG_SANITIZE)
+    set_target_properties(${target} PROPERTIES AG_FULLY_STATIC ON)
     target_link_options(${target} PRIVATE -static)
     # glibc's static libpthread needs the whole archive so weak pthread symbols resolve.
     target_link_options(${target} PRIVATE -Wl,--whole-archive -lpthread -Wl,--no-whole-archive)
@@ -21,6 +22,7 @@ endfunction()
 
 function(airground_test_binary target)
   if(AG_STATIC_TESTS AND NOT AG_SANITIZE)
+    set_target_properties(${target} PROPERTIES AG_FULLY_STATIC ON)
     target_link_options(${target} PRIVATE -static)
     target_link_options(${target} PRIVATE -Wl,--whole-archive -lpthread -Wl,--no-whole-archive)
   endif()

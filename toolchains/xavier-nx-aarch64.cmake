@@ -23,6 +23,16 @@ set(CMAKE_FIND_ROOT_PATH_MODE_PROGRAM NEVER)
 set(CMAKE_FIND_ROOT_PATH_MODE_LIBRARY ONLY)
 set(CMAKE_FIND_ROOT_PATH_MODE_INCLUDE ONLY)
 set(CMAKE_FIND_ROOT_PATH_MODE_PACKAGE ONLY)
+# Absolute PATHS/HINTS given to find_* (e.g. /usr/lib/aarch64-linux-gnu/lapack in cmake/Ceres.cmake) are
+# re-rooted under these roots, so they resolve in the sysroot; CMAKE_SYSROOT stays unset on purpose (the
+# sysroot folder holds only unpacked -dev packages, the C library comes with the cross gcc).
+
+# Eigen is header-only and architecture-independent (libeigen3-dev is Architecture: all, so it cannot
+# be downloaded as :arm64 into the sysroot): use the native package's config, which points at
+# /usr/include/eigen3. An explicit <Package>_DIR is not re-rooted.
+if(NOT Eigen3_DIR AND EXISTS /usr/share/eigen3/cmake/Eigen3Config.cmake)
+  set(Eigen3_DIR /usr/share/eigen3/cmake)
+endif()
 
 # Carmel is ARMv8.2-A with crypto and half-precision; GCC 12 has no -mcpu=carmel, and its wide
 # out-of-order core schedules best with the Cortex-A76 model of the options GCC has.

@@ -46,7 +46,13 @@ dl=$(mktemp -d)
 trap 'rm -rf "$dl"' EXIT
 chmod 777 "$dl"
 echo "install-deps: unpacking arm64 packages into $sysroot: $want"
-(cd "$dl" && apt-get download -q $(for p in $want; do echo "$p:arm64"; done) 2>&1 | grep -v "^W: Download is performed unsandboxed" || true)
+# A failed download (a package missing for arm64, no network) must stop here, not leave an empty sysroot.
+if ! (cd "$dl" && apt-get download -q $(for p in $want; do echo "$p:arm64"; done)) >"$dl/download.log" 2>&1; then
+  grep -v "^W: Download is performed unsandboxed" "$dl/download.log" >&2 || true
+  echo "install-deps: apt-get download of the arm64 packages failed (sysroot left as it was)" >&2
+  exit 1
+fi
+grep -v -e "^W: Download is performed unsandboxed" -e "^Get:" "$dl/download.log" || true
 rm -rf "$sysroot"
 mkdir -p "$sysroot"
 for deb in "$dl"/*.deb; do dpkg-deb -x "$deb" "$sysroot"; done

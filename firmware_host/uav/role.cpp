@@ -1,20 +1,34 @@
 // The uav role table: every stage once, with rate, budget, priority and CPU; checked at compile time.
+// Budgets are for the quadrotor's NUC i7-10710U. The mapping stages each have their own thread below
+// the drivers' priority: a pose-graph solve or a stereo pair takes tens of milliseconds.
 #include "roles.hpp"
 
+#include "airground/aerial_mapping/stages.hpp"
 #include "airground/platform/status_stage.hpp"
 
 namespace ag {
 
 namespace {
+using mapping::OrthoMapStage;
+using mapping::PoseGraphStage;
+
 // name, factory, rate [Hz], budget [µs], SCHED_FIFO priority, CPU (-1 any), parameters, what it does
 constexpr StageSpec kUavStages[] = {
     {"status", &StatusStage::make, 1.0, 2'000, 10, -1, StatusStage::kParams, "scheduler counters, once a second"},
+    {"pose_graph", &PoseGraphStage::make, 5.0, 150'000, 30, -1, PoseGraphStage::kParams,
+     "odometry + GPS pose graph (Ceres), keyframes every 2 m, keyframe poses after each solve"},
+    {"ortho_map", &OrthoMapStage::make, 5.0, 150'000, 20, -1, OrthoMapStage::kParams,
+     "dense stereo between keyframes, binned into the 0.5 m ortho-map tiles"},
 };
 static_assert(role_table_ok(kUavStages));
+
+constexpr ParamSection kUavSections[] = {
+    {"camera_calibration", mapping::kCameraCalibrationParams, "the nadir camera's intrinsics at 640x400 (OpenCV model)"},
+};
 }  // namespace
 
 const RoleDescription& uav_role() {
-  static const RoleDescription role{"uav", "quadrotor: semantic ortho-mapping and the regions of interest it finds", kUavStages, {}};
+  static const RoleDescription role{"uav", "quadrotor: semantic ortho-mapping and the regions of interest it finds", kUavStages, kUavSections};
   return role;
 }
 

@@ -11,10 +11,12 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 
+#include "airground/core/messages.hpp"
 #include "airground/platform/clock.hpp"
 #include "airground/platform/executor.hpp"
 #include "airground/platform/log.hpp"
@@ -123,6 +125,14 @@ struct Uav {
   std::vector<Eigen::Vector2d> trail;
   CsvLog truth_log, gps_log, vo_log, frame_log;
   std::unique_ptr<RoleInstance> role;
+  // The quadrotor's drivers in simulation: what the camera, the VO and the GPS publish to its stages.
+  RingWriter<CameraImageMsg, kCameraRing> camera_out{};
+  RingWriter<VoMsg, kVoRing> vo_out{};
+  RingWriter<GpsMsg, kGpsRing> gps_out{};
+  std::unique_ptr<CameraImageMsg> image{};
+  cv::Mat rgb_small{}, cls_small{};
+  std::uint32_t image_seq{0};
+  std::vector<TruthSample> truth{};
 };
 
 struct Team {
@@ -169,6 +179,28 @@ void new_leg(Team& t, Ugv& u, TimeNs now) {
   u.pursuit.set_path({});
   u.retry_at = now + 2 * kNsPerS;  // stay put and try again later rather than search every tick
   AG_LOG_WARN("sim", "%s: no road route from (%.1f, %.1f); retrying in 2 s", u.name.c_str(), u.vehicle.pose().x, u.vehicle.pose().y);
+}
+
+// The camera driver's job in simulation: the rendered frame at the mapper's 640x400, with its labels.
+void publish_image(Uav& a, TimeNs now) {
+  CameraImageMsg& m = *a.image;
+  const cv::Mat* rgb = &a.frame.rgb;
+  const cv::Mat* cls = &a.frame.cls;
+  if (rgb->cols != kImageWidth || rgb->rows != kImageHeight) {
+    cv::resize(a.frame.rgb, a.rgb_small, cv::Size(kImageWidth, kImageHeight), 0, 0, cv::INTER_AREA);
+    cv::resize(a.frame.cls, a.cls_small, cv::Size(kImageWidth, kImageHeight), 0, 0, cv::INTER_NEAREST);
+    rgb = &a.rgb_small;
+    cls = &a.cls_small;
+  }
+  m.stamp = now;
+  m.published = now;
+  m.seq = a.image_seq++;
+  m.labels = LabelSource::kGroundTruth;
+  for (int r = 0; r < kImageHeight; ++r) {
+    std::memcpy(m.rgb.data() + static_cast<std::size_t>(r) * kImageWidth * 3, rgb->ptr<std::uint8_t>(r), kImageWidth * 3);
+    std::memcpy(m.cls.data() + static_cast<std::size_t>(r) * kImageWidth, cls->ptr<std::uint8_t>(r), kImageWidth);
+  }
+  (void)a.camera_out.push(m);
 }
 
 // The world side of the lockstep tick: vehicles, odometry, GPS, VO, camera, LiDAR, radio, recording.
@@ -222,14 +254,32 @@ void SimWorldStage::step(TimeNs now) noexcept {
     Uav& a = *t.uav;
     if (dt > 0) a.vehicle.step(dt);
     const Pose3& p = a.vehicle.pose();
+    if (t.opt.keep_uav_truth) a.truth.push_back(TruthSample{now, p});
     GpsFix fix;
     if (a.gps.sample(now, p, fix)) {
       ++a.fixes;
+      GpsMsg m;
+      m.stamp = fix.stamp;
+      m.published = now;
+      m.fix_type = static_cast<std::uint8_t>(fix.fix_type);
+      m.east_m = fix.east_m;
+      m.north_m = fix.north_m;
+      m.up_m = fix.up_m;
+      m.h_accuracy_m = fix.h_accuracy_m;
+      m.v_accuracy_m = fix.v_accuracy_m;
+      (void)a.gps_out.push(m);  // a full ring is counted by the channel
       if (a.gps_log) std::fprintf(a.gps_log.get(), "%.3f,%d,%.9f,%.9f,%.3f,%.3f,%.3f,%.3f,%.2f\n", to_seconds(now), static_cast<int>(fix.fix_type), fix.lat_deg, fix.lon_deg, fix.height_m, fix.east_m, fix.north_m, fix.up_m, fix.h_accuracy_m);
     }
     VoSample vs;
     if (a.vo.sample(now, p, vs)) {
       ++a.vo_samples;
+      VoMsg m;
+      m.stamp = vs.stamp;
+      m.published = now;
+      m.segment = vs.segment;
+      m.tracking = vs.tracking;
+      m.pose = vs.pose;
+      (void)a.vo_out.push(m);
       if (vs.segment != a.last_segment || a.vo_samples == 1) {
         a.last_segment = vs.segment;
         ++a.segments;
@@ -275,6 +325,7 @@ void SimWorldStage::step(TimeNs now) noexcept {
       t.next_camera += t.camera_period;
       Uav& a = *t.uav;
       ++a.frames;
+      publish_image(a, now);
       if (a.frame_log) std::fprintf(a.frame_log.get(), "%.3f,%llu,%.3f,%.3f,%.3f,%.4f\n", to_seconds(now), static_cast<unsigned long long>(a.frames), uav_pose.x, uav_pose.y, uav_pose.z, uav_pose.yaw);
       const bool keep = t.opt.record == RecordLevel::kFull || (t.opt.record == RecordLevel::kLight && (a.frames - 1) % 20 == 0);
       if (keep) {
@@ -477,7 +528,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     auto u = std::make_unique<Uav>(Uav{Quadrotor(quad_cfg.value(), start), GpsSimulator(gps_cfg.value(), w.header.datum, opt.seed ^ std::uint64_t{0x67707331}),
                                        VisualOdometrySimulator(vo_cfg.value(), opt.seed ^ std::uint64_t{0x766f3031}), CameraFrame{}, 0, 0, 0, 0, 0, {}, {}, {}, {}, {}, nullptr});
     const GridGeometry& g = w.grid();
-    const double margin = 20.0;
+    const double margin = opt.survey_margin_m;
     SurveyOptions so;
     so.speed_mps = opt.uav_speed_mps;
     const double hfov = 2.0 * std::atan(0.5 * cam_model.width / cam_model.fx);
@@ -494,6 +545,16 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     auto role = make_role(uav_role(), 0, "uav", cfgs);
     if (!role) return role.error();
     u->role = std::move(role).value();
+    auto cam_w = u->role->channels().ring_writer<CameraImageMsg, kCameraRing>("camera");
+    auto vo_w = u->role->channels().ring_writer<VoMsg, kVoRing>("visual_odometry");
+    auto gps_w = u->role->channels().ring_writer<GpsMsg, kGpsRing>("gps");
+    if (!cam_w) return cam_w.error();
+    if (!vo_w) return vo_w.error();
+    if (!gps_w) return gps_w.error();
+    u->camera_out = cam_w.value();
+    u->vo_out = vo_w.value();
+    u->gps_out = gps_w.value();
+    u->image = std::make_unique<CameraImageMsg>();
     t.uav = std::move(u);
   }
   for (int i = 0; i < opt.ugvs; ++i) {
@@ -545,11 +606,17 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   exec.start(0);
 
   const TimeNs end = from_seconds(opt.duration_s);
-  const TimeNs chunk = std::max<TimeNs>(kNsPerS / 10, end / 100);
+  TimeNs chunk = std::max<TimeNs>(kNsPerS / 10, end / 100);
+  if (opt.stop_when_survey_done) chunk = std::min<TimeNs>(chunk, 2 * kNsPerS);
   const auto wall0 = std::chrono::steady_clock::now();
+  TimeNs ended = end;
   for (TimeNs tt = 0; tt < end;) {
     tt = std::min(end, tt + chunk);
     exec.run_until(tt);
+    if (opt.stop_when_survey_done && t.uav && t.uav->vehicle.finished()) {
+      ended = tt;
+      break;
+    }
     if (progress) {
       const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
       progress(to_seconds(tt), opt.duration_s, wall > 0 ? to_seconds(tt) / wall : 0);
@@ -558,9 +625,9 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
 
   RunSummary s;
-  s.sim_s = opt.duration_s;
+  s.sim_s = to_seconds(ended);
   s.wall_s = wall_s;
-  s.real_time_factor = wall_s > 0 ? opt.duration_s / wall_s : 0;
+  s.real_time_factor = wall_s > 0 ? s.sim_s / wall_s : 0;
   s.sensor_cpu_s = to_seconds(t.sensor_cpu);
   if (t.uav) {
     s.camera_frames = t.uav->frames;
@@ -594,6 +661,20 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     s.ugvs.push_back(r);
     if (u.scan_bin != nullptr) std::fclose(u.scan_bin);
     u.scan_bin = nullptr;
+  }
+  if (opt.inspect) {
+    const GridGeometry& g = w.grid();
+    RunInspection in{w};
+    in.uav = t.uav ? t.uav->role.get() : nullptr;
+    in.uav_truth = t.uav ? &t.uav->truth : nullptr;
+    in.vo_scale = t.uav ? t.uav->vo.scale() : 0.0;
+    in.vo_segments = s.vo_segments;
+    in.vo_tracking_losses = t.uav ? t.uav->vo.tracking_losses() : 0;
+    in.survey_x0 = g.origin_x + opt.survey_margin_m;
+    in.survey_y0 = g.origin_y - g.size_y() + opt.survey_margin_m;
+    in.survey_x1 = g.origin_x + g.size_x() - opt.survey_margin_m;
+    in.survey_y1 = g.origin_y - opt.survey_margin_m;
+    if (auto st = opt.inspect(in); !st) return st.error();
   }
   if (auto st = write_reports(t, s); !st) return st.error();
   return s;

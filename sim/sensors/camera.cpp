@@ -4,6 +4,7 @@
 #include <Eigen/Geometry>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -140,6 +141,7 @@ inline float value_noise(double a, double b, std::uint64_t salt) noexcept {
   return lo + (hi - lo) * tb;
 }
 
+constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr float kGroundStep = 0.3f;    // [m] lower steps are shaded as ground
 constexpr double kShadowBias = 0.05;   // [m] shadow rays leave the ground this high (no self-shadowing)
 constexpr int kSunBlockShift = 2;      // sun ceiling per 4x4-cell block
@@ -337,15 +339,87 @@ void CameraRenderer::render_rows(const Pose3& pose, int row_begin, int row_end, 
   const double sun_flat = shading_.ambient + (1.0 - shading_.ambient) * sun_.z();  // a lit flat top renders at albedo
   const double pixel_angle = 1.0 / std::max(model_.fx, model_.fy);
 
-  for (int r = row_begin; r < row_end; ++r) {
+  // Tiles of kTile x kTile pixels. All rays of a tile leave the eye downward inside a thin cone: the
+  // cells under the cone between the highest surface (or the eye) and a height P are known from a block
+  // max query; when they are all lower than P, no ray of the tile meets anything above P, and each cast
+  // starts at P (the same hits as a cast from the eye, most of the descent skipped).
+  constexpr int kTile = 8;
+  constexpr double kMargin = 0.01;  // [m] above the highest surface found
+  const double ez = eye.z(), ztop = std::min(ez, zmax);
+  std::array<Eigen::Vector3d, kTile * kTile> dirs;
+  for (int tr = row_begin; tr < row_end; tr += kTile) {
+    const int tr1 = std::min(tr + kTile, row_end);
+    for (int tc = 0; tc < model_.width; tc += kTile) {
+      const int tc1 = std::min(tc + kTile, model_.width);
+      const int tw = tc1 - tc;
+      // Map-frame directions, and the tile's range of horizontal offset per metre of descent.
+      double kx_lo = kInf, kx_hi = -kInf, ky_lo = kInf, ky_hi = -kInf;
+      bool down = true;
+      for (int r = tr; r < tr1; ++r) {
+        const float* ray = rays_.data() + 3 * (static_cast<std::size_t>(r) * static_cast<std::size_t>(model_.width) +
+                                               static_cast<std::size_t>(tc));
+        for (int c = 0; c < tw; ++c, ray += 3) {
+          const Eigen::Vector3d dc(ray[0], ray[1], ray[2]);
+          Eigen::Vector3d& d = dirs[static_cast<std::size_t>((r - tr) * kTile + c)];
+          if (!(dc.z() > 0.0)) continue;  // no ray: sky, not cast
+          d = map_from_camera * dc;
+          if (!(d.z() < 0.0)) {
+            down = false;
+            continue;
+          }
+          const double kx = d.x() / -d.z(), ky = d.y() / -d.z();
+          kx_lo = std::min(kx_lo, kx), kx_hi = std::max(kx_hi, kx);
+          ky_lo = std::min(ky_lo, ky), ky_hi = std::max(ky_hi, ky);
+        }
+      }
+      double proven = kInf;  // every ray of the tile is free above this height (+inf: nothing known)
+      if (shading_.tile_start && down && kx_lo <= kx_hi) {
+        // Cells under the tile's rays while they descend from ztop to height z (one cell of margin).
+        const auto highest = [&](double z) noexcept {
+          const double a = ez - ztop, b = ez - z;
+          const double x_lo = eye.x() + std::min(a * kx_lo, b * kx_lo), x_hi = eye.x() + std::max(a * kx_hi, b * kx_hi);
+          const double y_lo = eye.y() + std::min(a * ky_lo, b * ky_lo), y_hi = eye.y() + std::max(a * ky_hi, b * ky_hi);
+          const double u_lo = (x_lo - g.origin_x) * inv_res, u_hi = (x_hi - g.origin_x) * inv_res;
+          const double v_lo = (g.origin_y - y_hi) * inv_res, v_hi = (g.origin_y - y_lo) * inv_res;
+          constexpr double kBig = 1e9;  // keeps the casts to int defined
+          return static_cast<double>(rc.max_surface_in(
+              static_cast<std::int32_t>(std::floor(std::clamp(u_lo, -kBig, kBig))) - 1,
+              static_cast<std::int32_t>(std::floor(std::clamp(v_lo, -kBig, kBig))) - 1,
+              static_cast<std::int32_t>(std::floor(std::clamp(u_hi, -kBig, kBig))) + 1,
+              static_cast<std::int32_t>(std::floor(std::clamp(v_hi, -kBig, kBig))) + 1));
+        };
+        proven = ztop;  // nothing is above zmax, and no ray point is above the eye
+        double cand = highest(ztop) + kMargin;
+        for (int it = 0; it < 6 && cand < proven; ++it) {
+          const double m = highest(cand);
+          if (m < cand) {  // free down to cand; try just above what that region holds
+            proven = cand;
+            cand = m + kMargin;
+          } else {  // the region down to m + margin lies inside the one just searched: free down to there
+            proven = std::min(proven, m + kMargin);
+            break;
+          }
+        }
+      }
+
+      for (int r = tr; r < tr1; ++r) {
     auto* rgb = out.rgb.ptr<cv::Vec3b>(r);
     auto* cls = out.cls.ptr<std::uint8_t>(r);
     auto* depth = out.depth.ptr<float>(r);
-    const float* ray = rays_.data() + 3 * static_cast<std::size_t>(r) * static_cast<std::size_t>(model_.width);
-    for (int c = 0; c < model_.width; ++c, ray += 3) {
+    const float* ray = rays_.data() + 3 * (static_cast<std::size_t>(r) * static_cast<std::size_t>(model_.width) +
+                                           static_cast<std::size_t>(tc));
+    for (int c = tc; c < tc1; ++c, ray += 3) {
       const Eigen::Vector3d dc(ray[0], ray[1], ray[2]);
+      const Eigen::Vector3d& dw = dirs[static_cast<std::size_t>((r - tr) * kTile + (c - tc))];
       RayHit hit;
-      if (dc.z() > 0.0) hit = rc.cast(eye, map_from_camera * dc, shading_.max_range_m);
+      if (dc.z() > 0.0) {
+        if (proven < ez) {
+          const double t_start = std::max(0.0, (proven - ez) / dw.z() - 1e-6);
+          hit = rc.cast_from(eye, dw, shading_.max_range_m, t_start, false);
+        } else {
+          hit = rc.cast(eye, dw, shading_.max_range_m);
+        }
+      }
       if (!hit.hit) {
         rgb[c] = cv::Vec3b(0, 0, 0);
         cls[c] = raw(ClassId::kUnknown);
@@ -398,7 +472,6 @@ void CameraRenderer::render_rows(const Pose3& pose, int row_begin, int row_end, 
 
       float factor = 1.0f;
       if (shading_.detail_texture) {
-        const Eigen::Vector3d dw = map_from_camera * dc;
         const double cos_view = std::max(0.2, std::abs(normal.dot(dw)));
         const double footprint = hit.range * pixel_angle / cos_view;
         if (!wall) {
@@ -427,6 +500,8 @@ void CameraRenderer::render_rows(const Pose3& pose, int row_begin, int row_end, 
       const double gain = static_cast<double>(factor) * light / sun_flat;
       rgb[c] = cv::Vec3b(cv::saturate_cast<std::uint8_t>(alb[0] * gain), cv::saturate_cast<std::uint8_t>(alb[1] * gain),
                          cv::saturate_cast<std::uint8_t>(alb[2] * gain));
+    }
+      }
     }
   }
 }

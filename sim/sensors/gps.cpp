@@ -24,6 +24,8 @@ constexpr ParamSpec kGpsParams[] = {
     ParamSpec::real("bias_tau_s", 60.0, 0.1, 1e6, "s", "correlation time of the bias"),
     ParamSpec::real("velocity_sigma_mps", 0.05, 0.0, 10.0, "m/s", "white noise per velocity component"),
     ParamSpec::boolean("report_no_fix", false, "emit no-fix reports during dropouts instead of nothing"),
+    ParamSpec::real("outlier_at_s", -1.0, -1.0, 1e7, "s", "fault injection: one fix this long after the start is off by outlier_m; -1 = never"),
+    ParamSpec::real("outlier_m", 50.0, 0.0, 1e4, "m", "fault injection: size of that jump"),
 };
 constexpr ParamSection kGpsSchema[] = {{"gps", kGpsParams, "simulated GNSS receiver"}};
 
@@ -46,6 +48,8 @@ Result<GpsConfig> gps_from(const Result<Config>& c) {
   g.bias_tau_s = v.real("bias_tau_s");
   g.velocity_sigma_mps = v.real("velocity_sigma_mps");
   g.report_no_fix = v.boolean("report_no_fix");
+  g.outlier_at_s = v.real("outlier_at_s");
+  g.outlier_m = v.real("outlier_m");
   return g;
 }
 }  // namespace
@@ -98,6 +102,7 @@ bool GpsSimulator::in_dropout(TimeNs t) const noexcept { return started_ && t >=
 bool GpsSimulator::sample(TimeNs t, const Pose3& truth, GpsFix& out) {
   if (!started_) {
     started_ = true;
+    start_t_ = t;
     next_fix_ = t;
     dropout_end_ = t;  // the first dropout is drawn from here
     dropout_start_ = t;
@@ -140,6 +145,11 @@ bool GpsSimulator::sample(TimeNs t, const Pose3& truth, GpsFix& out) {
   out.east_m = truth.x + bias_e_ + noise_rng_.gaussian(0.0, cfg_.sigma_m);
   out.north_m = truth.y + bias_n_ + noise_rng_.gaussian(0.0, cfg_.sigma_m);
   out.up_m = truth.z + bias_u_ + noise_rng_.gaussian(0.0, cfg_.sigma_vertical_m);
+  if (!outlier_done_ && cfg_.outlier_at_s >= 0 && to_seconds(t - start_t_) >= cfg_.outlier_at_s) {
+    outlier_done_ = true;
+    out.east_m += cfg_.outlier_m / std::sqrt(2.0);
+    out.north_m += cfg_.outlier_m / std::sqrt(2.0);
+  }
   out.vel_east_mps = ve + noise_rng_.gaussian(0.0, cfg_.velocity_sigma_mps);
   out.vel_north_mps = vn + noise_rng_.gaussian(0.0, cfg_.velocity_sigma_mps);
   out.vel_up_mps = vu + noise_rng_.gaussian(0.0, cfg_.velocity_sigma_mps);

@@ -76,6 +76,48 @@ inline std::uint64_t splitmix64(std::uint64_t& state) noexcept {
 inline double unit_open(std::uint64_t bits) noexcept {  // (0, 1]
   return (static_cast<double>(bits >> 11) + 1.0) * 0x1.0p-53;
 }
+inline double unit_centred(std::uint64_t bits) noexcept {  // (0, 1), symmetric about 1/2
+  return (static_cast<double>(bits >> 11) + 0.5) * 0x1.0p-53;
+}
+
+// Polynomial with coefficients from the highest power down.
+template <std::size_t N>
+inline double horner(const double (&c)[N], double x) noexcept {
+  double r = c[0];
+  for (std::size_t i = 1; i < N; ++i) r = r * x + c[i];
+  return r;
+}
+
+// The standard normal quantile, Wichura's AS241 (PPND16, relative error ~1e-16): one uniform gives one
+// normal deviate, by a rational function alone in 85 % of cases (Box-Muller needs log, sqrt and cos).
+inline double normal_quantile(double p) noexcept {
+  constexpr double kA[] = {2.5090809287301226727e+3, 3.3430575583588128105e+4, 6.7265770927008700853e+4,
+                           4.5921953931549871457e+4, 1.3731693765509461125e+4, 1.9715909503065514427e+3,
+                           1.3314166789178437745e+2, 3.3871328727963666080e+0};
+  constexpr double kB[] = {5.2264952788528545610e+3, 2.8729085735721942674e+4, 3.9307895800092710610e+4,
+                           2.1213794301586595867e+4, 5.3941960214247511077e+3, 6.8718700749205790830e+2,
+                           4.2313330701600911252e+1, 1.0};
+  constexpr double kC[] = {7.74545014278341407640e-4, 2.27238449892691845833e-2, 2.41780725177450611770e-1,
+                           1.27045825245236838258e+0, 3.64784832476320460504e+0, 5.76949722146069140550e+0,
+                           4.63033784615654529590e+0, 1.42343711074968357734e+0};
+  constexpr double kD[] = {1.05075007164441684324e-9, 5.47593808499534494600e-4, 1.51986665636164571966e-2,
+                           1.48103976427480074590e-1, 6.89767334985100004550e-1, 1.67638483018380384940e+0,
+                           2.05319162663775882187e+0, 1.0};
+  constexpr double kE[] = {2.01033439929228813265e-7, 2.71155556874348757815e-5, 1.24266094738807843860e-3,
+                           2.65321895265761230930e-2, 2.96560571828504891230e-1, 1.78482653991729133580e+0,
+                           5.46378491116411436990e+0, 6.65790464350110377720e+0};
+  constexpr double kF[] = {2.04426310338993978564e-15, 1.42151175831644588870e-7, 1.84631831751005468180e-5,
+                           7.86869131145613259100e-4, 1.48753612908506148525e-2, 1.36929880922735805310e-1,
+                           5.99832206555887937690e-1, 1.0};
+  const double q = p - 0.5;
+  if (std::abs(q) <= 0.425) {
+    const double r = 0.180625 - q * q;
+    return q * horner(kA, r) / horner(kB, r);
+  }
+  const double r = std::sqrt(-std::log(q < 0.0 ? p : 1.0 - p));
+  const double x = r <= 5.0 ? horner(kC, r - 1.6) / horner(kD, r - 1.6) : horner(kE, r - 5.0) / horner(kF, r - 5.0);
+  return q < 0.0 ? -x : x;
+}
 
 }  // namespace
 
@@ -238,9 +280,9 @@ void LidarSimulator::emit(std::size_t k, double hit_range, std::int32_t cell_col
   double range = hit_range + beam_offset_m_;
   if (sigma > 0.0 || noise_.dropout_prob > 0.0) {
     std::uint64_t state = key ^ ((static_cast<std::uint64_t>(col) << 32) | ring);
-    const double u1 = unit_open(splitmix64(state)), u2 = unit_open(splitmix64(state));
+    const std::uint64_t bits = splitmix64(state);
     if (noise_.dropout_prob > 0.0 && unit_open(splitmix64(state)) <= noise_.dropout_prob) return;
-    range += sigma * std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * kPi * u2);  // Box-Muller
+    if (sigma > 0.0) range += sigma * normal_quantile(unit_centred(bits));  // inversion: one uniform per deviate
   }
   if (range < noise_.min_range_m || range > noise_.max_range_m) return;
   const Eigen::Vector3d p = ray_origin_[k] + (range - beam_offset_m_) * ray_dir_[k];

@@ -9,6 +9,7 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 
 namespace ag::sim {
 
@@ -16,6 +17,7 @@ namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr int kLevelShifts[] = {2, 3, 4, 5, 6};  // blocks of 4, 8, 16, 32 and 64 cells
+constexpr int kNearSteps = 12;  // cells a `near` cast steps one by one before it tests blocks again
 
 // floor() of a grid coordinate already known to lie near [lo, hi], as a clamped index.
 std::int32_t floor_clamped(double x, std::int32_t lo, std::int32_t hi) noexcept {
@@ -182,29 +184,34 @@ RayHit HeightfieldRaycaster::cast_impl(const Eigen::Vector3d& origin, const Eige
   }
   if (!(t0 <= t1)) return out;
 
-  const Ray ray{origin, unit_dir, u0, v0, z0, du, dv, dz, idu, idv, t0, t1, axis};
+  Ray ray{origin, unit_dir, u0, v0, z0, du, dv, dz, idu, idv, t0, t1, axis};
+  bool stopped = false;
   // One traversal per sign of the horizontal direction: the stepping has no direction branches.
-  if (levels_.empty()) {
-    if (du >= 0.0) return dv >= 0.0 ? traverse<true, true, 0>(ray) : traverse<true, false, 0>(ray);
-    return dv >= 0.0 ? traverse<false, true, 0>(ray) : traverse<false, false, 0>(ray);
-  }
-  if (near) {  // a few cells to go: plain cell stepping beats testing blocks on the way down
-    if (du >= 0.0) return dv >= 0.0 ? traverse<true, true, 0>(ray) : traverse<true, false, 0>(ray);
-    return dv >= 0.0 ? traverse<false, true, 0>(ray) : traverse<false, false, 0>(ray);
-  }
-  if (du >= 0.0) return dv >= 0.0 ? traverse<true, true, kMaxLevels>(ray) : traverse<true, false, kMaxLevels>(ray);
-  return dv >= 0.0 ? traverse<false, true, kMaxLevels>(ray) : traverse<false, false, kMaxLevels>(ray);
+  const auto run = [&](auto pos_u, auto pos_v) noexcept {
+    constexpr bool kU = decltype(pos_u)::value, kV = decltype(pos_v)::value;
+    if (levels_.empty()) return traverse<kU, kV, 0>(ray, 0, stopped);
+    if (near) {  // a few cells to go: plain cell stepping beats testing blocks on the way down...
+      RayHit hit = traverse<kU, kV, 0>(ray, kNearSteps, stopped);
+      if (!stopped) return hit;  // ...unless the ray only grazed something and flies on: blocks again
+    }
+    return traverse<kU, kV, kMaxLevels>(ray, 0, stopped);
+  };
+  using T = std::true_type;
+  using F = std::false_type;
+  if (du >= 0.0) return dv >= 0.0 ? run(T{}, T{}) : run(T{}, F{});
+  return dv >= 0.0 ? run(F{}, T{}) : run(F{}, F{});
 }
 
 template <bool kPosU, bool kPosV, int kLevels>
-RayHit HeightfieldRaycaster::traverse(const Ray& ray) const noexcept {
+RayHit HeightfieldRaycaster::traverse(Ray& ray, int max_steps, bool& stopped) const noexcept {
   RayHit out;
   const std::int32_t w = grid_.width, h = grid_.height;
   const double u0 = ray.u0, v0 = ray.v0, z0 = ray.z0, du = ray.du, dv = ray.dv, dz = ray.dz, t1 = ray.t1;
   const double idu = ray.idu, idv = ray.idv;
   int axis = ray.axis;
-  std::int32_t ci = axis == 1 ? (kPosU ? 0 : w - 1) : floor_clamped(u0 + ray.t0 * du, 0, w - 1);
-  std::int32_t cj = axis == 2 ? (kPosV ? 0 : h - 1) : floor_clamped(v0 + ray.t0 * dv, 0, h - 1);
+  std::int32_t ci = ray.ci >= 0 ? ray.ci : axis == 1 ? (kPosU ? 0 : w - 1) : floor_clamped(u0 + ray.t0 * du, 0, w - 1);
+  std::int32_t cj = ray.cj >= 0 ? ray.cj : axis == 2 ? (kPosV ? 0 : h - 1) : floor_clamped(v0 + ray.t0 * dv, 0, h - 1);
+  stopped = false;
   constexpr std::int32_t su = kPosU ? 1 : -1, sv = kPosV ? 1 : -1;
 
   const auto make_hit = [&](double th, int ax) noexcept {
@@ -263,6 +270,14 @@ RayHit HeightfieldRaycaster::traverse(const Ray& ray) const noexcept {
       continue;
     }
 
+    if (kLevels == 0 && max_steps > 0 && --max_steps == 0) {  // the cell (ci, cj) entered at t is still to test
+      stopped = true;
+      ray.t0 = t;
+      ray.axis = axis;
+      ray.ci = ci;
+      ray.cj = cj;
+      return out;
+    }
     const double s = static_cast<double>(surface_[static_cast<std::size_t>(cj) * static_cast<std::size_t>(w) +
                                                   static_cast<std::size_t>(ci)]);
     if (z0 + t * dz <= s) return make_hit(t, axis);  // entered through a side (a wall), or started inside
@@ -401,6 +416,33 @@ void HeightfieldRaycaster::fan_walk(double u0, double v0, double z0, double cu, 
     s = te;
     if (ci < 0 || cj < 0 || ci >= w || cj >= h) return stop_at(s);
   }
+}
+
+float HeightfieldRaycaster::max_surface_in(std::int32_t c0, std::int32_t r0, std::int32_t c1, std::int32_t r1) const noexcept {
+  c0 = std::max(c0, 0);
+  r0 = std::max(r0, 0);
+  c1 = std::min(c1, grid_.width - 1);
+  r1 = std::min(r1, grid_.height - 1);
+  float m = -std::numeric_limits<float>::infinity();
+  if (c0 > c1 || r0 > r1) return m;
+  constexpr std::int64_t kReads = 64;
+  if (levels_.empty() || static_cast<std::int64_t>(c1 - c0 + 1) * (r1 - r0 + 1) <= kReads) {
+    for (std::int32_t r = r0; r <= r1; ++r)
+      for (std::int32_t c = c0; c <= c1; ++c) m = std::max(m, surface(c, r));
+    return m;
+  }
+  std::size_t l = 0;
+  while (l + 1 < levels_.size()) {
+    const int sh = levels_[l].shift;
+    if (static_cast<std::int64_t>((c1 >> sh) - (c0 >> sh) + 1) * ((r1 >> sh) - (r0 >> sh) + 1) <= kReads) break;
+    ++l;
+  }
+  const Level& lv = levels_[l];
+  for (std::int32_t by = r0 >> lv.shift; by <= r1 >> lv.shift; ++by) {
+    const float* row = lv.max.data() + static_cast<std::size_t>(by) * static_cast<std::size_t>(lv.width);
+    for (std::int32_t bx = c0 >> lv.shift; bx <= c1 >> lv.shift; ++bx) m = std::max(m, row[bx]);
+  }
+  return m;
 }
 
 std::shared_ptr<const HeightfieldRaycaster> raycaster_for(const World& world,

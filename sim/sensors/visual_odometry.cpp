@@ -21,6 +21,7 @@ constexpr ParamSpec kVoParams[] = {
     ParamSpec::real("rotation_noise_rad", 0.001, 0.0, 1.0, "rad", "white noise per angle per frame"),
     ParamSpec::real("tracking_loss_rate_per_s", 1.0 / 300.0, 0.0, 10.0, "1/s", "mean rate of tracking losses, 0 = never"),
     ParamSpec::real("tracking_loss_duration_s", 2.0, 0.0, 3600.0, "s", "mean length of a tracking loss (exponential)"),
+    ParamSpec::real("forced_loss_at_s", -1.0, -1.0, 1e7, "s", "fault injection: one extra tracking loss this long after the start; -1 = none"),
     ParamSpec::boolean("random_initial_yaw", true, "a new segment starts at a random yaw (false: yaw 0)"),
 };
 constexpr ParamSection kVoSchema[] = {{"visual_odometry", kVoParams, "simulated monocular visual odometry"}};
@@ -38,6 +39,7 @@ Result<VoConfig> vo_from(const Result<Config>& c, std::string_view origin) {
   o.rotation_noise_rad = v.real("rotation_noise_rad");
   o.tracking_loss_rate_per_s = v.real("tracking_loss_rate_per_s");
   o.tracking_loss_duration_s = v.real("tracking_loss_duration_s");
+  o.forced_loss_at_s = v.real("forced_loss_at_s");
   o.random_initial_yaw = v.boolean("random_initial_yaw");
   if (o.scale_min > o.scale_max)
     return model_config_error(origin, "key 'visual_odometry.scale_min' (" + std::to_string(o.scale_min) +
@@ -95,8 +97,15 @@ bool VisualOdometrySimulator::sample(TimeNs t, const Pose3& truth, VoSample& out
     first = true;
     next_frame_ = t;
     loss_start_ = loss_end_ = t;
+    start_t_ = t;
   }
   advance_losses(t);
+  if (!forced_done_ && cfg_.forced_loss_at_s >= 0 && to_seconds(t - start_t_) >= cfg_.forced_loss_at_s && t < loss_start_) {
+    forced_done_ = true;  // replaces the pending random loss's window; the random stream continues after it
+    loss_start_ = t;
+    loss_end_ = time_after(t, std::max(cfg_.tracking_loss_duration_s, 0.5));
+    ++losses_;
+  }
   if (t < next_frame_) return false;
   if (period_ > 0) next_frame_ += period_ * ((t - next_frame_) / period_ + 1);
 

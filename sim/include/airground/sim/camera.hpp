@@ -51,6 +51,9 @@ struct CameraShading {
   // Skip the shadow ray where a precomputed bound proves the point lit: the same image, faster.
   // Not in the YAML; off only to test that claim.
   bool shadow_culling{true};
+  // Start each tile's casts at a height a block max query proves free (see render_rows): the same image,
+  // faster. Not in the YAML; off only to test that claim.
+  bool tile_start{true};
 
   static Result<CameraShading> load_file(const std::string& path);
   static Result<CameraShading> load_string(std::string_view yaml, std::string_view origin);

@@ -30,6 +30,10 @@ struct GpsConfig {
   double bias_tau_s{60.0};           // [s] correlation time of the bias (first-order Gauss-Markov)
   double velocity_sigma_mps{0.05};   // [m/s] white noise on each velocity component
   bool report_no_fix{false};         // during a dropout: false = no output, true = fixes with kNoFix at the rate
+  // Fault injection: the first fix at or after outlier_at_s is off by outlier_m to the north-east
+  // (a multipath jump, as receivers report them: with the normal accuracy). Negative = never.
+  double outlier_at_s{-1.0};         // [s] time of the outlier, from the first sample() call
+  double outlier_m{50.0};            // [m] horizontal size of the jump
 };
 
 // Parameter table (key, default, range, unit) of GpsConfig, as one section named "gps".
@@ -88,6 +92,8 @@ class GpsSimulator {
   TimeNs last_fix_t_{0};
   Pose3 last_truth_{};
   bool have_last_{false};
+  TimeNs start_t_{0};
+  bool outlier_done_{false};
 };
 
 }  // namespace ag::sim

@@ -75,6 +75,10 @@ class HeightfieldRaycaster {
                     static_cast<std::size_t>(col)];
   }
   [[nodiscard]] float max_surface() const noexcept { return max_surface_; }
+  // An upper bound on the surface over the cells [c0, c1] x [r0, r1] (clamped to the grid; -inf when
+  // empty): exact when read cell by cell, otherwise the max of the pyramid blocks covering the rectangle,
+  // the finest level that needs at most ~64 reads.
+  [[nodiscard]] float max_surface_in(std::int32_t c0, std::int32_t r0, std::int32_t c1, std::int32_t r1) const noexcept;
   [[nodiscard]] float min_surface() const noexcept { return min_surface_; }
 
  private:
@@ -92,9 +96,12 @@ class HeightfieldRaycaster {
     double idu, idv;  // 1/du, 1/dv; +inf for a zero component
     double t0, t1;    // the part of the ray inside the box
     int axis;       // how it enters: 0 from above or at the origin, 1 across a u face, 2 across a v face
+    std::int32_t ci{-1}, cj{-1};  // the cell it starts in when resumed (else found from t0 and axis)
   };
+  // kLevels = 0 steps cell by cell; with max_steps > 0 it stops after that many cells with no hit and
+  // leaves in `ray` the state to resume from (returns hit = false, resumed = true).
   template <bool kPosU, bool kPosV, int kLevels>
-  RayHit traverse(const Ray& ray) const noexcept;
+  RayHit traverse(Ray& ray, int max_steps, bool& stopped) const noexcept;
   template <bool kPosU, bool kPosV>
   void fan_walk(double u0, double v0, double z0, double cu, double cv, double s_stop, FanBeam* beams, int n,
                 double& walked) const noexcept;

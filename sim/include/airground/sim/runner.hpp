@@ -8,10 +8,33 @@
 #include <string>
 #include <vector>
 
+#include "airground/core/geometry.hpp"
 #include "airground/platform/result.hpp"
+#include "airground/platform/time.hpp"
 #include "airground/sim/world.hpp"
 
+namespace ag {
+class RoleInstance;
+}
+
 namespace ag::sim {
+
+struct TruthSample {
+  TimeNs t{0};
+  Pose3 pose;
+};
+
+// What a caller may look at when the run ends (before the reports are written): evaluation commands
+// read the robots' stages and compare them with the ground truth here.
+struct RunInspection {
+  const World& world;
+  RoleInstance* uav{nullptr};                 // the quadrotor's role instance (nullptr without one)
+  const std::vector<TruthSample>* uav_truth{nullptr};  // at the physics rate (RunOptions::keep_uav_truth)
+  double vo_scale{0};                         // true visual-odometry scale at the end [VO units per metre]
+  std::uint64_t vo_segments{0};
+  std::uint64_t vo_tracking_losses{0};
+  double survey_x0{0}, survey_y0{0}, survey_x1{0}, survey_y1{0};  // [m] the area the survey covers
+};
 
 enum class RecordLevel { kNone, kLight, kFull };
 
@@ -23,7 +46,7 @@ struct RunOptions {
   std::uint64_t seed{1};
   double duration_s{60};          // simulated seconds
   double physics_hz{50};          // vehicle dynamics, odometry, GPS/VO sampling
-  double camera_hz{2};            // quadrotor camera frames (keyframes need ~2 m spacing at 5 m/s)
+  double camera_hz{5};            // quadrotor camera frames (1 m apart at 5 m/s, for keyframes every 2 m)
   double camera_scale{0.5};       // 0.5 = 640x400, the size the mapper matches stereo at; 1.0 = 1280x800
   double lidar_hz{10};
   int lidar_columns{1024};        // 512, 1024 or 2048
@@ -37,6 +60,10 @@ struct RunOptions {
   RecordLevel record{RecordLevel::kLight};
   int threads{0};                 // sensor worker threads, 0 = all cores
   bool progress{true};
+  bool keep_uav_truth{false};     // keep the quadrotor's true poses for RunInspection
+  bool stop_when_survey_done{false};  // end the run when the quadrotor finished its survey (duration_s caps it)
+  double survey_margin_m{20};     // [m] the survey area is the world minus this margin
+  std::function<Status(const RunInspection&)> inspect{};  // called after the run, before the reports
 };
 
 struct RobotSummary {

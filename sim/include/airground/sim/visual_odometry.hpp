@@ -32,6 +32,9 @@ struct VoConfig {
   double tracking_loss_rate_per_s{1.0 / 300.0};  // [1/s] mean rate of tracking losses (Poisson), 0 = never
   double tracking_loss_duration_s{2.0};    // [s] mean length of a loss (exponential)
   bool random_initial_yaw{true};           // a segment starts at a random yaw (false: yaw 0 at its first frame)
+  // Fault injection: one tracking loss of tracking_loss_duration_s at this time from the first sample()
+  // call, besides the random ones. Negative = none.
+  double forced_loss_at_s{-1.0};           // [s]
 };
 
 std::span<const ParamSection> vo_config_schema() noexcept;  // one section, "visual_odometry"
@@ -75,6 +78,8 @@ class VisualOdometrySimulator {
   std::uint64_t losses_{0};
   std::uint64_t losses_at_segment_start_{0};
   TimeNs loss_start_{0}, loss_end_{0};
+  TimeNs start_t_{0};
+  bool forced_done_{false};
   double log_scale_{0}, scale_{1}, yaw_offset_{0};
   double vx_{0}, vy_{0}, vz_{0};  // integrated position in the segment frame [VO units]
   Pose3 last_truth_{};

@@ -1,0 +1,176 @@
+// The UAV's mapping stages (thin wrappers; the algorithms are in pose_graph, stereo and ortho_map):
+//   pose_graph  camera + visual_odometry + gps -> pose graph, keyframes, keyframe_poses
+//   ortho_map   keyframes + keyframe_poses -> dense stereo -> ortho-map tiles, map_status
+// They run on their own threads at low priority: a solve or a stereo pair takes tens of milliseconds
+// and allocates inside Ceres, so they are not real-time paths (the drivers and the status stage are).
+#pragma once
+
+#include <array>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "airground/aerial_mapping/ortho_map.hpp"
+#include "airground/aerial_mapping/pose_graph.hpp"
+#include "airground/aerial_mapping/stereo.hpp"
+#include "airground/core/messages.hpp"
+#include "airground/platform/config.hpp"
+#include "airground/platform/stage.hpp"
+
+namespace ag::mapping {
+
+// Role-wide section "camera_calibration": the nadir camera at the 640x400 the mapper works at.
+// Defaults: the simulator's 1280x800 camera (fx 967, k1 -0.05, k2 0.01) resampled to 640x400.
+inline constexpr ParamSpec kCameraCalibrationParams[] = {
+    ParamSpec::real("fx", 483.5, 1.0, 1e5, "px", "focal length x at 640x400"),
+    ParamSpec::real("fy", 483.5, 1.0, 1e5, "px", "focal length y at 640x400"),
+    ParamSpec::real("cx", 319.5, 0.0, 640.0, "px", "principal point x (pixel centres at integers)"),
+    ParamSpec::real("cy", 199.5, 0.0, 400.0, "px", "principal point y"),
+    ParamSpec::real("k1", -0.05, -5.0, 5.0, "", "radial distortion r^2 (OpenCV model)"),
+    ParamSpec::real("k2", 0.01, -5.0, 5.0, "", "radial distortion r^4"),
+    ParamSpec::real("p1", 0.0, -1.0, 1.0, "", "tangential distortion"),
+    ParamSpec::real("p2", 0.0, -1.0, 1.0, "", "tangential distortion"),
+    ParamSpec::real("k3", 0.0, -5.0, 5.0, "", "radial distortion r^6"),
+};
+PinholeCamera load_camera_calibration(const Config& config);
+
+struct PoseGraphStageCounters {
+  std::uint64_t frames_in{0}, frames_keyframed{0};
+  std::uint64_t frames_without_odometry{0};  // no odometry around the image time (or a segment change)
+  std::uint64_t frames_before_init{0};       // the graph was not georeferenced yet
+  std::uint64_t frames_out_of_order{0};
+  std::uint64_t frames_dropped_busy{0};      // keyframe ring full
+  std::uint64_t odometry_lost{0};            // samples flagged tracking lost
+  std::uint64_t gps_no_fix{0};
+};
+
+class PoseGraphStage final : public Stage {
+ public:
+  static constexpr ParamSpec kParams[] = {
+      ParamSpec::real("keyframe_distance_m", 2.0, 0.2, 50.0, "m", "a new keyframe once the optimised position moved this far (ASOOM: 2 m)"),
+      ParamSpec::real("max_image_wait_s", 1.0, 0.05, 10.0, "s", "an image waits this long for the odometry after it, then is dropped (counted)"),
+      ParamSpec::integer("solve_every_frames", 30, 1, 1000, "frames", "re-solve the graph after this many frames (ASOOM: ~30)"),
+      ParamSpec::integer("window_frames", 600, 0, 100000, "frames", "free nodes per solve, older ones held constant; 0 = all"),
+      ParamSpec::integer("max_iterations", 30, 1, 500, "iterations", "Levenberg-Marquardt iterations per solve"),
+      ParamSpec::real("between_sigma_m", 0.05, 1e-4, 10.0, "m", "odometry between-factor sigma, translation (ASOOM: 0.05)"),
+      ParamSpec::real("between_sigma_rad", 0.05, 1e-5, 1.0, "rad", "odometry between-factor sigma, rotation (ASOOM: 0.05)"),
+      ParamSpec::real("gravity_sigma_rad", 0.02, 0.0, 1.0, "rad", "roll/pitch from the gravity-aligned odometry; 0 = off"),
+      ParamSpec::real("gps_sigma_m", 0.5, 0.01, 100.0, "m", "GPS factor sigma at zero interpolation gap (ASOOM: 0.5)"),
+      ParamSpec::real("gps_sigma_per_gap_s", 0.5, 0.0, 100.0, "m/s", "added to the sigma per second of interpolation gap (ASOOM: 0.5)"),
+      ParamSpec::real("gps_max_interpolation_s", 1.0, 0.05, 60.0, "s", "fixes further apart are not interpolated between"),
+      ParamSpec::real("gps_robust_sigmas", 2.0, 0.1, 100.0, "", "Cauchy loss scale on GPS residuals, in sigmas"),
+      ParamSpec::real("gps_gate_sigmas", 6.0, 1.0, 1000.0, "", "once initialised, fixes further than this many sigmas are rejected"),
+      ParamSpec::real("gps_gate_floor_m", 5.0, 0.0, 1000.0, "m", "... but never fixes closer than this"),
+      ParamSpec::integer("min_gps_fixes", 3, 2, 1000, "fixes", "GPS fixes a segment needs before it is georeferenced"),
+      ParamSpec::real("min_gps_baseline_m", 4.0, 0.0, 1000.0, "m", "spread those fixes need (scale and yaw need motion)"),
+  };
+  static std::unique_ptr<Stage> make() { return std::make_unique<PoseGraphStage>(); }
+
+  Status init(StageContext& ctx) override;
+  void step(TimeNs now) noexcept override;
+
+  [[nodiscard]] const PoseGraph& graph() const noexcept { return *graph_; }
+  [[nodiscard]] const PoseGraphStageCounters& counters() const noexcept { return c_; }
+  // Keyframe k's node interpolation, for evaluation: current optimised body pose.
+  [[nodiscard]] Eigen::Isometry3d keyframe_pose(std::uint32_t id) const noexcept;
+  [[nodiscard]] std::uint32_t keyframes() const noexcept { return next_id_; }
+  [[nodiscard]] TimeNs keyframe_stamp(std::uint32_t id) const noexcept;
+
+ private:
+  struct NodeRef {
+    TimeNs stamp{0};
+    NodeId node{kNoNode};
+    std::uint32_t segment{0};
+  };
+  struct KeyframeRef {
+    NodeId a{kNoNode}, b{kNoNode};
+    double alpha{0};
+    TimeNs stamp{0};
+  };
+  bool interpolate(TimeNs t, KeyframeRef& ref, std::uint32_t& segment) const noexcept;
+  [[nodiscard]] Eigen::Isometry3d pose_of(const KeyframeRef& r) const noexcept;
+  void publish_poses(TimeNs now) noexcept;
+
+  std::unique_ptr<PoseGraph> graph_;
+  const Clock* clock_{nullptr};
+  RingReader<CameraImageMsg, kCameraRing> camera_;
+  RingReader<VoMsg, kVoRing> vo_;
+  RingReader<GpsMsg, kGpsRing> gps_;
+  RingWriter<KeyframeMsg, kKeyframeRing> keyframes_out_;
+  LatestWriter<KeyframePosesMsg> poses_out_;
+  std::unique_ptr<KeyframeMsg> kf_;
+  std::unique_ptr<KeyframePosesMsg> poses_msg_;
+  std::array<NodeRef, 512> history_{};  // newest nodes, ring
+  std::size_t history_head_{0}, history_size_{0};
+  std::vector<KeyframeRef> keyframe_refs_;  // every keyframe's interpolation (small: 40 bytes each)
+  double keyframe_distance_m_{2.0};
+  double max_image_wait_s_{1.0};
+  std::uint32_t next_id_{0};
+  std::uint32_t last_kf_segment_{0};
+  Eigen::Vector3d last_kf_position_{0, 0, 0};
+  bool have_kf_{false};
+  TimeNs last_image_stamp_{-1};
+  std::uint64_t solves_published_{0};
+  PoseGraphStageCounters c_;
+};
+
+struct OrthoMapStageCounters {
+  std::uint64_t keyframes_in{0}, pairs_matched{0}, pairs_refused{0}, segment_starts{0};
+  double last_stereo_ms{0}, last_bin_ms{0};
+};
+
+class OrthoMapStage final : public Stage {
+ public:
+  static constexpr ParamSpec kParams[] = {
+      ParamSpec::integer("min_disparity", 1, 0, 256, "px", "block matching: smallest disparity (ASOOM: 1)"),
+      ParamSpec::integer("num_disparities", 112, 16, 256, "px", "block matching: disparity range, multiple of 16 (112: a 30 m roof under 40 m flight)"),
+      ParamSpec::integer("block_size", 9, 5, 31, "px", "block matching: odd SAD window (ASOOM: 9)"),
+      ParamSpec::integer("prefilter_cap", 31, 1, 63, "", "block matching: x-Sobel prefilter clip"),
+      ParamSpec::integer("texture_threshold", 10, 0, 10000, "", "block matching: minimum block texture"),
+      ParamSpec::integer("uniqueness_ratio", 10, 0, 100, "%", "block matching: margin of the best match over the others"),
+      ParamSpec::integer("speckle_window", 100, 0, 10000, "px", "speckle filter region size; 0 = off"),
+      ParamSpec::integer("speckle_range", 2, 0, 64, "px", "speckle filter disparity step"),
+      ParamSpec::integer("border_dilate_px", 5, 0, 64, "px", "invalid rectification border grown by this"),
+      ParamSpec::real("min_depth_m", 1.0, 0.1, 1000.0, "m", "points nearer are dropped (ASOOM: 1)"),
+      ParamSpec::real("max_depth_m", 150.0, 1.0, 10000.0, "m", "points further are dropped (ASOOM: 150)"),
+      ParamSpec::real("min_baseline_m", 0.5, 0.01, 100.0, "m", "keyframe pairs closer than this are not matched"),
+      ParamSpec::real("resolution_m", 0.5, 0.05, 10.0, "m", "map cell size"),
+      ParamSpec::integer("tile_cells", 64, 8, 1024, "cells", "tile edge"),
+      ParamSpec::real("elevation_gate_m", 1.0, 0.05, 100.0, "m", "colour/class accepted only this close to the cell's mean elevation (ASOOM: 1)"),
+      ParamSpec::integer("min_points", 4, 1, 10000, "points", "points a cell needs before it takes a class"),
+      ParamSpec::integer("window_keyframes", 256, 2, 512, "keyframes", "keyframes kept re-binnable after pose-graph corrections"),
+      ParamSpec::real("rebuild_translation_m", 0.2, 0.0, 100.0, "m", "a keyframe moved further than this is re-binned (ASOOM: 2)"),
+      ParamSpec::real("rebuild_rotation_rad", 0.005, 0.0, 3.2, "rad", "... or turned more than this (ASOOM: 0.1)"),
+      ParamSpec::integer("max_tiles", 16384, 1, 1000000, "tiles", "map size limit; points beyond are refused (counted)"),
+  };
+  static std::unique_ptr<Stage> make() { return std::make_unique<OrthoMapStage>(); }
+
+  Status init(StageContext& ctx) override;
+  void step(TimeNs now) noexcept override;
+
+  [[nodiscard]] const OrthoMap& map() const noexcept { return *map_; }
+  [[nodiscard]] const OrthoMapStageCounters& counters() const noexcept { return c_; }
+  [[nodiscard]] const DenseStereo& stereo() const noexcept { return *stereo_; }
+
+ private:
+  [[nodiscard]] Eigen::Isometry3d camera_pose(const Pose3& body) const noexcept;
+
+  std::unique_ptr<OrthoMap> map_;
+  std::unique_ptr<DenseStereo> stereo_;
+  const Clock* clock_{nullptr};
+  RingReader<KeyframeMsg, kKeyframeRing> keyframes_;
+  LatestReader<KeyframePosesMsg> poses_;
+  LatestWriter<MapStatusMsg> status_out_;
+  std::unique_ptr<KeyframeMsg> prev_;
+  bool have_prev_{false};
+  std::vector<MapPoint> points_;
+  std::vector<std::pair<std::uint32_t, Eigen::Isometry3d>> corrections_;
+  Eigen::Matrix3d body_from_camera_{Eigen::Matrix3d::Identity()};
+  MapStatusMsg status_{};
+  bool initialised_{false};
+  double scale_{0};
+  double max_baseline_axis_cos_{0.5};  // baselines within 60 deg of the optical axis are not matched
+  OrthoMapStageCounters c_;
+};
+
+}  // namespace ag::mapping

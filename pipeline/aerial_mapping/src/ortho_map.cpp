@@ -1,0 +1,276 @@
+// The ortho-map: binning keyframes into cells, versioned tiles, rebuilds after pose corrections.
+#include "airground/aerial_mapping/ortho_map.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace ag::mapping {
+
+namespace {
+
+std::int64_t floor_div(std::int64_t a, std::int64_t b) noexcept {
+  const std::int64_t q = a / b;
+  return (a % b != 0 && ((a < 0) != (b < 0))) ? q - 1 : q;
+}
+
+std::int64_t cell_index(double v, double inv_res) noexcept { return static_cast<std::int64_t>(std::floor(v * inv_res)); }
+
+double rotation_angle(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) noexcept {
+  return Eigen::AngleAxisd(a.transpose() * b).angle();
+}
+
+}  // namespace
+
+OrthoMap::OrthoMap(const OrthoMapParams& params) : p_(params), inv_res_(1.0 / params.resolution_m) {}
+
+Tile* OrthoMap::tile_for(std::int64_t cx, std::int64_t cy, bool create) {
+  const std::int64_t t = p_.tile_cells;
+  const TileKey key{static_cast<std::int32_t>(floor_div(cx, t)), static_cast<std::int32_t>(floor_div(cy, t))};
+  const auto it = tiles_.find(key.packed());
+  if (it != tiles_.end()) return it->second.get();
+  if (!create || tiles_.size() >= p_.max_tiles) return nullptr;
+  auto tile = std::make_unique<Tile>();
+  tile->key = key;
+  const auto n = static_cast<std::size_t>(t * t);
+  tile->base.assign(n, Cell{});
+  tile->live.assign(n, Cell{});
+  Tile* raw = tile.get();
+  tiles_.emplace(key.packed(), std::move(tile));
+  return raw;
+}
+
+void OrthoMap::touched_tiles(Patch& patch) const {
+  patch.tiles.clear();
+  const std::int64_t t = p_.tile_cells;
+  for (const PatchCell& c : patch.cells) {
+    const Eigen::Vector3d p = patch.pose * Eigen::Vector3d(c.x, c.y, c.z);
+    const TileKey key{static_cast<std::int32_t>(floor_div(cell_index(p.x(), inv_res_), t)),
+                      static_cast<std::int32_t>(floor_div(cell_index(p.y(), inv_res_), t))};
+    const std::uint64_t k = key.packed();
+    if (std::find(patch.tiles.begin(), patch.tiles.end(), k) == patch.tiles.end()) patch.tiles.push_back(k);
+  }
+}
+
+void OrthoMap::apply(const Patch& patch, bool to_base, const std::unordered_map<std::uint64_t, Tile*>* only) {
+  const std::int64_t t = p_.tile_cells;
+  const auto gate = static_cast<float>(p_.elevation_gate_m);
+  const auto min_points = static_cast<std::uint32_t>(p_.min_points);
+  for (const PatchCell& c : patch.cells) {
+    const Eigen::Vector3d p = patch.pose * Eigen::Vector3d(c.x, c.y, c.z);
+    const std::int64_t cx = cell_index(p.x(), inv_res_), cy = cell_index(p.y(), inv_res_);
+    Tile* tile = nullptr;
+    if (only != nullptr) {
+      const TileKey key{static_cast<std::int32_t>(floor_div(cx, t)), static_cast<std::int32_t>(floor_div(cy, t))};
+      const auto it = only->find(key.packed());
+      if (it == only->end()) continue;
+      tile = it->second;
+    } else {
+      tile = tile_for(cx, cy, true);
+      if (tile == nullptr) {
+        stats_.points_refused += c.count;
+        continue;
+      }
+    }
+    const auto lx = static_cast<std::size_t>(cx - static_cast<std::int64_t>(tile->key.tx) * t);
+    const auto ly = static_cast<std::size_t>(cy - static_cast<std::int64_t>(tile->key.ty) * t);
+    Cell& cell = (to_base ? tile->base : tile->live)[ly * static_cast<std::size_t>(t) + lx];
+    const auto z = static_cast<float>(p.z());
+    cell.elevation_sum += z * static_cast<float>(c.count);
+    cell.count += c.count;
+    if (cell.count >= min_points && std::fabs(z - cell.elevation()) <= gate) {
+      if (c.cls != 255 && (cell.cls == 255 || c.cos > cell.best_cos)) cell.cls = c.cls;
+      if (c.cos > cell.best_cos) {
+        cell.best_cos = c.cos;
+        cell.r = c.r;
+        cell.g = c.g;
+        cell.b = c.b;
+      }
+    }
+    if (!to_base) tile->version = version_ + 1;
+  }
+  ++version_;
+}
+
+void OrthoMap::add_keyframe(std::uint32_t id, const Eigen::Isometry3d& map_from_camera, std::span<const MapPoint> points) {
+  ++stats_.keyframes;
+  stats_.points += points.size();
+  if (points.empty()) return;
+  // Bin in a dense scratch grid over the points' extent.
+  std::int64_t x0 = std::numeric_limits<std::int64_t>::max(), y0 = x0, x1 = std::numeric_limits<std::int64_t>::min(), y1 = x1;
+  for (const MapPoint& m : points) {
+    const std::int64_t cx = cell_index(m.x, inv_res_), cy = cell_index(m.y, inv_res_);
+    x0 = std::min(x0, cx);
+    x1 = std::max(x1, cx);
+    y0 = std::min(y0, cy);
+    y1 = std::max(y1, cy);
+  }
+  const auto w = static_cast<std::size_t>(x1 - x0 + 1), h = static_cast<std::size_t>(y1 - y0 + 1);
+  auto index_of = [&](const MapPoint& m) {
+    return static_cast<std::size_t>(cell_index(m.y, inv_res_) - y0) * w + static_cast<std::size_t>(cell_index(m.x, inv_res_) - x0);
+  };
+  // Counting sort of the points by cell, so each cell's heights are contiguous.
+  start_.assign(w * h + 1, 0);
+  for (const MapPoint& m : points) ++start_[index_of(m) + 1];
+  for (std::size_t i = 1; i < start_.size(); ++i) start_[i] += start_[i - 1];
+  order_.resize(points.size());
+  fill_ = start_;
+  for (std::uint32_t k = 0; k < points.size(); ++k) order_[fill_[index_of(points[k])]++] = k;
+  acc_.assign(w * h, Acc{});
+  const double gate = p_.elevation_gate_m;
+  for (std::size_t cidx = 0; cidx < w * h; ++cidx) {
+    const std::uint32_t b = start_[cidx], e = start_[cidx + 1];
+    if (e - b < static_cast<std::uint32_t>(std::max(1, p_.min_points))) continue;  // too few to trust
+    // Robust height: the median, then the mean of the points within the gate of it (a wrong stereo
+    // match lands metres away and must not drag the cell).
+    heights_.clear();
+    for (std::uint32_t k = b; k < e; ++k) heights_.push_back(points[order_[k]].z);
+    auto mid = heights_.begin() + static_cast<std::ptrdiff_t>(heights_.size() / 2);
+    std::nth_element(heights_.begin(), mid, heights_.end());
+    const double median = static_cast<double>(*mid);
+    Acc& a = acc_[cidx];
+    for (std::uint32_t k = b; k < e; ++k) {
+      const MapPoint& m = points[order_[k]];
+      if (std::fabs(static_cast<double>(m.z) - median) > gate) continue;
+      a.sx += static_cast<double>(m.x);
+      a.sy += static_cast<double>(m.y);
+      a.sz += static_cast<double>(m.z);
+      ++a.n;
+      if (m.cos_axis > a.cos) {
+        a.cos = m.cos_axis;
+        a.r = m.r;
+        a.g = m.g;
+        a.b = m.b;
+      }
+      if (m.cls != 255 && m.cos_axis > a.cls_cos) {
+        a.cls_cos = m.cos_axis;
+        a.cls = m.cls;
+      }
+    }
+  }
+  Patch patch;
+  patch.id = id;
+  patch.pose = map_from_camera;
+  const Eigen::Isometry3d camera_from_map = map_from_camera.inverse();
+  for (const Acc& a : acc_) {
+    if (a.n == 0) continue;
+    const double n = a.n;
+    const Eigen::Vector3d c = camera_from_map * Eigen::Vector3d(a.sx / n, a.sy / n, a.sz / n);
+    patch.cells.push_back(PatchCell{static_cast<float>(c.x()), static_cast<float>(c.y()), static_cast<float>(c.z()), a.n,
+                                    std::max(a.cos, a.cls_cos), a.r, a.g, a.b, a.cls});
+  }
+  touched_tiles(patch);
+  apply(patch, false, nullptr);
+  window_.push_back(std::move(patch));
+  while (window_.size() > static_cast<std::size_t>(std::max(1, p_.window_keyframes))) freeze_oldest();
+}
+
+void OrthoMap::freeze_oldest() {
+  apply(window_.front(), true, nullptr);
+  window_.erase(window_.begin());
+  ++stats_.keyframes_frozen;
+}
+
+const Eigen::Isometry3d* OrthoMap::keyframe_pose(std::uint32_t id) const noexcept {
+  const auto it = std::lower_bound(window_.begin(), window_.end(), id, [](const Patch& p, std::uint32_t v) { return p.id < v; });
+  return (it != window_.end() && it->id == id) ? &it->pose : nullptr;
+}
+
+std::size_t OrthoMap::correct(std::span<const std::pair<std::uint32_t, Eigen::Isometry3d>> poses) {
+  std::unordered_map<std::uint64_t, Tile*> affected;
+  auto mark = [&](const Patch& p) {
+    for (const std::uint64_t k : p.tiles) {
+      const auto it = tiles_.find(k);
+      if (it != tiles_.end()) affected.emplace(k, it->second.get());
+    }
+  };
+  for (const auto& [id, pose] : poses) {
+    auto it = std::lower_bound(window_.begin(), window_.end(), id, [](const Patch& p, std::uint32_t v) { return p.id < v; });
+    if (it == window_.end() || it->id != id) continue;
+    const double moved = (pose.translation() - it->pose.translation()).norm();
+    const double turned = rotation_angle(pose.linear(), it->pose.linear());
+    if (moved <= p_.rebuild_translation_m && turned <= p_.rebuild_rotation_rad) continue;
+    ++stats_.keyframes_moved;
+    mark(*it);
+    it->pose = pose;
+    touched_tiles(*it);
+    for (const std::uint64_t k : it->tiles) {  // tiles it now reaches for the first time
+      const std::int64_t t = p_.tile_cells;
+      const auto tx = static_cast<std::int32_t>(static_cast<std::uint32_t>(k >> 32));
+      const auto ty = static_cast<std::int32_t>(static_cast<std::uint32_t>(k & 0xffffffffU));
+      if (Tile* tile = tile_for(static_cast<std::int64_t>(tx) * t, static_cast<std::int64_t>(ty) * t, true)) affected.emplace(k, tile);
+    }
+  }
+  if (affected.empty()) return 0;
+  for (auto& [k, tile] : affected) tile->live = tile->base;
+  for (const Patch& p : window_) {
+    const bool touches = std::any_of(p.tiles.begin(), p.tiles.end(), [&](std::uint64_t k) { return affected.count(k) != 0; });
+    if (touches) apply(p, false, &affected);
+  }
+  ++version_;
+  for (auto& [k, tile] : affected) tile->version = version_;
+  stats_.tiles_rebuilt += affected.size();
+  return affected.size();
+}
+
+const Cell* OrthoMap::cell_at(double x, double y) const noexcept {
+  const std::int64_t t = p_.tile_cells;
+  const std::int64_t cx = cell_index(x, inv_res_), cy = cell_index(y, inv_res_);
+  const TileKey key{static_cast<std::int32_t>(floor_div(cx, t)), static_cast<std::int32_t>(floor_div(cy, t))};
+  const auto it = tiles_.find(key.packed());
+  if (it == tiles_.end()) return nullptr;
+  const auto lx = static_cast<std::size_t>(cx - static_cast<std::int64_t>(key.tx) * t);
+  const auto ly = static_cast<std::size_t>(cy - static_cast<std::int64_t>(key.ty) * t);
+  return &it->second->live[ly * static_cast<std::size_t>(t) + lx];
+}
+
+std::uint64_t OrthoMap::cells_classified() const noexcept {
+  std::uint64_t n = 0;
+  for (const auto& [k, t] : tiles_)
+    for (const Cell& c : t->live) n += c.cls != 255 ? 1U : 0U;
+  return n;
+}
+
+MapRaster OrthoMap::raster() const {
+  GridGeometry g;
+  g.resolution = p_.resolution_m;
+  if (tiles_.empty()) return raster(g);
+  std::int32_t tx0 = std::numeric_limits<std::int32_t>::max(), ty0 = tx0, tx1 = std::numeric_limits<std::int32_t>::min(), ty1 = tx1;
+  for (const auto& [k, t] : tiles_) {
+    tx0 = std::min(tx0, t->key.tx);
+    tx1 = std::max(tx1, t->key.tx);
+    ty0 = std::min(ty0, t->key.ty);
+    ty1 = std::max(ty1, t->key.ty);
+  }
+  const double tile_m = p_.tile_cells * p_.resolution_m;
+  g.width = (tx1 - tx0 + 1) * p_.tile_cells;
+  g.height = (ty1 - ty0 + 1) * p_.tile_cells;
+  g.origin_x = tx0 * tile_m;
+  g.origin_y = (ty1 + 1) * tile_m;
+  return raster(g);
+}
+
+MapRaster OrthoMap::raster(const GridGeometry& grid) const {
+  MapRaster r;
+  r.grid = grid;
+  const auto n = static_cast<std::size_t>(grid.width) * static_cast<std::size_t>(grid.height);
+  r.cls.assign(n, 255);
+  r.elevation.assign(n, std::numeric_limits<float>::quiet_NaN());
+  r.rgb.assign(n * 3, 0);
+  r.count.assign(n, 0);
+  for (std::int32_t row = 0; row < grid.height; ++row)
+    for (std::int32_t col = 0; col < grid.width; ++col) {
+      const Cell* c = cell_at(grid.x_of(col), grid.y_of(row));
+      if (c == nullptr || c->count == 0) continue;
+      const auto i = static_cast<std::size_t>(row) * static_cast<std::size_t>(grid.width) + static_cast<std::size_t>(col);
+      r.cls[i] = c->cls;
+      r.elevation[i] = c->elevation();
+      r.rgb[3 * i] = c->r;
+      r.rgb[3 * i + 1] = c->g;
+      r.rgb[3 * i + 2] = c->b;
+      r.count[i] = c->count;
+    }
+  return r;
+}
+
+}  // namespace ag::mapping

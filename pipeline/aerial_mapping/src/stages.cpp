@@ -1,0 +1,337 @@
+// The UAV's mapping stages: pose graph + keyframes, and stereo + ortho-map.
+#include "airground/aerial_mapping/stages.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#include "airground/core/pose_math.hpp"
+#include "airground/platform/clock.hpp"
+#include "airground/platform/log.hpp"
+
+namespace ag::mapping {
+
+namespace {
+
+Eigen::Isometry3d interpolate_pose(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b, double alpha) noexcept {
+  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+  const Eigen::Quaterniond qa(a.linear()), qb(b.linear());
+  t.linear() = qa.slerp(alpha, qb).toRotationMatrix();
+  t.translation() = (1.0 - alpha) * a.translation() + alpha * b.translation();
+  return t;
+}
+
+double cpu_ms_since(TimeNs t0) noexcept { return static_cast<double>(thread_cpu_now() - t0) * 1e-6; }
+}  // namespace
+
+PinholeCamera load_camera_calibration(const Config& config) {
+  const SectionView v(config, "camera_calibration");
+  PinholeCamera c;
+  c.width = kImageWidth;
+  c.height = kImageHeight;
+  c.fx = v.real("fx");
+  c.fy = v.real("fy");
+  c.cx = v.real("cx");
+  c.cy = v.real("cy");
+  c.k1 = v.real("k1");
+  c.k2 = v.real("k2");
+  c.p1 = v.real("p1");
+  c.p2 = v.real("p2");
+  c.k3 = v.real("k3");
+  return c;
+}
+
+// ---------------------------------------------------------------------------------------------------
+// pose_graph
+
+Status PoseGraphStage::init(StageContext& ctx) {
+  const SectionView v = ctx.params();
+  PoseGraphParams p;
+  p.solve_every_frames = static_cast<int>(v.integer("solve_every_frames"));
+  p.window_frames = static_cast<int>(v.integer("window_frames"));
+  p.max_iterations = static_cast<int>(v.integer("max_iterations"));
+  p.between_sigma_m = v.real("between_sigma_m");
+  p.between_sigma_rad = v.real("between_sigma_rad");
+  p.gravity_sigma_rad = v.real("gravity_sigma_rad");
+  p.gps_sigma_m = v.real("gps_sigma_m");
+  p.gps_sigma_per_gap_s = v.real("gps_sigma_per_gap_s");
+  p.gps_max_interpolation_s = v.real("gps_max_interpolation_s");
+  p.gps_robust_sigmas = v.real("gps_robust_sigmas");
+  p.gps_gate_sigmas = v.real("gps_gate_sigmas");
+  p.gps_gate_floor_m = v.real("gps_gate_floor_m");
+  p.min_gps_fixes = static_cast<int>(v.integer("min_gps_fixes"));
+  p.min_gps_baseline_m = v.real("min_gps_baseline_m");
+  keyframe_distance_m_ = v.real("keyframe_distance_m");
+  max_image_wait_s_ = v.real("max_image_wait_s");
+  graph_ = std::make_unique<PoseGraph>(p);
+  clock_ = &ctx.clock;
+
+  auto cam = ctx.channels.ring_reader<CameraImageMsg, kCameraRing>("camera");
+  if (!cam) return cam.error();
+  camera_ = cam.value();
+  auto vo = ctx.channels.ring_reader<VoMsg, kVoRing>("visual_odometry");
+  if (!vo) return vo.error();
+  vo_ = vo.value();
+  auto gps = ctx.channels.ring_reader<GpsMsg, kGpsRing>("gps");
+  if (!gps) return gps.error();
+  gps_ = gps.value();
+  auto kf = ctx.channels.ring_writer<KeyframeMsg, kKeyframeRing>("keyframes");
+  if (!kf) return kf.error();
+  keyframes_out_ = kf.value();
+  auto poses = ctx.channels.latest_writer<KeyframePosesMsg>("keyframe_poses");
+  if (!poses) return poses.error();
+  poses_out_ = poses.value();
+  kf_ = std::make_unique<KeyframeMsg>();
+  poses_msg_ = std::make_unique<KeyframePosesMsg>();
+  keyframe_refs_.reserve(1U << 16);
+  return ok_status();
+}
+
+bool PoseGraphStage::interpolate(TimeNs t, KeyframeRef& ref, std::uint32_t& segment) const noexcept {
+  constexpr TimeNs kMaxGap = kNsPerS / 2;  // odometry further apart than this is a gap, not a bracket
+  const std::size_t cap = history_.size();
+  for (std::size_t k = 0; k + 1 < history_size_ + 1 && k < history_size_; ++k) {
+    const NodeRef& b = history_[(history_head_ + cap - 1 - k) % cap];  // newest first
+    if (b.stamp < t) return false;                                      // t is after every node left
+    if (b.stamp == t) {
+      ref = KeyframeRef{b.node, b.node, 0.0, t};
+      segment = b.segment;
+      return true;
+    }
+    if (k + 1 >= history_size_) return false;
+    const NodeRef& a = history_[(history_head_ + cap - 2 - k) % cap];
+    if (a.stamp > t) continue;
+    if (a.segment != b.segment || b.stamp - a.stamp > kMaxGap) return false;
+    ref = KeyframeRef{a.node, b.node, static_cast<double>(t - a.stamp) / static_cast<double>(b.stamp - a.stamp), t};
+    segment = b.segment;
+    return true;
+  }
+  return false;
+}
+
+Eigen::Isometry3d PoseGraphStage::pose_of(const KeyframeRef& r) const noexcept {
+  if (r.a == r.b) return graph_->pose(r.a);
+  return interpolate_pose(graph_->pose(r.a), graph_->pose(r.b), r.alpha);
+}
+
+Eigen::Isometry3d PoseGraphStage::keyframe_pose(std::uint32_t id) const noexcept {
+  return id < keyframe_refs_.size() ? pose_of(keyframe_refs_[id]) : Eigen::Isometry3d::Identity();
+}
+
+TimeNs PoseGraphStage::keyframe_stamp(std::uint32_t id) const noexcept {
+  return id < keyframe_refs_.size() ? keyframe_refs_[id].stamp : 0;
+}
+
+void PoseGraphStage::publish_poses(TimeNs now) noexcept {
+  KeyframePosesMsg& m = *poses_msg_;
+  const auto count = static_cast<std::uint32_t>(std::min<std::size_t>(keyframe_refs_.size(), KeyframePosesMsg::kCapacity));
+  m.stamp = now;
+  m.solve = static_cast<std::uint32_t>(++solves_published_);
+  m.first_id = static_cast<std::uint32_t>(keyframe_refs_.size()) - count;
+  m.count = count;
+  for (std::uint32_t i = 0; i < count; ++i) m.poses[i] = to_pose3(pose_of(keyframe_refs_[m.first_id + i]));
+  const NodeId last = graph_->last();
+  m.segment = last == kNoNode ? 0 : graph_->segment_of(last);
+  m.initialised = graph_->initialised();
+  m.scale = m.initialised ? graph_->scale(m.segment) : 0.0;
+  m.published = clock_->now();
+  poses_out_.publish(m);
+}
+
+void PoseGraphStage::step(TimeNs now) noexcept {
+  while (const GpsMsg* g = gps_.front()) {
+    if (g->fix_type >= 2)
+      graph_->add_gps(g->stamp, Eigen::Vector3d(g->east_m, g->north_m, g->up_m), g->h_accuracy_m);
+    else
+      ++c_.gps_no_fix;
+    gps_.pop();
+  }
+  while (const VoMsg* v = vo_.front()) {
+    if (!v->tracking) {
+      ++c_.odometry_lost;
+    } else {
+      const NodeId id = graph_->add_frame(v->stamp, v->segment, v->pose);
+      if (id != kNoNode) {
+        history_[history_head_] = NodeRef{v->stamp, id, v->segment};
+        history_head_ = (history_head_ + 1) % history_.size();
+        history_size_ = std::min(history_size_ + 1, history_.size());
+      }
+    }
+    vo_.pop();
+  }
+  const bool solved = graph_->update();
+
+  while (const CameraImageMsg* img = camera_.front()) {
+    if (img->stamp <= last_image_stamp_) {
+      ++c_.frames_out_of_order;
+      camera_.pop();
+      continue;
+    }
+    const TimeNs newest = history_size_ ? history_[(history_head_ + history_.size() - 1) % history_.size()].stamp : -1;
+    if (newest < img->stamp) {  // the odometry after the image has not arrived yet
+      if (to_seconds(now - img->stamp) <= max_image_wait_s_) break;
+      ++c_.frames_without_odometry;
+      camera_.pop();
+      continue;
+    }
+    KeyframeRef ref;
+    std::uint32_t segment = 0;
+    if (!interpolate(img->stamp, ref, segment)) {
+      ++c_.frames_without_odometry;
+      camera_.pop();
+      continue;
+    }
+    last_image_stamp_ = img->stamp;
+    ++c_.frames_in;
+    if (!graph_->segment_initialised(segment)) {
+      ++c_.frames_before_init;
+      camera_.pop();
+      continue;
+    }
+    const Eigen::Isometry3d pose = pose_of(ref);
+    if (have_kf_ && segment == last_kf_segment_ && (pose.translation() - last_kf_position_).norm() < keyframe_distance_m_) {
+      camera_.pop();
+      continue;
+    }
+    KeyframeMsg& kf = *kf_;
+    kf.stamp = img->stamp;
+    kf.id = next_id_;
+    kf.segment = segment;
+    kf.body_pose = to_pose3(pose);
+    kf.labels = img->labels;
+    std::memcpy(kf.rgb.data(), img->rgb.data(), kf.rgb.size());
+    std::memcpy(kf.cls.data(), img->cls.data(), kf.cls.size());
+    kf.published = clock_->now();
+    camera_.pop();
+    if (keyframes_out_.push(kf) != 0) {  // the mapper is behind: skip this one, the next frame will do
+      ++c_.frames_dropped_busy;
+      continue;
+    }
+    keyframe_refs_.push_back(ref);
+    ++next_id_;
+    ++c_.frames_keyframed;
+    have_kf_ = true;
+    last_kf_segment_ = segment;
+    last_kf_position_ = pose.translation();
+  }
+  if (solved) publish_poses(now);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// ortho_map
+
+Status OrthoMapStage::init(StageContext& ctx) {
+  const SectionView v = ctx.params();
+  StereoParams sp;
+  sp.min_disparity = static_cast<int>(v.integer("min_disparity"));
+  sp.num_disparities = static_cast<int>(v.integer("num_disparities"));
+  sp.block_size = static_cast<int>(v.integer("block_size"));
+  sp.prefilter_cap = static_cast<int>(v.integer("prefilter_cap"));
+  sp.texture_threshold = static_cast<int>(v.integer("texture_threshold"));
+  sp.uniqueness_ratio = static_cast<int>(v.integer("uniqueness_ratio"));
+  sp.speckle_window = static_cast<int>(v.integer("speckle_window"));
+  sp.speckle_range = static_cast<int>(v.integer("speckle_range"));
+  sp.border_dilate_px = static_cast<int>(v.integer("border_dilate_px"));
+  sp.min_depth_m = v.real("min_depth_m");
+  sp.max_depth_m = v.real("max_depth_m");
+  sp.min_baseline_m = v.real("min_baseline_m");
+  if (sp.num_disparities % 16 != 0)
+    return Error::make(ErrorCode::kConfig, "config error: ortho_map.num_disparities must be a multiple of 16");
+  if (sp.block_size % 2 == 0) return Error::make(ErrorCode::kConfig, "config error: ortho_map.block_size must be odd");
+  OrthoMapParams mp;
+  mp.resolution_m = v.real("resolution_m");
+  mp.tile_cells = static_cast<int>(v.integer("tile_cells"));
+  mp.elevation_gate_m = v.real("elevation_gate_m");
+  mp.min_points = static_cast<int>(v.integer("min_points"));
+  mp.window_keyframes = static_cast<int>(v.integer("window_keyframes"));
+  mp.rebuild_translation_m = v.real("rebuild_translation_m");
+  mp.rebuild_rotation_rad = v.real("rebuild_rotation_rad");
+  mp.max_tiles = static_cast<std::size_t>(v.integer("max_tiles"));
+  const PinholeCamera cam = load_camera_calibration(ctx.config);
+  stereo_ = std::make_unique<DenseStereo>(cam, sp);
+  map_ = std::make_unique<OrthoMap>(mp);
+  clock_ = &ctx.clock;
+  body_from_camera_ = nadir_body_from_camera();
+
+  auto kf = ctx.channels.ring_reader<KeyframeMsg, kKeyframeRing>("keyframes");
+  if (!kf) return kf.error();
+  keyframes_ = kf.value();
+  auto poses = ctx.channels.latest_reader<KeyframePosesMsg>("keyframe_poses");
+  if (!poses) return poses.error();
+  poses_ = poses.value();
+  auto st = ctx.channels.latest_writer<MapStatusMsg>("map_status");
+  if (!st) return st.error();
+  status_out_ = st.value();
+  prev_ = std::make_unique<KeyframeMsg>();
+  points_.reserve(kImagePixels);
+  corrections_.reserve(KeyframePosesMsg::kCapacity);
+  return ok_status();
+}
+
+Eigen::Isometry3d OrthoMapStage::camera_pose(const Pose3& body) const noexcept {
+  Eigen::Isometry3d t = to_isometry(body);
+  t.linear() = t.linear() * body_from_camera_;
+  return t;
+}
+
+void OrthoMapStage::step(TimeNs now) noexcept {
+  const bool fresh = poses_.fresh();
+  const KeyframePosesMsg& latest = poses_.read();
+  if (fresh) {
+    corrections_.clear();
+    for (std::uint32_t i = 0; i < latest.count; ++i) {
+      const std::uint32_t id = latest.first_id + i;
+      if (map_->keyframe_pose(id) != nullptr) corrections_.emplace_back(id, camera_pose(latest.poses[i]));
+    }
+    map_->correct(corrections_);
+    initialised_ = latest.initialised;
+    scale_ = latest.scale;
+  }
+  auto newest_pose = [&](const KeyframeMsg& k) {
+    if (latest.count != 0 && k.id >= latest.first_id && k.id < latest.first_id + latest.count)
+      return camera_pose(latest.poses[k.id - latest.first_id]);
+    return camera_pose(k.body_pose);
+  };
+  if (const KeyframeMsg* kf = keyframes_.front()) {
+    ++c_.keyframes_in;
+    const Eigen::Isometry3d cur = newest_pose(*kf);
+    const Eigen::Isometry3d* binned = have_prev_ ? map_->keyframe_pose(prev_->id) : nullptr;
+    const Eigen::Isometry3d prev = binned != nullptr ? *binned : newest_pose(*prev_);
+    // A pair whose baseline runs along the optical axis (climbing, descending) has its epipole in the
+    // image: rectification would be degenerate, so it is not matched (counted).
+    const Eigen::Vector3d base = cur.translation() - prev.translation();
+    const double along_axis = std::fabs(base.dot(cur.linear().col(2))) / std::max(base.norm(), 1e-9);
+    if (have_prev_ && prev_->segment == kf->segment && along_axis > max_baseline_axis_cos_) {
+      ++c_.pairs_refused;
+    } else if (have_prev_ && prev_->segment == kf->segment) {
+      const TimeNs t0 = thread_cpu_now();
+      auto r = stereo_->compute(StereoImage{prev_->rgb.data(), prev_->cls.data(), prev},
+                                StereoImage{kf->rgb.data(), kf->cls.data(), cur}, points_);
+      c_.last_stereo_ms = cpu_ms_since(t0);
+      if (r) {
+        const TimeNs t1 = thread_cpu_now();
+        map_->add_keyframe(kf->id, cur, points_);
+        c_.last_bin_ms = cpu_ms_since(t1);
+        ++c_.pairs_matched;
+      } else {
+        ++c_.pairs_refused;
+      }
+    } else {
+      ++c_.segment_starts;
+    }
+    std::memcpy(prev_.get(), kf, sizeof(KeyframeMsg));
+    have_prev_ = true;
+    keyframes_.pop();
+  }
+  status_.stamp = now;
+  status_.version = map_->version();
+  status_.keyframes = static_cast<std::uint32_t>(map_->stats().keyframes);
+  status_.tiles = static_cast<std::uint32_t>(map_->tile_count());
+  status_.tiles_rebuilt = static_cast<std::uint32_t>(map_->stats().tiles_rebuilt);
+  status_.initialised = initialised_;
+  status_.scale = scale_;
+  status_.published = clock_->now();
+  status_out_.publish(status_);
+}
+
+}  // namespace ag::mapping

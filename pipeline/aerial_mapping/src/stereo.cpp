@@ -1,0 +1,208 @@
+// DenseStereo: rectify (stereo_rectify.cpp), block-match (stereo_block_match.cpp), mask the black
+// borders, project the disparities to coloured, classified map points.
+#include "airground/aerial_mapping/stereo.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+
+#include "stereo_internal.hpp"
+
+namespace ag::mapping {
+namespace {
+
+std::size_t sz(int v) noexcept { return static_cast<std::size_t>(v); }
+
+double ms_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// OpenCV's fixed-point RGB -> grey (0.299 R + 0.587 G + 0.114 B).
+void to_grey(const std::uint8_t* rgb, std::size_t n, std::uint8_t* grey) {
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint32_t r = rgb[3 * i], g = rgb[3 * i + 1], b = rgb[3 * i + 2];
+    grey[i] = static_cast<std::uint8_t>((r * 4899u + g * 9617u + b * 1868u + (1u << 13)) >> 14);
+  }
+}
+
+int checked_camera_size(const PinholeCamera& c) {
+  if (c.width < 2 || c.height < 2 || !(c.fx > 0.0) || !(c.fy > 0.0))
+    throw std::invalid_argument("DenseStereo: camera needs a size of at least 2x2 px and positive focal lengths");
+  return c.width;
+}
+
+}  // namespace
+
+struct DenseStereo::Impl {
+  Impl(const PinholeCamera& c, const StereoParams& p)
+      : camera(c),
+        params(p),
+        max_r2((checked_camera_size(c), detail::max_undistorted_r2(c))),
+        // Any in-plane rotation of the undistorted image (+10% for tilt) plus the matcher's margins.
+        content(static_cast<int>(std::ceil(2.2 * c.fx * std::sqrt(max_r2)))),
+        max_width(content + p.min_disparity + p.num_disparities + 2 * (p.block_size / 2) + 2),
+        max_height(content + 2 * (p.block_size / 2) + 2),
+        matcher(p, max_width, max_height) {
+    if (p.border_dilate_px < 0 || !(p.min_depth_m >= 0.0) || !(p.max_depth_m > p.min_depth_m) || !(p.min_baseline_m >= 0.0))
+      throw std::invalid_argument("StereoParams: border_dilate_px >= 0, 0 <= min_depth_m < max_depth_m, min_baseline_m >= 0");
+    const std::size_t src = sz(c.width) * sz(c.height), cap = sz(max_width) * sz(max_height);
+    grey_ref.assign(src, 0);
+    grey_other.assign(src, 0);
+    for (auto* v : {&rect_ref, &rect_other, &invalid_ref, &invalid_other, &valid_ref, &valid_other, &tmp}) v->reserve(cap);
+    map_ref.reserve(2 * cap);
+    map_other.reserve(2 * cap);
+    raw.reserve(cap);
+    disp.reserve(cap);
+    last.assign(sz(max_width), 0);
+  }
+
+  PinholeCamera camera;
+  StereoParams params;
+  double max_r2;
+  int content, max_width, max_height;
+  detail::BlockMatcher matcher;
+  RectifiedGeometry geometry;
+  StereoStats stats;
+  std::vector<std::uint8_t> grey_ref, grey_other;
+  std::vector<std::uint8_t> rect_ref, rect_other, invalid_ref, invalid_other, valid_ref, valid_other, tmp;
+  std::vector<float> map_ref, map_other;
+  std::vector<std::int16_t> raw, disp;
+  std::vector<int> last;
+};
+
+DenseStereo::DenseStereo(const PinholeCamera& camera, const StereoParams& params)
+    : impl_(std::make_unique<Impl>(camera, params)) {}
+DenseStereo::~DenseStereo() = default;
+
+Result<std::size_t> DenseStereo::compute(const StereoImage& prev, const StereoImage& cur, std::vector<MapPoint>& out,
+                                         StereoTiming* timing) {
+  Impl& m = *impl_;
+  const StereoParams& p = m.params;
+  out.clear();
+  ++m.stats.pairs;  // every pair offered, refused ones included
+  m.stats.valid_disparities = 0;
+  if (prev.rgb == nullptr || cur.rgb == nullptr || cur.cls == nullptr) {
+    ++m.stats.refused;
+    return Error::make(ErrorCode::kInvalidArgument, "stereo pair: missing image data");
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  const double baseline = (prev.map_from_camera.translation() - cur.map_from_camera.translation()).norm();
+  if (!(baseline >= p.min_baseline_m)) {
+    ++m.stats.refused;
+    return Error::make(ErrorCode::kInvalidArgument, "stereo pair refused: baseline " + std::to_string(baseline) +
+                                                        " m is below min_baseline_m " + std::to_string(p.min_baseline_m));
+  }
+  auto plan = detail::plan_rectification(m.camera, p, m.max_width, m.max_height, cur.map_from_camera, prev.map_from_camera);
+  if (!plan.ok()) {
+    ++m.stats.refused;
+    return plan.error();
+  }
+  m.geometry = plan.value();
+  const RectifiedGeometry& g = m.geometry;
+  const int w = g.width, h = g.height;
+  const std::size_t n = sz(w) * sz(h);
+
+  // 1. Rectify.
+  const std::size_t src = sz(m.camera.width) * sz(m.camera.height);
+  to_grey(cur.rgb, src, m.grey_ref.data());
+  to_grey(prev.rgb, src, m.grey_other.data());
+  for (auto* v : {&m.rect_ref, &m.rect_other, &m.invalid_ref, &m.invalid_other, &m.valid_ref, &m.valid_other, &m.tmp}) v->resize(n);
+  m.map_ref.resize(2 * n);
+  m.map_other.resize(2 * n);
+  m.raw.resize(n);
+  m.disp.resize(n);
+  detail::build_rectified(m.camera, g, g.rect_from_reference, m.max_r2, m.grey_ref.data(), m.map_ref.data(),
+                          m.rect_ref.data(), m.invalid_ref.data());
+  detail::build_rectified(m.camera, g, g.rect_from_other, m.max_r2, m.grey_other.data(), m.map_other.data(),
+                          m.rect_other.data(), m.invalid_other.data());
+  detail::dilate_invalid(m.invalid_ref.data(), w, h, p.border_dilate_px, m.valid_ref.data(), m.tmp.data(), m.last.data());
+  detail::dilate_invalid(m.invalid_other.data(), w, h, p.border_dilate_px, m.valid_other.data(), m.tmp.data(), m.last.data());
+  const auto t1 = std::chrono::steady_clock::now();
+
+  // 2. Match, then drop disparities on or near the black border of either image (the other image is
+  //    checked at the matched column).
+  m.matcher.compute(m.rect_ref.data(), m.rect_other.data(), w, h, m.raw.data());
+  const std::int16_t filtered = m.matcher.filtered_value();
+  std::uint64_t valid = 0;
+  for (int y = 0; y < h; ++y) {
+    const std::size_t row = sz(y) * sz(w);
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = row + sz(x);
+      const std::int16_t d = m.raw[i];
+      bool ok = d != filtered && d > 0 && m.valid_ref[i] != 0;
+      if (ok) {
+        const int xo = x - (d + 8) / 16;
+        ok = xo >= 0 && m.valid_other[row + sz(xo)] != 0;
+      }
+      m.disp[i] = ok ? d : std::int16_t{-1};
+      valid += ok ? 1u : 0u;
+    }
+  }
+  m.stats.valid_disparities = valid;
+  const auto t2 = std::chrono::steady_clock::now();
+
+  // 3. Project.
+  const Eigen::Matrix3d map_r = g.map_from_rect.linear();
+  const Eigen::Vector3d map_t = g.map_from_rect.translation();
+  const Eigen::Matrix3d cam_from_rect = g.rect_from_reference.transpose();
+  const double fb16 = g.f * g.baseline_m * 16.0;
+  const int cw = m.camera.width, ch = m.camera.height;
+  const std::size_t sw = sz(cw);
+  for (int y = 0; y < h; ++y) {
+    const std::size_t row = sz(y) * sz(w);
+    const double yn = (y - g.cy) / g.f;
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = row + sz(x);
+      const std::int16_t d = m.disp[i];
+      if (d <= 0) continue;
+      const double z = fb16 / d;
+      if (z < p.min_depth_m || z > p.max_depth_m) continue;
+      const Eigen::Vector3d xr((x - g.cx) / g.f * z, yn * z, z);
+      const Eigen::Vector3d xm = map_r * xr + map_t;
+      const Eigen::Vector3d xc = cam_from_rect * xr;
+      const float sx = m.map_ref[2 * i], sy = m.map_ref[2 * i + 1];
+      const int x0 = std::min(static_cast<int>(sx), cw - 2), y0 = std::min(static_cast<int>(sy), ch - 2);
+      const float ax = sx - static_cast<float>(x0), ay = sy - static_cast<float>(y0);
+      const std::uint8_t* q = cur.rgb + 3 * (sz(y0) * sw + sz(x0));
+      const std::size_t down = 3 * sw;
+      std::uint8_t rgb[3];
+      for (std::size_t c = 0; c < 3; ++c) {
+        const float top = static_cast<float>(q[c]) + ax * static_cast<float>(q[c + 3] - q[c]);
+        const float bot = static_cast<float>(q[down + c]) + ax * static_cast<float>(q[down + c + 3] - q[down + c]);
+        rgb[c] = static_cast<std::uint8_t>(top + ay * (bot - top) + 0.5f);
+      }
+      const int nx = static_cast<int>(sx + 0.5f), ny = static_cast<int>(sy + 0.5f);
+      MapPoint pt{};
+      pt.x = static_cast<float>(xm.x());
+      pt.y = static_cast<float>(xm.y());
+      pt.z = static_cast<float>(xm.z());
+      pt.r = rgb[0];
+      pt.g = rgb[1];
+      pt.b = rgb[2];
+      pt.cls = cur.cls[sz(ny) * sw + sz(nx)];
+      pt.cos_axis = static_cast<float>(xc.z() / xc.norm());
+      out.push_back(pt);
+    }
+  }
+  if (timing != nullptr) {
+    timing->rectify_ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
+    timing->match_ms = std::chrono::duration<double, std::milli>(t2 - t1).count();
+    timing->project_ms = ms_since(t2);
+  }
+  return out.size();
+}
+
+const std::vector<std::uint8_t>& DenseStereo::rectified_reference() const noexcept { return impl_->rect_ref; }
+const std::vector<std::uint8_t>& DenseStereo::rectified_other() const noexcept { return impl_->rect_other; }
+const std::vector<std::int16_t>& DenseStereo::disparity() const noexcept { return impl_->disp; }
+const std::vector<std::int16_t>& DenseStereo::raw_disparity() const noexcept { return impl_->raw; }
+const std::vector<std::uint8_t>& DenseStereo::valid_mask() const noexcept { return impl_->valid_ref; }
+const std::vector<float>& DenseStereo::map_reference() const noexcept { return impl_->map_ref; }
+const std::vector<float>& DenseStereo::map_other() const noexcept { return impl_->map_other; }
+const RectifiedGeometry& DenseStereo::rectified() const noexcept { return impl_->geometry; }
+const StereoStats& DenseStereo::stats() const noexcept { return impl_->stats; }
+const PinholeCamera& DenseStereo::camera() const noexcept { return impl_->camera; }
+const StereoParams& DenseStereo::params() const noexcept { return impl_->params; }
+
+}  // namespace ag::mapping

@@ -1,0 +1,235 @@
+// The mapping evaluation: a survey flight through the lockstep runner, the map scored against the world.
+#include "airground/sim/eval_mapping.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "airground/aerial_mapping/stages.hpp"
+#include "airground/core/classes.hpp"
+#include "airground/platform/role_instance.hpp"
+#include "airground/sim/map_export.hpp"
+
+namespace ag::sim {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+bool ground_class(std::uint8_t c) noexcept {
+  return c == raw(ClassId::kRoad) || c == raw(ClassId::kDirt) || c == raw(ClassId::kGrass) || c == raw(ClassId::kWater);
+}
+
+double resident_mb() {
+  std::ifstream f("/proc/self/statm");
+  long pages = 0, rss = 0;
+  f >> pages >> rss;
+  return static_cast<double>(rss) * 4096.0 / (1024.0 * 1024.0);
+}
+
+Pose3 truth_at(const std::vector<TruthSample>& truth, TimeNs t) {
+  const auto it = std::lower_bound(truth.begin(), truth.end(), t, [](const TruthSample& s, TimeNs v) { return s.t < v; });
+  if (it == truth.end()) return truth.back().pose;
+  if (it == truth.begin() || it->t == t) return it->pose;
+  const TruthSample& b = *it;
+  const TruthSample& a = *(it - 1);
+  const double w = static_cast<double>(t - a.t) / static_cast<double>(b.t - a.t);
+  Pose3 p = a.pose;
+  p.x += w * (b.pose.x - a.pose.x);
+  p.y += w * (b.pose.y - a.pose.y);
+  p.z += w * (b.pose.z - a.pose.z);
+  return p;
+}
+
+// Writes model overrides (the caller's, plus the evaluation's fault injection) into out/models.
+Result<std::string> model_dir(const EvalMappingOptions& o) {
+  const fs::path dir = fs::path(o.out_dir) / "models";
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec) return Error::make(ErrorCode::kIo, "cannot create " + dir.string() + ": " + ec.message());
+  if (!o.config_dir.empty()) {
+    for (const auto& e : fs::directory_iterator(o.config_dir, ec))
+      if (e.path().extension() == ".yaml") fs::copy_file(e.path(), dir / e.path().filename(), fs::copy_options::overwrite_existing, ec);
+  }
+  auto append = [&](const char* file, const std::string& body) {
+    const fs::path p = dir / file;
+    std::string existing;
+    if (fs::exists(p)) {
+      std::ifstream in(p);
+      std::ostringstream ss;
+      ss << in.rdbuf();
+      existing = ss.str();
+    }
+    std::ofstream out(p);
+    // A section named after the model holds the keys; overrides of ours win (set last).
+    if (existing.empty()) out << body;
+    else out << existing << "\n" << body;
+  };
+  std::string vo, gps;
+  if (o.vo_scale > 0) vo += "scale_min: " + std::to_string(o.vo_scale) + "\nscale_max: " + std::to_string(o.vo_scale) + "\n";
+  if (o.tracking_loss_at_s >= 0) vo += "forced_loss_at_s: " + std::to_string(o.tracking_loss_at_s) + "\n";
+  if (!o.random_faults) {
+    vo += "tracking_loss_rate_per_s: 0\n";
+    gps += "dropout_rate_per_s: 0\n";
+  }
+  if (o.gps_outlier_at_s >= 0)
+    gps += "outlier_at_s: " + std::to_string(o.gps_outlier_at_s) + "\noutlier_m: " + std::to_string(o.gps_outlier_m) + "\n";
+  if (!vo.empty()) append("visual_odometry.yaml", vo);
+  if (!gps.empty()) append("gps.yaml", gps);
+  return dir.string();
+}
+
+}  // namespace
+
+Result<MappingMetrics> eval_mapping(const EvalMappingOptions& o, const ProgressFn& progress) {
+  auto models = model_dir(o);
+  if (!models) return models.error();
+  RunOptions r;
+  r.world = o.world;
+  r.out_dir = o.out_dir;
+  r.ugvs = 0;
+  r.uav = true;
+  r.seed = o.seed;
+  r.duration_s = o.max_duration_s;
+  r.uav_altitude_m = o.altitude_m;
+  r.uav_speed_mps = o.speed_mps;
+  r.survey_overlap = o.overlap;
+  r.config_dir = models.value();
+  r.record = RecordLevel::kNone;
+  r.keep_uav_truth = true;
+  r.stop_when_survey_done = true;
+  r.progress = !o.quiet;
+
+  MappingMetrics m;
+  mapping::MapRaster raster;
+  Datum datum;
+  r.inspect = [&](const RunInspection& in) -> Status {
+    if (in.uav == nullptr) return Error::make(ErrorCode::kInternal, "no quadrotor in the run");
+    const mapping::PoseGraphStage* pg = nullptr;
+    const mapping::OrthoMapStage* om = nullptr;
+    for (auto& slot : in.uav->stages()) {
+      if (auto* p = dynamic_cast<const mapping::PoseGraphStage*>(slot.stage.get())) pg = p;
+      if (auto* q = dynamic_cast<const mapping::OrthoMapStage*>(slot.stage.get())) om = q;
+      const StagePerfSnapshot s = snapshot(*slot.perf);
+      if (slot.spec->name == "pose_graph") m.pose_graph_p99_ms = to_seconds(s.exec_p99) * 1e3;
+      if (slot.spec->name == "ortho_map") m.ortho_map_p99_ms = to_seconds(s.exec_p99) * 1e3;
+      m.stage_overruns += s.overruns;
+    }
+    if (pg == nullptr || om == nullptr) return Error::make(ErrorCode::kInternal, "the uav role has no mapping stages");
+    const World& w = in.world;
+    datum = w.header.datum;
+    m.resident_mb = resident_mb();
+    const mapping::PoseGraph& graph = pg->graph();
+    m.keyframes = pg->keyframes();
+    m.gps_rejected = graph.stats().gps_rejected_gate;
+    m.vo_segments = in.vo_segments;
+    const mapping::NodeId last = graph.last();
+    if (last != mapping::kNoNode && graph.segment_initialised(graph.segment_of(last)))
+      m.scale_error = std::fabs(graph.scale(graph.segment_of(last)) * in.vo_scale - 1.0);
+    else
+      m.scale_error = 1.0;
+    double se = 0;
+    std::uint64_t n = 0;
+    for (std::uint32_t k = 0; k < pg->keyframes(); ++k) {
+      const Eigen::Isometry3d est = pg->keyframe_pose(k);
+      const Pose3 truth = truth_at(*in.uav_truth, pg->keyframe_stamp(k));
+      se += std::pow(est.translation().x() - truth.x, 2) + std::pow(est.translation().y() - truth.y, 2);
+      ++n;
+    }
+    m.georeg_error_m = n ? std::sqrt(se / static_cast<double>(n)) : 1e9;
+
+    // Score over the surveyed area at the map's resolution.
+    const mapping::OrthoMap& map = om->map();
+    m.tiles = map.tile_count();
+    m.tiles_rebuilt = map.stats().tiles_rebuilt;
+    const double res = map.params().resolution_m;
+    GridGeometry g;
+    g.resolution = res;
+    g.origin_x = std::ceil(in.survey_x0 / res) * res;
+    g.origin_y = std::floor(in.survey_y1 / res) * res;
+    g.width = static_cast<std::int32_t>(std::floor((in.survey_x1 - g.origin_x) / res));
+    g.height = static_cast<std::int32_t>(std::floor((g.origin_y - in.survey_y0) / res));
+    raster = map.raster(g);
+    const GridGeometry& wg = w.grid();
+    const int sub = std::max(1, static_cast<int>(std::lround(res / wg.resolution)));
+    std::uint64_t classified = 0, correct = 0, total = 0, ground_n = 0, all_n = 0;
+    double ground_se = 0, all_se = 0;
+    for (std::int32_t row = 0; row < g.height; ++row)
+      for (std::int32_t col = 0; col < g.width; ++col) {
+        const auto i = static_cast<std::size_t>(row) * static_cast<std::size_t>(g.width) + static_cast<std::size_t>(col);
+        // The world cells inside this map cell.
+        const double x0 = g.origin_x + col * res, y0 = g.origin_y - row * res;
+        const std::int32_t wc0 = wg.col(x0 + 0.25 * wg.resolution), wr0 = wg.row(y0 - 0.25 * wg.resolution);
+        bool any_class[256] = {};
+        bool all_ground = true;
+        double smin = 1e9, smax = -1e9, ssum = 0;
+        int cnt = 0;
+        for (int dr = 0; dr < sub; ++dr)
+          for (int dc = 0; dc < sub; ++dc) {
+            const std::int32_t wc = wc0 + dc, wr = wr0 + dr;
+            if (!wg.contains(wc, wr)) continue;
+            const std::uint8_t c = w.class_id.at<std::uint8_t>(wr, wc);
+            any_class[c] = true;
+            const double s = static_cast<double>(w.surface_at(wc, wr));
+            all_ground = all_ground && ground_class(c) && w.height.at<float>(wr, wc) < 0.3F;
+            smin = std::min(smin, s);
+            smax = std::max(smax, s);
+            ssum += s;
+            ++cnt;
+          }
+        if (cnt == 0) continue;
+        ++total;
+        const std::uint8_t mc = raster.cls[i];
+        if (mc != 255) {
+          ++classified;
+          if (any_class[mc]) ++correct;
+        }
+        const float e = raster.elevation[i];
+        if (!std::isfinite(e)) continue;
+        const double ev = static_cast<double>(e);
+        const double err = ev < smin ? smin - ev : (ev > smax ? ev - smax : 0.0);
+        all_se += err * err;
+        ++all_n;
+        if (all_ground) {
+          const double d = ev - ssum / cnt;
+          ground_se += d * d;
+          ++ground_n;
+        }
+      }
+    m.cells_evaluated = total;
+    m.map_coverage = total ? static_cast<double>(classified) / static_cast<double>(total) : 0.0;
+    m.map_class_accuracy = classified ? static_cast<double>(correct) / static_cast<double>(classified) : 0.0;
+    m.elevation_rmse_ground_m = ground_n ? std::sqrt(ground_se / static_cast<double>(ground_n)) : 1e9;
+    m.elevation_rmse_m = all_n ? std::sqrt(all_se / static_cast<double>(all_n)) : 1e9;
+    return ok_status();
+  };
+  auto run = run_team(r, progress);
+  if (!run) return run.error();
+  m.sim_s = run.value().sim_s;
+  m.wall_s = run.value().wall_s;
+
+  if (auto st = write_map_exports(o.out_dir, raster, datum); !st) return st.error();
+  std::ofstream j(fs::path(o.out_dir) / "metrics.json");
+  j << "{\n  \"map_class_accuracy\": " << m.map_class_accuracy << ",\n  \"map_coverage\": " << m.map_coverage
+    << ",\n  \"elevation_rmse_ground_m\": " << m.elevation_rmse_ground_m << ",\n  \"elevation_rmse_m\": " << m.elevation_rmse_m
+    << ",\n  \"georeg_error_m\": " << m.georeg_error_m << ",\n  \"scale_error\": " << m.scale_error
+    << ",\n  \"keyframes\": " << m.keyframes << ",\n  \"cells_evaluated\": " << m.cells_evaluated << ",\n  \"tiles\": " << m.tiles
+    << ",\n  \"tiles_rebuilt\": " << m.tiles_rebuilt << ",\n  \"gps_rejected\": " << m.gps_rejected
+    << ",\n  \"vo_segments\": " << m.vo_segments << ",\n  \"stage_overruns\": " << m.stage_overruns
+    << ",\n  \"pose_graph_p99_ms\": " << m.pose_graph_p99_ms << ",\n  \"ortho_map_p99_ms\": " << m.ortho_map_p99_ms
+    << ",\n  \"resident_mb\": " << m.resident_mb << ",\n  \"sim_s\": " << m.sim_s << ",\n  \"wall_s\": " << m.wall_s << "\n}\n";
+  std::ofstream md(fs::path(o.out_dir) / "report.md", std::ios::app);
+  md << "\n## Mapping evaluation\n\n| metric | value | goal |\n|---|---|---|\n"
+     << "| map_class_accuracy | " << m.map_class_accuracy << " | >= 0.95 |\n| map_coverage | " << m.map_coverage << " | >= 0.90 |\n"
+     << "| elevation_rmse_ground_m | " << m.elevation_rmse_ground_m << " | <= 0.5 |\n| elevation_rmse_m | " << m.elevation_rmse_m << " | <= 1.5 |\n"
+     << "| georeg_error_m | " << m.georeg_error_m << " | <= 0.5 |\n| scale_error | " << m.scale_error << " | <= 0.01 |\n"
+     << "| keyframes | " << m.keyframes << " | |\n\n![class](map_class.png) ![rgb](map_rgb.png) ![elevation](map_elevation.png)\n\n"
+     << "GeoTIFFs (UTM of the datum): map_class.tif, map_elevation.tif, map_rgb.tif.\n";
+  if (!j || !md) return Error::make(ErrorCode::kIo, "cannot write metrics.json / report.md in " + o.out_dir);
+  return m;
+}
+
+}  // namespace ag::sim

@@ -1,0 +1,49 @@
+// `airground-sim eval mapping`: fly a survey over a world with the simulator's camera, GPS and odometry
+// noise, run the quadrotor's real mapping stages in lockstep, and score the map against the world.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "airground/platform/result.hpp"
+#include "airground/sim/runner.hpp"
+
+namespace ag::sim {
+
+struct EvalMappingOptions {
+  std::string world{"default"};
+  std::uint64_t seed{1};
+  std::string out_dir{"eval-mapping"};
+  double altitude_m{40};
+  double speed_mps{5};
+  double overlap{0.3};            // survey side overlap
+  double max_duration_s{3600};    // the run ends when the survey is flown, or at this
+  std::string config_dir{};       // simulator model overrides (as for `run --config-dir`)
+  double vo_scale{0};             // > 0: the odometry starts with exactly this scale (VO units per metre)
+  double tracking_loss_at_s{-1};  // >= 0: one odometry tracking loss at this time
+  double gps_outlier_at_s{-1};    // >= 0: one GPS fix this long after the start is off by gps_outlier_m
+  double gps_outlier_m{50};
+  bool random_faults{true};       // the models' own random tracking losses and GPS dropouts
+  bool quiet{false};
+};
+
+struct MappingMetrics {
+  double map_class_accuracy{0};     // classified cells whose class is one the world has in that cell
+  double map_coverage{0};           // classified cells / cells of the surveyed area
+  double elevation_rmse_ground_m{0};  // cells wholly on flat ground (road, dirt, grass, water)
+  double elevation_rmse_m{0};       // every mapped cell, against the world's surface range in the cell
+  double georeg_error_m{0};         // RMS horizontal error of the keyframes' optimised positions
+  double scale_error{0};            // |estimated x true odometry scale - 1| at the end
+  std::uint64_t keyframes{0};
+  std::uint64_t cells_evaluated{0};
+  std::uint64_t tiles{0}, tiles_rebuilt{0};
+  std::uint64_t gps_rejected{0}, vo_segments{0}, stage_overruns{0};
+  double sim_s{0}, wall_s{0};
+  double pose_graph_p99_ms{0}, ortho_map_p99_ms{0};  // stage step times, thread CPU
+  double resident_mb{0};            // process resident set at the end
+};
+
+// Runs the evaluation and writes DIR/metrics.json, DIR/report.md, the map PNGs and GeoTIFFs.
+Result<MappingMetrics> eval_mapping(const EvalMappingOptions& options, const ProgressFn& progress = {});
+
+}  // namespace ag::sim

@@ -1,0 +1,466 @@
+// DenseStereo on simulator frames: rectification against cv::stereoRectify/initUndistortRectifyMap and
+// against the epipolar geometry itself, the block matcher against cv::StereoBM, the points against the
+// world's true surface and classes, and the refusals.
+#include <gtest/gtest.h>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <random>
+#include <vector>
+
+#include "airground/aerial_mapping/stereo.hpp"
+#include "airground/core/camera.hpp"
+#include "airground/core/classes.hpp"
+#include "airground/core/pose_math.hpp"
+#include "airground/sim/camera.hpp"
+#include "airground/sim/generator.hpp"
+
+namespace {
+
+using ag::Pose3;
+using ag::mapping::DenseStereo;
+using ag::mapping::MapPoint;
+using ag::mapping::RectifiedGeometry;
+using ag::mapping::StereoImage;
+using ag::mapping::StereoParams;
+
+ag::PinholeCamera pinhole(const ag::sim::CameraModel& m) {
+  ag::PinholeCamera c;
+  c.width = m.width;
+  c.height = m.height;
+  c.fx = m.fx;
+  c.fy = m.fy;
+  c.cx = m.cx;
+  c.cy = m.cy;
+  c.k1 = m.k1;
+  c.k2 = m.k2;
+  c.p1 = m.p1;
+  c.p2 = m.p2;
+  c.k3 = m.k3;
+  return c;
+}
+
+Eigen::Isometry3d camera_pose(const Pose3& body) {
+  Eigen::Isometry3d t = ag::to_isometry(body);
+  t.linear() = t.linear() * ag::nadir_body_from_camera();
+  return t;
+}
+
+// A body pose `ahead` metres along the body x axis of `p`, with a slightly different attitude.
+Pose3 moved(const Pose3& p, double ahead, double side, double droll, double dpitch, double dyaw) {
+  const Eigen::Isometry3d t = ag::to_isometry(p);
+  const Eigen::Vector3d c = t * Eigen::Vector3d(ahead, side, 0.0);
+  return Pose3{c.x(), c.y(), c.z(), p.roll + droll, p.pitch + dpitch, p.yaw + dyaw};
+}
+
+struct Frame {
+  ag::sim::CameraFrame f;
+  Eigen::Isometry3d map_from_camera;
+  [[nodiscard]] StereoImage image() const { return {f.rgb.ptr<std::uint8_t>(), f.cls.ptr<std::uint8_t>(), map_from_camera}; }
+};
+
+struct Scene {
+  const ag::sim::World& world = ag::sim::default_world();
+  ag::sim::CameraModel model = ag::sim::CameraModel{}.scaled(0.5);
+  ag::PinholeCamera camera = pinhole(model);
+  ag::sim::CameraRenderer renderer{world, model};
+  Pose3 cur_body;   // 40 m over the most built-up spot of the world, flying north-east-ish
+  Pose3 prev_body;  // 2 m behind it along body x
+  Frame cur, prev;
+
+  Scene() {
+    // The candidate centre (10 m grid, inside the world) with the most building cells under the footprint.
+    const auto& g = world.grid();
+    double best_x = 0, best_y = 0;
+    int best = -1;
+    for (double x = -150; x <= 150; x += 10) {
+      for (double y = -150; y <= 150; y += 10) {
+        int n = 0;
+        for (double dx = -15; dx <= 15; dx += 1)
+          for (double dy = -15; dy <= 15; dy += 1)
+            n += world.class_at_xy(x + dx, y + dy) == ag::ClassId::kBuilding ? 1 : 0;
+        if (n > best) {
+          best = n;
+          best_x = x;
+          best_y = y;
+        }
+      }
+    }
+    const double ground = static_cast<double>(world.terrain.at<float>(g.row(best_y), g.col(best_x)));
+    cur_body = Pose3{best_x, best_y, ground + 40.0, 0.02, -0.015, 0.6};
+    prev_body = moved(cur_body, -2.0, 0.05, -0.012, 0.02, -0.01);
+    render(cur_body, cur);
+    render(prev_body, prev);
+  }
+  void render(const Pose3& body, Frame& out) const {
+    renderer.render(body, out.f);
+    out.map_from_camera = camera_pose(body);
+  }
+};
+
+Scene& scene() {
+  static Scene s;
+  return s;
+}
+
+StereoParams test_params() { return StereoParams{}; }
+
+// Bilinear sample of an interleaved (x, y) map at a rectified position; false if a corner has no source.
+bool sample_map(const std::vector<float>& map, int width, int height, double x, double y, Eigen::Vector2d& out) {
+  const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
+  if (x0 < 0 || y0 < 0 || x0 + 1 >= width || y0 + 1 >= height) return false;
+  const double ax = x - x0, ay = y - y0;
+  Eigen::Vector2d acc(0, 0);
+  for (int dy = 0; dy < 2; ++dy) {
+    for (int dx = 0; dx < 2; ++dx) {
+      const std::size_t i = 2 * (static_cast<std::size_t>(y0 + dy) * static_cast<std::size_t>(width) + static_cast<std::size_t>(x0 + dx));
+      if (map[i] < 0.0f) return false;
+      const double wgt = (dx == 1 ? ax : 1.0 - ax) * (dy == 1 ? ay : 1.0 - ay);
+      acc += wgt * Eigen::Vector2d(static_cast<double>(map[i]), static_cast<double>(map[i + 1]));
+    }
+  }
+  out = acc;
+  return true;
+}
+
+TEST(StereoSim, CameraMountMatchesTheSimulator) {
+  EXPECT_TRUE(ag::sim::CameraModel::body_from_camera().isApprox(ag::nadir_body_from_camera(), 1e-12));
+  EXPECT_EQ(scene().camera.width, 640);
+  EXPECT_EQ(scene().camera.height, 400);
+}
+
+// 1a. Rotations and remap tables equal OpenCV's. OpenCV rectifies a baseline along the image y axis
+// vertically, ours always horizontally; so OpenCV gets the same cameras turned by 90 degrees about their
+// optical axis (x' = y, y' = -x: the images transposed and mirrored, which the radial-only lens model
+// does not notice), where the baseline is along x', and its maps are turned back.
+TEST(StereoSim, RectificationMatchesOpenCvStereoRectify) {
+  Scene& s = scene();
+  ASSERT_EQ(s.model.p1, 0.0);
+  ASSERT_EQ(s.model.p2, 0.0);
+  DenseStereo stereo(s.camera, test_params());
+  std::vector<MapPoint> pts;
+  auto r = stereo.compute(s.prev.image(), s.cur.image(), pts);
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  const RectifiedGeometry& g = stereo.rectified();
+  std::printf("rectified %dx%d f=%.1f c=(%.1f, %.1f) baseline %.3f m\n", g.width, g.height, g.f, g.cx, g.cy, g.baseline_m);
+  EXPECT_GT(g.width, 400);
+  EXPECT_GT(g.height, 600);
+
+  const Eigen::Matrix3d r_ref = s.cur.map_from_camera.linear(), r_oth = s.prev.map_from_camera.linear();
+  const Eigen::Vector3d c_ref = s.cur.map_from_camera.translation(), c_oth = s.prev.map_from_camera.translation();
+  const Eigen::Matrix3d rel_r = r_oth.transpose() * r_ref;        // X_prev = R X_cur + T
+  const Eigen::Vector3d rel_t = r_oth.transpose() * (c_ref - c_oth);
+  Eigen::Matrix3d q;
+  q << 0, 1, 0, -1, 0, 0, 0, 0, 1;  // turned camera from camera
+  const Eigen::Matrix3d rq = q * rel_r * q.transpose();
+  const Eigen::Vector3d tq = q * rel_t;
+  const double f = s.camera.fx, cx = s.camera.cx, cy = s.camera.cy;
+  const cv::Matx33d k_turned(f, 0, cy, 0, f, cx, 0, 0, 1);  // u' = v, v' = 2 cx - u
+  const cv::Mat dist = (cv::Mat_<double>(1, 5) << s.camera.k1, s.camera.k2, s.camera.p1, s.camera.p2, s.camera.k3);
+  cv::Matx33d cv_r(rq(0, 0), rq(0, 1), rq(0, 2), rq(1, 0), rq(1, 1), rq(1, 2), rq(2, 0), rq(2, 1), rq(2, 2));
+  cv::Vec3d cv_t(tq.x(), tq.y(), tq.z());
+  cv::Mat r1, r2, p1, p2, q4;
+  cv::stereoRectify(k_turned, dist, k_turned, dist, cv::Size(s.camera.height, s.camera.width), cv_r, cv_t, r1, r2, p1, p2,
+                    q4, cv::CALIB_ZERO_DISPARITY, -1);
+  ASSERT_GT(std::abs(p2.at<double>(0, 3)), std::abs(p2.at<double>(1, 3))) << "OpenCV should rectify the turned pair horizontally";
+  Eigen::Matrix3d e_r1, e_r2;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      e_r1(i, j) = r1.at<double>(i, j);
+      e_r2(i, j) = r2.at<double>(i, j);
+    }
+  const double rot_err_ref = (g.rect_from_reference - e_r1 * q).cwiseAbs().maxCoeff();
+  const double rot_err_oth = (g.rect_from_other - e_r2 * q).cwiseAbs().maxCoeff();
+  std::printf("rotation vs stereoRectify: max |diff| ref %.2e other %.2e\n", rot_err_ref, rot_err_oth);
+  EXPECT_LT(rot_err_ref, 1e-9);
+  EXPECT_LT(rot_err_oth, 1e-9);
+
+  const cv::Matx33d p_ours(g.f, 0, g.cx, 0, g.f, g.cy, 0, 0, 1);
+  for (int which = 0; which < 2; ++which) {
+    cv::Mat mx, my;
+    cv::initUndistortRectifyMap(k_turned, dist, which == 0 ? r1 : r2, p_ours, cv::Size(g.width, g.height), CV_32FC1, mx, my);
+    const std::vector<float>& ours = which == 0 ? stereo.map_reference() : stereo.map_other();
+    double max_err = 0;
+    std::size_t compared = 0, missing = 0;
+    for (int y = 0; y < g.height; ++y) {
+      for (int x = 0; x < g.width; ++x) {
+        const double u = 2.0 * cx - static_cast<double>(my.at<float>(y, x)), v = static_cast<double>(mx.at<float>(y, x));
+        const std::size_t i = 2 * (static_cast<std::size_t>(y) * static_cast<std::size_t>(g.width) + static_cast<std::size_t>(x));
+        const bool cv_inside = u >= 0.1 && v >= 0.1 && u <= s.camera.width - 1.1 && v <= s.camera.height - 1.1;
+        if (ours[i] < 0.0f) {
+          missing += cv_inside ? 1u : 0u;
+          continue;
+        }
+        ++compared;
+        max_err = std::max({max_err, std::abs(static_cast<double>(ours[i]) - u), std::abs(static_cast<double>(ours[i + 1]) - v)});
+      }
+    }
+    std::printf("%s map vs initUndistortRectifyMap: %zu px compared, max error %.2e px, %zu inside for OpenCV but not ours\n",
+                which == 0 ? "reference" : "other", compared, max_err, missing);
+    EXPECT_GT(compared, static_cast<std::size_t>(g.width * g.height) / 2);
+    EXPECT_LT(max_err, 0.05);
+    EXPECT_EQ(missing, 0u);
+  }
+}
+
+// 1b. The epipolar property itself: a 3D point seen by both cameras lands on the same rectified row of
+// both images, at disparity f * B / z, and our remap tables send those rectified positions to where the
+// point is in each distorted original.
+TEST(StereoSim, RectifiedCorrespondencesShareRowsAndDisparity) {
+  Scene& s = scene();
+  DenseStereo stereo(s.camera, test_params());
+  std::vector<MapPoint> pts;
+  ASSERT_TRUE(stereo.compute(s.prev.image(), s.cur.image(), pts).ok());
+  const RectifiedGeometry& g = stereo.rectified();
+  const ag::PinholeCamera& cam = s.camera;
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> du(0, cam.width - 1), dv(0, cam.height - 1);
+  double max_row = 0, max_disp = 0, max_map = 0;
+  int n = 0;
+  for (int trial = 0; trial < 20000 && n < 2000; ++trial) {
+    const int u = du(rng), v = dv(rng);
+    const double z = static_cast<double>(s.cur.f.depth.at<float>(v, u));
+    if (z <= 0) continue;
+    const Eigen::Vector2d nrm = cam.undistort_pixel(u, v);
+    const Eigen::Vector3d x_cur(nrm.x() * z, nrm.y() * z, z);
+    const Eigen::Vector3d x_map = s.cur.map_from_camera * x_cur;
+    const Eigen::Vector3d x_prev = s.prev.map_from_camera.inverse() * x_map;
+    if (x_prev.z() <= 0) continue;
+    const Eigen::Vector2d pix_prev = cam.distort_to_pixel(x_prev.x() / x_prev.z(), x_prev.y() / x_prev.z());
+    if (pix_prev.x() < 1 || pix_prev.y() < 1 || pix_prev.x() > cam.width - 2 || pix_prev.y() > cam.height - 2) continue;
+    const Eigen::Vector3d ra = g.rect_from_reference * x_cur, rb = g.rect_from_other * x_prev;
+    const Eigen::Vector2d a(g.f * ra.x() / ra.z() + g.cx, g.f * ra.y() / ra.z() + g.cy);
+    const Eigen::Vector2d b(g.f * rb.x() / rb.z() + g.cx, g.f * rb.y() / rb.z() + g.cy);
+    max_row = std::max(max_row, std::abs(a.y() - b.y()));
+    max_disp = std::max(max_disp, std::abs((a.x() - b.x()) - g.f * g.baseline_m / ra.z()));
+    EXPECT_GT(a.x() - b.x(), 0.0) << "disparity must be positive";
+    Eigen::Vector2d ma, mb;
+    if (sample_map(stereo.map_reference(), g.width, g.height, a.x(), a.y(), ma) &&
+        sample_map(stereo.map_other(), g.width, g.height, b.x(), b.y(), mb)) {
+      max_map = std::max({max_map, (ma - Eigen::Vector2d(u, v)).norm(), (mb - pix_prev).norm()});
+      ++n;
+    }
+  }
+  std::printf("%d correspondences: max row difference %.2e px, max |disparity - fB/z| %.2e px, max map error %.3f px\n", n,
+              max_row, max_disp, max_map);
+  EXPECT_GT(n, 1000);
+  EXPECT_LT(max_row, 0.05);
+  EXPECT_LT(max_disp, 0.05);
+  // Bilinear interpolation of a smooth map between pixel centres: well under the 0.05 px budget.
+  EXPECT_LT(max_map, 0.05);
+}
+
+// 2. Our block matcher against cv::StereoBM on our rectified pair with the same parameters.
+TEST(StereoSim, BlockMatcherMatchesOpenCvStereoBM) {
+  Scene& s = scene();
+  const StereoParams p = test_params();
+  DenseStereo stereo(s.camera, p);
+  std::vector<MapPoint> pts;
+  ag::mapping::StereoTiming t;
+  ASSERT_TRUE(stereo.compute(s.prev.image(), s.cur.image(), pts, &t).ok());
+  std::printf("timing: rectify %.1f ms, match %.1f ms, project %.1f ms, %zu points\n", t.rectify_ms, t.match_ms, t.project_ms,
+              pts.size());
+  const RectifiedGeometry& g = stereo.rectified();
+  const cv::Mat left(g.height, g.width, CV_8UC1, const_cast<std::uint8_t*>(stereo.rectified_reference().data()));
+  const cv::Mat right(g.height, g.width, CV_8UC1, const_cast<std::uint8_t*>(stereo.rectified_other().data()));
+  auto bm = cv::StereoBM::create(p.num_disparities, p.block_size);
+  bm->setMinDisparity(p.min_disparity);
+  bm->setPreFilterType(cv::StereoBM::PREFILTER_XSOBEL);
+  bm->setPreFilterCap(p.prefilter_cap);
+  bm->setTextureThreshold(p.texture_threshold);
+  bm->setUniquenessRatio(p.uniqueness_ratio);
+  bm->setSpeckleWindowSize(p.speckle_window);
+  bm->setSpeckleRange(16 * p.speckle_range);  // StereoBM's speckle range is in 1/16 px
+  cv::Mat cv_disp;
+  bm->compute(left, right, cv_disp);
+  ASSERT_EQ(cv_disp.type(), CV_16SC1);
+  const std::int16_t filtered = static_cast<std::int16_t>((p.min_disparity - 1) * 16);
+
+  // Raw output (before our border mask) against StereoBM's.
+  const auto& raw = stereo.raw_disparity();
+  std::size_t ours_valid = 0, cv_valid = 0, both = 0, agree = 0, identical = 0;
+  for (int y = 0; y < g.height; ++y) {
+    for (int x = 0; x < g.width; ++x) {
+      const std::int16_t a = raw[static_cast<std::size_t>(y) * static_cast<std::size_t>(g.width) + static_cast<std::size_t>(x)];
+      const std::int16_t b = cv_disp.at<std::int16_t>(y, x);
+      const bool va = a != filtered, vb = b != filtered;
+      ours_valid += va ? 1u : 0u;
+      cv_valid += vb ? 1u : 0u;
+      identical += a == b ? 1u : 0u;
+      if (va && vb) {
+        ++both;
+        agree += std::abs(a - b) <= 16 ? 1u : 0u;
+      }
+    }
+  }
+  std::printf("raw: ours %zu valid, OpenCV %zu valid, %zu both, %.4f%% of those within 1 px, %.4f%% of all pixels identical\n",
+              ours_valid, cv_valid, both, 100.0 * static_cast<double>(agree) / static_cast<double>(std::max<std::size_t>(both, 1)),
+              100.0 * static_cast<double>(identical) / static_cast<double>(g.width * g.height));
+  EXPECT_GT(ours_valid, static_cast<std::size_t>(g.width * g.height) / 3);
+  EXPECT_GE(static_cast<double>(agree), 0.95 * static_cast<double>(both));
+  EXPECT_LE(std::abs(static_cast<double>(ours_valid) - static_cast<double>(cv_valid)), 0.10 * static_cast<double>(cv_valid));
+
+  // Masked output: OpenCV's disparities under the same border masks.
+  const auto& disp = stereo.disparity();
+  const auto& mask = stereo.valid_mask();
+  // The other image's border mask, from its remap table, dilated by OpenCV.
+  cv::Mat invalid_other(g.height, g.width, CV_8UC1);
+  for (int y = 0; y < g.height; ++y)
+    for (int x = 0; x < g.width; ++x)
+      invalid_other.at<std::uint8_t>(y, x) =
+          stereo.map_other()[2 * (static_cast<std::size_t>(y) * static_cast<std::size_t>(g.width) + static_cast<std::size_t>(x))] < 0.0f ? 1 : 0;
+  cv::dilate(invalid_other, invalid_other, cv::Mat::ones(2 * p.border_dilate_px + 1, 2 * p.border_dilate_px + 1, CV_8UC1),
+             cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
+  std::size_t m_ours = 0, m_cv = 0, m_both = 0, m_agree = 0;
+  for (int y = 0; y < g.height; ++y) {
+    for (int x = 0; x < g.width; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(g.width) + static_cast<std::size_t>(x);
+      const std::int16_t b = cv_disp.at<std::int16_t>(y, x);
+      const bool va = disp[i] >= 0;
+      bool vb = b != filtered && b > 0 && mask[i] != 0;
+      // The other image's border is checked at the matched column.
+      if (vb) {
+        const int xo = x - (b + 8) / 16;
+        vb = xo >= 0 && invalid_other.at<std::uint8_t>(y, xo) == 0;
+      }
+      m_ours += va ? 1u : 0u;
+      m_cv += vb ? 1u : 0u;
+      if (va && vb) {
+        ++m_both;
+        m_agree += std::abs(disp[i] - b) <= 16 ? 1u : 0u;
+      }
+    }
+  }
+  std::printf("masked: ours %zu valid, OpenCV %zu, %zu both, %.3f%% within 1 px\n", m_ours, m_cv, m_both,
+              100.0 * static_cast<double>(m_agree) / static_cast<double>(std::max<std::size_t>(m_both, 1)));
+  EXPECT_GE(static_cast<double>(m_agree), 0.95 * static_cast<double>(m_both));
+  EXPECT_LE(std::abs(static_cast<double>(m_ours) - static_cast<double>(m_cv)), 0.10 * static_cast<double>(m_cv));
+  EXPECT_EQ(stereo.stats().valid_disparities, m_ours);
+}
+
+// 3. The points against the world: heights on open ground, coverage of the overlap, classes.
+TEST(StereoSim, PointsMatchTheWorld) {
+  Scene& s = scene();
+  const StereoParams p = test_params();
+  DenseStereo stereo(s.camera, p);
+  std::vector<MapPoint> pts;
+  auto r = stereo.compute(s.prev.image(), s.cur.image(), pts);
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  ASSERT_EQ(r.value(), pts.size());
+  const ag::sim::World& w = s.world;
+  const auto& grid = w.grid();
+
+  // Heights: points over open ground (no object within 0.5 m) against the terrain.
+  std::vector<double> ground_err, all_err;
+  std::size_t cls_ok = 0, cls_n = 0;
+  for (const MapPoint& pt : pts) {
+    const int c = grid.col(static_cast<double>(pt.x)), rr = grid.row(static_cast<double>(pt.y));
+    if (!grid.contains(c - 2, rr - 2) || !grid.contains(c + 2, rr + 2)) continue;
+    bool open = true;
+    for (int dr = -2; dr <= 2 && open; ++dr)
+      for (int dc = -2; dc <= 2 && open; ++dc) open = w.height.at<float>(rr + dr, c + dc) == 0.0f;
+    const double err = static_cast<double>(pt.z - w.surface_at(c, rr));
+    all_err.push_back(std::abs(err));
+    if (open) ground_err.push_back(std::abs(err));
+    EXPECT_GT(pt.cos_axis, 0.75f);
+    EXPECT_LE(pt.cos_axis, 1.0f);
+    if (pt.cls != ag::raw(ag::ClassId::kUnknown)) {
+      ++cls_n;
+      cls_ok += pt.cls == ag::raw(w.class_at(c, rr)) ? 1u : 0u;
+    }
+  }
+  const auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+    return v[v.size() / 2];
+  };
+  ASSERT_GT(ground_err.size(), 10000u);
+  const double med_ground = median(ground_err), med_all = median(all_err);
+  std::printf("%zu points, %zu on open ground: median |z error| ground %.3f m, all %.3f m; class agreement %.2f%%\n", pts.size(),
+              ground_err.size(), med_ground, med_all, 100.0 * static_cast<double>(cls_ok) / static_cast<double>(cls_n));
+  EXPECT_LE(med_ground, 0.3);
+  EXPECT_GE(static_cast<double>(cls_ok), 0.95 * static_cast<double>(cls_n));
+
+  // Coverage: rectified reference pixels whose true surface point (render depth) is inside the other
+  // image, and how many of them gave a point.
+  const RectifiedGeometry& g = stereo.rectified();
+  const ag::PinholeCamera& cam = s.camera;
+  const auto& map = stereo.map_reference();
+  const auto& disp = stereo.disparity();
+  const Eigen::Isometry3d prev_from_cur = s.prev.map_from_camera.inverse() * s.cur.map_from_camera;
+  std::size_t overlap = 0, covered = 0;
+  for (int y = 0; y < g.height; ++y) {
+    for (int x = 0; x < g.width; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(g.width) + static_cast<std::size_t>(x);
+      const double su = static_cast<double>(map[2 * i]), sv = static_cast<double>(map[2 * i + 1]);
+      if (su < 0) continue;
+      const double z = static_cast<double>(s.cur.f.depth.at<float>(static_cast<int>(sv + 0.5), static_cast<int>(su + 0.5)));
+      if (z <= 0) continue;
+      const Eigen::Vector2d nrm = cam.undistort_pixel(su, sv);
+      const Eigen::Vector3d xp = prev_from_cur * Eigen::Vector3d(nrm.x() * z, nrm.y() * z, z);
+      if (xp.z() <= 0) continue;
+      const Eigen::Vector2d q = cam.distort_to_pixel(xp.x() / xp.z(), xp.y() / xp.z());
+      if (q.x() < 0 || q.y() < 0 || q.x() > cam.width - 1 || q.y() > cam.height - 1) continue;
+      ++overlap;
+      if (disp[i] > 0) {
+        const double zd = g.f * g.baseline_m * 16.0 / disp[i];
+        covered += zd >= p.min_depth_m && zd <= p.max_depth_m ? 1u : 0u;
+      }
+    }
+  }
+  std::printf("overlap %zu rectified px, %zu with a point (%.1f%%)\n", overlap, covered,
+              100.0 * static_cast<double>(covered) / static_cast<double>(overlap));
+  EXPECT_GE(static_cast<double>(covered), 0.60 * static_cast<double>(overlap));
+}
+
+// 4. Refusals, and no reallocation between pairs.
+TEST(StereoSim, RefusesShortBaselinesAndNonOverlappingPairs) {
+  Scene& s = scene();
+  DenseStereo stereo(s.camera, test_params());
+  std::vector<MapPoint> pts;
+
+  Frame near;
+  s.render(moved(s.cur_body, -0.3, 0.0, 0.0, 0.0, 0.0), near);
+  auto r = stereo.compute(near.image(), s.cur.image(), pts);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().message.find("baseline"), std::string::npos) << r.error().message;
+  EXPECT_EQ(stereo.stats().refused, 1u);
+  EXPECT_TRUE(pts.empty());
+
+  Frame far;
+  s.render(moved(s.cur_body, -60.0, 0.0, 0.0, 0.0, 0.0), far);
+  r = stereo.compute(far.image(), s.cur.image(), pts);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().message.find("overlap"), std::string::npos) << r.error().message;
+  EXPECT_EQ(stereo.stats().refused, 2u);
+
+  // A camera turned to look along the baseline cannot be rectified.
+  Frame turned = s.prev;
+  turned.map_from_camera.linear() = s.prev.map_from_camera.linear() *
+                                    Eigen::AngleAxisd(1.5, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  r = stereo.compute(turned.image(), s.cur.image(), pts);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(stereo.stats().refused, 3u);
+
+  // Good pairs go through and reuse the buffers.
+  ASSERT_TRUE(stereo.compute(s.prev.image(), s.cur.image(), pts).ok());
+  const auto* disp_data = stereo.disparity().data();
+  const auto* map_data = stereo.map_reference().data();
+  const auto* rect_data = stereo.rectified_reference().data();
+  Frame other;
+  s.render(moved(s.cur_body, 2.0, -0.1, 0.01, 0.0, 0.02), other);
+  ASSERT_TRUE(stereo.compute(s.cur.image(), other.image(), pts).ok());
+  EXPECT_FALSE(pts.empty());
+  EXPECT_EQ(stereo.disparity().data(), disp_data);
+  EXPECT_EQ(stereo.map_reference().data(), map_data);
+  EXPECT_EQ(stereo.rectified_reference().data(), rect_data);
+  EXPECT_EQ(stereo.stats().pairs, 5u);
+  EXPECT_EQ(stereo.stats().refused, 3u);
+}
+
+}  // namespace
