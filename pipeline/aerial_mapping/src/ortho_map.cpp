@@ -76,8 +76,23 @@ void OrthoMap::apply(const Patch& patch, bool to_base, const std::unordered_map<
     const auto ly = static_cast<std::size_t>(cy - static_cast<std::int64_t>(tile->key.ty) * t);
     Cell& cell = (to_base ? tile->base : tile->live)[ly * static_cast<std::size_t>(t) + lx];
     const auto z = static_cast<float>(p.z());
-    cell.elevation_sum += z * static_cast<float>(c.count);
-    cell.count += c.count;
+    const auto n = static_cast<float>(c.count);
+    if (cell.count == 0 || std::fabs(z - cell.elevation()) <= gate) {
+      cell.elevation_sum += z * n;
+      cell.count += c.count;
+    } else if (cell.rival_count == 0 || std::fabs(z - cell.rival()) <= gate) {
+      cell.rival_sum += z * n;
+      cell.rival_count += c.count;
+      if (cell.rival_count > cell.count) {  // the rival now has more support: it leads
+        std::swap(cell.elevation_sum, cell.rival_sum);
+        std::swap(cell.count, cell.rival_count);
+        cell.best_cos = -2.0F;  // colour and class were accepted against the old surface
+        cell.cls = 255;
+      }
+    } else if (c.count > cell.rival_count) {  // a third surface: keep the better supported of the two rivals
+      cell.rival_sum = z * n;
+      cell.rival_count = c.count;
+    }
     if (cell.count >= min_points && std::fabs(z - cell.elevation()) <= gate) {
       if (c.cls != 255 && (cell.cls == 255 || c.cos > cell.best_cos)) cell.cls = c.cls;
       if (c.cos > cell.best_cos) {

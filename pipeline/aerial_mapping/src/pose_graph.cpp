@@ -19,7 +19,10 @@
 //
 // Solves rebuild a small ceres::Problem over the newest window_frames nodes (of aligned segments) plus
 // the one constant node before them that a between-factor ties to the window; factors among constant
-// nodes are not added at all. Levenberg-Marquardt, sparse normal Cholesky on Eigen (no SuiteSparse:
+// nodes are not added at all, but what their between-factors say about the scale (a quadratic in the
+// scale once the poses are constant) is kept per segment as one residual, faded over window_frames, so
+// the scale survives a hover or a GPS gap that fills the window. A young segment is re-solved each time
+// it has grown by a third (until the regular solve_every_frames cadence takes over). Levenberg-Marquardt, sparse normal Cholesky on Eigen (no SuiteSparse:
 // the static binary has no METIS), one thread, warm-started from the stored states.
 #include "airground/aerial_mapping/pose_graph.hpp"
 
@@ -493,7 +496,14 @@ struct PoseGraph::Impl {
   bool update(bool force) {
     bool pending = false;
     for (const Segment& s : segments) pending = pending || s.pending;
-    if (!force && !pending && frames_since_solve < std::max(prm.solve_every_frames, 1)) return false;
+    // A young segment (its scale and yaw from a short baseline) is re-solved whenever it has grown by
+    // a third, so that the predictions chained from it do not run away before the regular solve.
+    int every = std::max(prm.solve_every_frames, 1);
+    if (!segments.empty() && segments.back().aligned) {
+      const auto age = static_cast<int>(std::min<std::size_t>(segments.back().last - segments.back().first + 1, 1U << 20));
+      every = std::min(every, std::max(3, age / 4));
+    }
+    if (!force && !pending && frames_since_solve < every) return false;
     frames_since_solve = 0;
     if (nodes.empty()) return false;
     const double t0 = thread_cpu_ms();
@@ -639,6 +649,8 @@ struct PoseGraph::Impl {
       s.initialised = std::isfinite(s.log_scale) && std::exp(s.log_scale) > 0;
     }
     st.last_final_cost = summary.final_cost;
+    st.last_free_nodes = variable_nodes;
+    st.last_iterations = static_cast<std::uint64_t>(summary.iterations.size());
     return true;
   }
 };

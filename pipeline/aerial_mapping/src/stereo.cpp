@@ -54,7 +54,8 @@ struct DenseStereo::Impl {
     map_other.reserve(2 * cap);
     raw.reserve(cap);
     disp.reserve(cap);
-    last.assign(sz(max_width), 0);
+    pad.assign(sz(max_width) + 2 * sz(std::max(p.border_dilate_px, 0)) + 64, 0);
+    scratch.assign(2 * sz(max_width + detail::kRectifyLanes), 0.0f);
   }
 
   PinholeCamera camera;
@@ -68,7 +69,8 @@ struct DenseStereo::Impl {
   std::vector<std::uint8_t> rect_ref, rect_other, invalid_ref, invalid_other, valid_ref, valid_other, tmp;
   std::vector<float> map_ref, map_other;
   std::vector<std::int16_t> raw, disp;
-  std::vector<int> last;
+  std::vector<std::uint8_t> pad;
+  std::vector<float> scratch;
 };
 
 DenseStereo::DenseStereo(const PinholeCamera& camera, const StereoParams& params)
@@ -113,11 +115,11 @@ Result<std::size_t> DenseStereo::compute(const StereoImage& prev, const StereoIm
   m.raw.resize(n);
   m.disp.resize(n);
   detail::build_rectified(m.camera, g, g.rect_from_reference, m.max_r2, m.grey_ref.data(), m.map_ref.data(),
-                          m.rect_ref.data(), m.invalid_ref.data());
+                          m.map_ref.data() + n, m.rect_ref.data(), m.invalid_ref.data(), m.scratch.data());
   detail::build_rectified(m.camera, g, g.rect_from_other, m.max_r2, m.grey_other.data(), m.map_other.data(),
-                          m.rect_other.data(), m.invalid_other.data());
-  detail::dilate_invalid(m.invalid_ref.data(), w, h, p.border_dilate_px, m.valid_ref.data(), m.tmp.data(), m.last.data());
-  detail::dilate_invalid(m.invalid_other.data(), w, h, p.border_dilate_px, m.valid_other.data(), m.tmp.data(), m.last.data());
+                          m.map_other.data() + n, m.rect_other.data(), m.invalid_other.data(), m.scratch.data());
+  detail::dilate_invalid(m.invalid_ref.data(), w, h, p.border_dilate_px, m.valid_ref.data(), m.tmp.data(), m.pad.data());
+  detail::dilate_invalid(m.invalid_other.data(), w, h, p.border_dilate_px, m.valid_other.data(), m.tmp.data(), m.pad.data());
   const auto t1 = std::chrono::steady_clock::now();
 
   // 2. Match, then drop disparities on or near the black border of either image (the other image is
@@ -161,7 +163,7 @@ Result<std::size_t> DenseStereo::compute(const StereoImage& prev, const StereoIm
       const Eigen::Vector3d xr((x - g.cx) / g.f * z, yn * z, z);
       const Eigen::Vector3d xm = map_r * xr + map_t;
       const Eigen::Vector3d xc = cam_from_rect * xr;
-      const float sx = m.map_ref[2 * i], sy = m.map_ref[2 * i + 1];
+      const float sx = m.map_ref[i], sy = m.map_ref[n + i];
       const int x0 = std::min(static_cast<int>(sx), cw - 2), y0 = std::min(static_cast<int>(sy), ch - 2);
       const float ax = sx - static_cast<float>(x0), ay = sy - static_cast<float>(y0);
       const std::uint8_t* q = cur.rgb + 3 * (sz(y0) * sw + sz(x0));

@@ -39,17 +39,26 @@ Result<RectifiedGeometry> plan_rectification(const PinholeCamera& camera, const 
 // The largest squared radius (x/z)^2 + (y/z)^2 of a ray through the image border, undistorted.
 [[nodiscard]] double max_undistorted_r2(const PinholeCamera& camera);
 
-// One rectified image: per pixel the source position in the distorted original (map, pairs of floats,
-// (-1, -1) without source), the bilinear grey value (rect, 0 without source) and invalid (1 without
-// source). Rays further out than max_r2 (where a distortion polynomial may fold back) have no source.
+// Rays computed at once when building a rectified image (float vector lanes); row scratch buffers
+// need width + kRectifyLanes floats each.
+#if defined(__AVX2__)
+inline constexpr int kRectifyLanes = 8;
+#else
+inline constexpr int kRectifyLanes = 4;
+#endif
+
+// One rectified image: per pixel the source position in the distorted original (planar maps, -1
+// without source), the bilinear grey value (rect, 0 without source) and invalid (1 without source).
+// Rays further out than max_r2 (where a distortion polynomial may fold back) have no source. scratch:
+// 2 * (width + kRectifyLanes) floats.
 void build_rectified(const PinholeCamera& camera, const RectifiedGeometry& geometry,
                      const Eigen::Matrix3d& rect_from_camera, double max_r2, const std::uint8_t* grey,
-                     float* map, std::uint8_t* rect, std::uint8_t* invalid);
+                     float* map_x, float* map_y, std::uint8_t* rect, std::uint8_t* invalid, float* scratch);
 
 // valid = 1 where no invalid pixel lies within `radius` (square window); tmp: width * height bytes,
-// last: width ints.
+// pad: width + 2 * radius + 64 bytes.
 void dilate_invalid(const std::uint8_t* invalid, int width, int height, int radius, std::uint8_t* valid,
-                    std::uint8_t* tmp, int* last);
+                    std::uint8_t* tmp, std::uint8_t* pad);
 
 // StereoBM with PREFILTER_XSOBEL on two rectified grey images of up to max_width x max_height, the same
 // results as cv::StereoBM::compute into CV_16S (1/16 px, invalid = (min_disparity - 1) * 16) followed by

@@ -3,6 +3,7 @@
 // cv::initUndistortRectifyMap, bilinear grey remap and the dilated invalid border.
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <numbers>
 #include <string>
 
@@ -12,6 +13,23 @@ namespace ag::mapping::detail {
 namespace {
 
 std::size_t sz(int v) noexcept { return static_cast<std::size_t>(v); }
+
+using F32 = float __attribute__((vector_size(kRectifyLanes * 4)));
+using I32 = std::int32_t __attribute__((vector_size(kRectifyLanes * 4)));
+constexpr int kF = kRectifyLanes;
+using U8B = std::uint8_t __attribute__((vector_size(kRectifyLanes * 4)));
+
+[[gnu::always_inline]] inline U8B load8(const std::uint8_t* p) noexcept {
+  U8B v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+[[gnu::always_inline]] inline void store8(std::uint8_t* p, const U8B& v) noexcept { std::memcpy(p, &v, sizeof v); }
+
+template <typename V>
+[[gnu::always_inline]] inline void store(float* p, const V& v) noexcept {
+  std::memcpy(p, &v, sizeof v);
+}
 
 Eigen::Matrix3d rodrigues(const Eigen::Vector3d& v) {
   const double a = v.norm();
@@ -143,88 +161,103 @@ Result<RectifiedGeometry> plan_rectification(const PinholeCamera& camera, const 
 }
 
 void build_rectified(const PinholeCamera& cam, const RectifiedGeometry& g, const Eigen::Matrix3d& rect_from_camera,
-                     double max_r2, const std::uint8_t* grey, float* map, std::uint8_t* rect, std::uint8_t* invalid) {
+                     double max_r2, const std::uint8_t* grey, float* map_x, float* map_y, std::uint8_t* rect,
+                     std::uint8_t* invalid, float* scratch) {
+  // Pass 1 per row, kF rays at a time in float (|error| ~1e-4 px): the source position, -1 without one.
   const Eigen::Matrix3d cam_from_rect = rect_from_camera.transpose();
   const Eigen::Vector3d step = cam_from_rect.col(0) / g.f;
-  const double w1 = cam.width - 1, h1 = cam.height - 1;
+  const auto fl = [](double v) { return static_cast<float>(v); };
+  const float sx = fl(step.x()), sy = fl(step.y()), sz_ = fl(step.z());
+  const float k1 = fl(cam.k1), k2 = fl(cam.k2), k3 = fl(cam.k3), p1 = fl(cam.p1), p2 = fl(cam.p2);
+  const float fx = fl(cam.fx), fy = fl(cam.fy), cx = fl(cam.cx), cy = fl(cam.cy);
+  const float w1 = fl(cam.width - 1), h1 = fl(cam.height - 1), r2max = fl(max_r2);
+  F32 lane{};
+  for (int l = 0; l < kF; ++l) lane[l] = static_cast<float>(l);
+  const F32 minus_one = F32{} - 1.0f;
+  float* row_x = scratch;
+  float* row_y = scratch + sz(g.width + kF);
   const std::size_t sw = sz(cam.width);
   for (int v = 0; v < g.height; ++v) {
     const Eigen::Vector3d base = cam_from_rect * Eigen::Vector3d(-g.cx / g.f, (v - g.cy) / g.f, 1.0);
+    const float bx = fl(base.x()), by = fl(base.y()), bz = fl(base.z());
+    for (int u0 = 0; u0 < g.width; u0 += kF) {
+      const F32 u = lane + static_cast<float>(u0);
+      const F32 x = bx + u * sx, y = by + u * sy, z = bz + u * sz_;
+      I32 ok = z > 1e-6f;
+      const F32 iz = 1.0f / z;
+      const F32 xn = x * iz, yn = y * iz;
+      const F32 r2 = xn * xn + yn * yn;
+      ok &= r2 <= r2max;
+      const F32 radial = 1.0f + r2 * (k1 + r2 * (k2 + r2 * k3));
+      const F32 xd = xn * radial + 2.0f * p1 * xn * yn + p2 * (r2 + 2.0f * xn * xn);
+      const F32 yd = yn * radial + p1 * (r2 + 2.0f * yn * yn) + 2.0f * p2 * xn * yn;
+      const F32 su = fx * xd + cx, sv = fy * yd + cy;
+      ok &= (su >= 0.0f) & (su <= w1) & (sv >= 0.0f) & (sv <= h1);
+      store(row_x + u0, ok ? su : minus_one);
+      store(row_y + u0, ok ? sv : minus_one);
+    }
     const std::size_t row = sz(v) * sz(g.width);
+    std::memcpy(map_x + row, row_x, sz(g.width) * sizeof(float));
+    std::memcpy(map_y + row, row_y, sz(g.width) * sizeof(float));
+    // Pass 2: bilinear grey.
     for (int u = 0; u < g.width; ++u) {
-      const Eigen::Vector3d x = base + static_cast<double>(u) * step;
+      const float px = row_x[u], py = row_y[u];
       const std::size_t i = row + sz(u);
-      bool ok = x.z() > 1e-9;
-      Eigen::Vector2d s(-1.0, -1.0);
-      if (ok) {
-        const double xn = x.x() / x.z(), yn = x.y() / x.z();
-        ok = xn * xn + yn * yn <= max_r2;
-        if (ok) {
-          s = cam.distort_to_pixel(xn, yn);
-          ok = s.x() >= 0.0 && s.x() <= w1 && s.y() >= 0.0 && s.y() <= h1;
-        }
-      }
-      if (!ok) {
-        map[2 * i] = -1.0f;
-        map[2 * i + 1] = -1.0f;
+      if (px < 0.0f) {
         rect[i] = 0;
         invalid[i] = 1;
         continue;
       }
-      const auto sx = static_cast<float>(s.x()), sy = static_cast<float>(s.y());
-      map[2 * i] = sx;
-      map[2 * i + 1] = sy;
       invalid[i] = 0;
-      const int x0 = std::min(static_cast<int>(sx), cam.width - 2), y0 = std::min(static_cast<int>(sy), cam.height - 2);
-      const float ax = sx - static_cast<float>(x0), ay = sy - static_cast<float>(y0);
-      const std::uint8_t* p = grey + sz(y0) * sw + sz(x0);
-      const float top = static_cast<float>(p[0]) + ax * static_cast<float>(p[1] - p[0]);
-      const float bot = static_cast<float>(p[sw]) + ax * static_cast<float>(p[sw + 1] - p[sw]);
+      const int x0 = std::min(static_cast<int>(px), cam.width - 2), y0 = std::min(static_cast<int>(py), cam.height - 2);
+      const float ax = px - static_cast<float>(x0), ay = py - static_cast<float>(y0);
+      const std::uint8_t* q = grey + sz(y0) * sw + sz(x0);
+      const float top = static_cast<float>(q[0]) + ax * static_cast<float>(q[1] - q[0]);
+      const float bot = static_cast<float>(q[sw]) + ax * static_cast<float>(q[sw + 1] - q[sw]);
       rect[i] = static_cast<std::uint8_t>(top + ay * (bot - top) + 0.5f);
     }
   }
 }
 
 void dilate_invalid(const std::uint8_t* invalid, int width, int height, int radius, std::uint8_t* valid,
-                    std::uint8_t* tmp, int* last) {
+                    std::uint8_t* tmp, std::uint8_t* pad) {
   const std::size_t n = sz(width) * sz(height);
   if (radius <= 0) {
     for (std::size_t i = 0; i < n; ++i) valid[i] = invalid[i] != 0 ? 0 : 1;
     return;
   }
-  constexpr int kFar = 1 << 28;
-  // Rows: tmp = 1 where an invalid pixel is within `radius` columns.
+  // Rows: tmp = OR of invalid over [x - radius, x + radius], through a zero-padded copy of the row.
+  const std::size_t r = sz(radius), w = sz(width);
+  std::memset(pad, 0, w + 2 * r + sizeof(U8B));
   for (int y = 0; y < height; ++y) {
-    const std::uint8_t* in = invalid + sz(y) * sz(width);
-    std::uint8_t* out = tmp + sz(y) * sz(width);
-    int prev = -kFar;
-    for (int x = 0; x < width; ++x) {
-      if (in[x] != 0) prev = x;
-      out[x] = x - prev <= radius ? 1 : 0;
+    std::memcpy(pad + r, invalid + sz(y) * w, w);
+    std::uint8_t* out = tmp + sz(y) * w;
+    std::size_t x = 0;
+    for (; x + sizeof(U8B) <= w; x += sizeof(U8B)) {
+      U8B acc = load8(pad + x);
+      for (std::size_t k = 1; k <= 2 * r; ++k) acc |= load8(pad + x + k);
+      store8(out + x, acc);
     }
-    int next = kFar;
-    for (int x = width - 1; x >= 0; --x) {
-      if (in[x] != 0) next = x;
-      if (next - x <= radius) out[x] = 1;
+    for (; x < w; ++x) {
+      std::uint8_t acc = 0;
+      for (std::size_t k = 0; k <= 2 * r; ++k) acc = static_cast<std::uint8_t>(acc | pad[x + k]);
+      out[x] = acc;
     }
   }
-  // Columns, one row at a time with per-column nearest marked row.
-  std::fill(last, last + width, -kFar);
+  // Columns: OR of tmp over rows [y - radius, y + radius], then valid = !that.
   for (int y = 0; y < height; ++y) {
-    const std::uint8_t* in = tmp + sz(y) * sz(width);
-    std::uint8_t* out = valid + sz(y) * sz(width);
-    for (int x = 0; x < width; ++x) {
-      if (in[x] != 0) last[x] = y;
-      out[x] = y - last[x] <= radius ? 0 : 1;
+    const int y0 = std::max(0, y - radius), y1 = std::min(height - 1, y + radius);
+    std::uint8_t* out = valid + sz(y) * w;
+    std::size_t x = 0;
+    for (; x + sizeof(U8B) <= w; x += sizeof(U8B)) {
+      U8B acc = load8(tmp + sz(y0) * w + x);
+      for (int yy = y0 + 1; yy <= y1; ++yy) acc |= load8(tmp + sz(yy) * w + x);
+      store8(out + x, (acc == 0) & 1);
     }
-  }
-  std::fill(last, last + width, kFar);
-  for (int y = height - 1; y >= 0; --y) {
-    const std::uint8_t* in = tmp + sz(y) * sz(width);
-    std::uint8_t* out = valid + sz(y) * sz(width);
-    for (int x = 0; x < width; ++x) {
-      if (in[x] != 0) last[x] = y;
-      if (last[x] - y <= radius) out[x] = 0;
+    for (; x < w; ++x) {
+      std::uint8_t acc = 0;
+      for (int yy = y0; yy <= y1; ++yy) acc = static_cast<std::uint8_t>(acc | tmp[sz(yy) * w + x]);
+      out[x] = acc == 0 ? 1 : 0;
     }
   }
 }

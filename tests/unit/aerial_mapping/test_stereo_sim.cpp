@@ -8,6 +8,9 @@
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
+#include <atomic>
+#include <cstdlib>
+#include <new>
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -20,6 +23,22 @@
 #include "airground/core/pose_math.hpp"
 #include "airground/sim/camera.hpp"
 #include "airground/sim/generator.hpp"
+
+// Counts global operator new (not under sanitizers, which bring their own) to check that compute()
+// does not allocate once warm.
+#if !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__)
+#define AG_STEREO_COUNT_ALLOCS 1
+namespace {
+std::atomic<std::uint64_t> g_allocations{0};
+}  // namespace
+void* operator new(std::size_t n) {
+  g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+#endif
 
 namespace {
 
@@ -111,18 +130,19 @@ Scene& scene() {
 
 StereoParams test_params() { return StereoParams{}; }
 
-// Bilinear sample of an interleaved (x, y) map at a rectified position; false if a corner has no source.
+// Bilinear sample of a planar (x plane, y plane) map at a rectified position; false if a corner has no source.
 bool sample_map(const std::vector<float>& map, int width, int height, double x, double y, Eigen::Vector2d& out) {
+  const std::size_t n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
   const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
   if (x0 < 0 || y0 < 0 || x0 + 1 >= width || y0 + 1 >= height) return false;
   const double ax = x - x0, ay = y - y0;
   Eigen::Vector2d acc(0, 0);
   for (int dy = 0; dy < 2; ++dy) {
     for (int dx = 0; dx < 2; ++dx) {
-      const std::size_t i = 2 * (static_cast<std::size_t>(y0 + dy) * static_cast<std::size_t>(width) + static_cast<std::size_t>(x0 + dx));
+      const std::size_t i = static_cast<std::size_t>(y0 + dy) * static_cast<std::size_t>(width) + static_cast<std::size_t>(x0 + dx);
       if (map[i] < 0.0f) return false;
       const double wgt = (dx == 1 ? ax : 1.0 - ax) * (dy == 1 ? ay : 1.0 - ay);
-      acc += wgt * Eigen::Vector2d(static_cast<double>(map[i]), static_cast<double>(map[i + 1]));
+      acc += wgt * Eigen::Vector2d(static_cast<double>(map[i]), static_cast<double>(map[n + i]));
     }
   }
   out = acc;
@@ -191,14 +211,15 @@ TEST(StereoSim, RectificationMatchesOpenCvStereoRectify) {
     for (int y = 0; y < g.height; ++y) {
       for (int x = 0; x < g.width; ++x) {
         const double u = 2.0 * cx - static_cast<double>(my.at<float>(y, x)), v = static_cast<double>(mx.at<float>(y, x));
-        const std::size_t i = 2 * (static_cast<std::size_t>(y) * static_cast<std::size_t>(g.width) + static_cast<std::size_t>(x));
+        const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(g.width) + static_cast<std::size_t>(x);
+        const std::size_t n = static_cast<std::size_t>(g.width) * static_cast<std::size_t>(g.height);
         const bool cv_inside = u >= 0.1 && v >= 0.1 && u <= s.camera.width - 1.1 && v <= s.camera.height - 1.1;
         if (ours[i] < 0.0f) {
           missing += cv_inside ? 1u : 0u;
           continue;
         }
         ++compared;
-        max_err = std::max({max_err, std::abs(static_cast<double>(ours[i]) - u), std::abs(static_cast<double>(ours[i + 1]) - v)});
+        max_err = std::max({max_err, std::abs(static_cast<double>(ours[i]) - u), std::abs(static_cast<double>(ours[n + i]) - v)});
       }
     }
     std::printf("%s map vs initUndistortRectifyMap: %zu px compared, max error %.2e px, %zu inside for OpenCV but not ours\n",
@@ -314,9 +335,25 @@ TEST(StereoSim, BlockMatcherMatchesOpenCvStereoBM) {
   for (int y = 0; y < g.height; ++y)
     for (int x = 0; x < g.width; ++x)
       invalid_other.at<std::uint8_t>(y, x) =
-          stereo.map_other()[2 * (static_cast<std::size_t>(y) * static_cast<std::size_t>(g.width) + static_cast<std::size_t>(x))] < 0.0f ? 1 : 0;
+          stereo.map_other()[static_cast<std::size_t>(y) * static_cast<std::size_t>(g.width) + static_cast<std::size_t>(x)] < 0.0f ? 1 : 0;
   cv::dilate(invalid_other, invalid_other, cv::Mat::ones(2 * p.border_dilate_px + 1, 2 * p.border_dilate_px + 1, CV_8UC1),
              cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
+  // Our reference mask is the same dilation of the reference's border.
+  cv::Mat invalid_ref(g.height, g.width, CV_8UC1);
+  for (int y = 0; y < g.height; ++y)
+    for (int x = 0; x < g.width; ++x)
+      invalid_ref.at<std::uint8_t>(y, x) =
+          stereo.map_reference()[static_cast<std::size_t>(y) * static_cast<std::size_t>(g.width) + static_cast<std::size_t>(x)] < 0.0f ? 1 : 0;
+  cv::dilate(invalid_ref, invalid_ref, cv::Mat::ones(2 * p.border_dilate_px + 1, 2 * p.border_dilate_px + 1, CV_8UC1),
+             cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
+  std::size_t mask_diff = 0;
+  for (int y = 0; y < g.height; ++y)
+    for (int x = 0; x < g.width; ++x)
+      mask_diff += (mask[static_cast<std::size_t>(y) * static_cast<std::size_t>(g.width) + static_cast<std::size_t>(x)] != 0) ==
+                           (invalid_ref.at<std::uint8_t>(y, x) != 0)
+                       ? 1u
+                       : 0u;
+  EXPECT_EQ(mask_diff, 0u) << "valid_mask() differs from cv::dilate of the reference's border";
   std::size_t m_ours = 0, m_cv = 0, m_both = 0, m_agree = 0;
   for (int y = 0; y < g.height; ++y) {
     for (int x = 0; x < g.width; ++x) {
@@ -397,7 +434,7 @@ TEST(StereoSim, PointsMatchTheWorld) {
   for (int y = 0; y < g.height; ++y) {
     for (int x = 0; x < g.width; ++x) {
       const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(g.width) + static_cast<std::size_t>(x);
-      const double su = static_cast<double>(map[2 * i]), sv = static_cast<double>(map[2 * i + 1]);
+      const double su = static_cast<double>(map[i]), sv = static_cast<double>(map[static_cast<std::size_t>(g.width * g.height) + i]);
       if (su < 0) continue;
       const double z = static_cast<double>(s.cur.f.depth.at<float>(static_cast<int>(sv + 0.5), static_cast<int>(su + 0.5)));
       if (z <= 0) continue;
@@ -462,5 +499,48 @@ TEST(StereoSim, RefusesShortBaselinesAndNonOverlappingPairs) {
   EXPECT_EQ(stereo.stats().pairs, 5u);
   EXPECT_EQ(stereo.stats().refused, 3u);
 }
+
+// Sideways and diagonal baselines (crabbing in wind, turns) rectify too, within the buffers.
+TEST(StereoSim, AnyBaselineDirectionInTheImage) {
+  Scene& s = scene();
+  DenseStereo stereo(s.camera, test_params());
+  std::vector<MapPoint> pts;
+  const double dirs[][2] = {{0.0, 2.0}, {0.0, -2.0}, {1.5, 1.5}, {-1.4, 1.4}, {2.0, 0.0}};
+  for (const auto& d : dirs) {
+    Frame other;
+    s.render(moved(s.cur_body, d[0], d[1], 0.01, -0.01, 0.02), other);
+    auto r = stereo.compute(other.image(), s.cur.image(), pts);
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    const RectifiedGeometry& g = stereo.rectified();
+    std::printf("baseline (%.1f, %.1f) m in body axes: rectified %dx%d, %zu points\n", d[0], d[1], g.width, g.height, pts.size());
+    EXPECT_GT(pts.size(), 100000u);
+    // The other camera sits at +x of the reference's rectified frame.
+    const Eigen::Vector3d c_other = g.map_from_rect.inverse() * other.map_from_camera.translation();
+    EXPECT_NEAR(c_other.x(), g.baseline_m, 1e-9);
+    EXPECT_NEAR(c_other.y(), 0.0, 1e-9);
+    EXPECT_NEAR(c_other.z(), 0.0, 1e-9);
+  }
+}
+
+#ifdef AG_STEREO_COUNT_ALLOCS
+TEST(StereoSim, ComputeDoesNotAllocateOnceWarm) {
+  Scene& s = scene();
+  const std::uint64_t at_start = g_allocations.load();
+  DenseStereo stereo(s.camera, test_params());
+  ASSERT_GT(g_allocations.load(), at_start) << "the counter must see the constructor's buffers";
+  std::vector<MapPoint> pts;
+  pts.reserve(static_cast<std::size_t>(4 * s.camera.width * s.camera.height));
+  ASSERT_TRUE(stereo.compute(s.prev.image(), s.cur.image(), pts).ok());
+  Frame next;
+  s.render(moved(s.cur_body, 2.1, 0.2, -0.01, 0.015, 0.03), next);
+  ag::mapping::StereoTiming t;
+  const std::uint64_t before = g_allocations.load();
+  auto r = stereo.compute(s.cur.image(), next.image(), pts, &t);
+  const std::uint64_t after = g_allocations.load();
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  EXPECT_GT(r.value(), 100000u);
+  EXPECT_EQ(after - before, 0u) << "allocations in a warm compute()";
+}
+#endif
 
 }  // namespace

@@ -244,7 +244,7 @@ TEST(Raycast, AgreesWithBruteForceMarchingOnRandomRays) {
 }
 
 // cast_from() promises the same hit once told a part of the ray that meets nothing; with `near` (plain
-// cell stepping) too.
+// cell stepping for a few cells, then blocks again from where it stopped) too, face and normal included.
 TEST(Raycast, CastFromAFreeStartGivesTheSameHit) {
   const World w = random_town(7);
   const HeightfieldRaycaster rc(w);
@@ -260,6 +260,10 @@ TEST(Raycast, CastFromAFreeStartGivesTheSameHit) {
         EXPECT_NEAR(h.range, full.range, 1e-9);
         EXPECT_EQ(h.col, full.col);
         EXPECT_EQ(h.row, full.row);
+        if (f > 0.0 && h.range > 0.0) {
+          EXPECT_EQ(h.vertical_face, full.vertical_face);
+          EXPECT_EQ(h.normal, full.normal);
+        }
       }
     }
     hits += full.hit ? 1 : 0;

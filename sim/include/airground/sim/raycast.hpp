@@ -99,7 +99,7 @@ class HeightfieldRaycaster {
     std::int32_t ci{-1}, cj{-1};  // the cell it starts in when resumed (else found from t0 and axis)
   };
   // kLevels = 0 steps cell by cell; with max_steps > 0 it stops after that many cells with no hit and
-  // leaves in `ray` the state to resume from (returns hit = false, resumed = true).
+  // leaves in `ray` the state to resume from (no hit, stopped = true).
   template <bool kPosU, bool kPosV, int kLevels>
   RayHit traverse(Ray& ray, int max_steps, bool& stopped) const noexcept;
   template <bool kPosU, bool kPosV>

@@ -34,13 +34,20 @@ struct OrthoMapParams {
   std::size_t max_tiles{16384};      // refuse (and count) points beyond this many tiles (16 km^2 at defaults)
 };
 
+// Elevation keeps two hypotheses: the running mean of the observations that agree (within the gate)
+// with the leading one, and a rival built from those that do not. Block matching puts occluded ground
+// on a roof edge, or a roof on the ground beside it, from some viewpoints only; when the rival gathers
+// more support than the leader they swap. With one consistent surface this is ASOOM's running mean.
 struct Cell {
-  float elevation_sum{0};   // [m x points] sum of point heights
-  std::uint32_t count{0};   // points binned
+  float elevation_sum{0};   // [m x points] sum of the leading hypothesis's heights
+  std::uint32_t count{0};   // points in the leading hypothesis
+  float rival_sum{0};       // [m x points]
+  std::uint32_t rival_count{0};
   float best_cos{-2.0F};    // cosine to the optical axis of the accepted colour observation
   std::uint8_t r{0}, g{0}, b{0};
   std::uint8_t cls{255};    // class id, 255 unknown
   [[nodiscard]] float elevation() const noexcept { return count ? elevation_sum / static_cast<float>(count) : 0.0F; }
+  [[nodiscard]] float rival() const noexcept { return rival_count ? rival_sum / static_cast<float>(rival_count) : 0.0F; }
 };
 
 struct TileKey {

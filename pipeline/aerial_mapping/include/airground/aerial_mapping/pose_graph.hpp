@@ -49,6 +49,8 @@ struct PoseGraphStats {
   std::uint64_t scale_flips{0};       // solves whose scale came out negative and were re-solved flipped
   double last_solve_ms{0};            // [ms] thread CPU time of the last solve
   double last_final_cost{0};
+  std::uint64_t last_free_nodes{0};   // nodes the last solve could move (<= window_frames, except a new segment's first solve)
+  std::uint64_t last_iterations{0};   // Levenberg-Marquardt iterations of the last solve
 };
 
 class PoseGraph {

@@ -24,7 +24,7 @@ struct StereoParams {
   int prefilter_cap{31};
   int texture_threshold{10};      // minimum sum of |prefiltered| over the block
   int uniqueness_ratio{10};       // [%] best SAD must beat every other (beyond +-1 px) by this margin
-  int speckle_window{100};        // [px] connected regions smaller than this are removed; 0 = off
+  int speckle_window{100};        // [px] connected regions of at most this many pixels are removed; 0 = off
   int speckle_range{2};           // [px] disparity step that still connects a region (StereoBM's speckleRange is in 1/16 px: 16x this)
   int border_dilate_px{5};        // [px] the invalid (black) rectification border is grown by this
   double min_depth_m{1.0};        // [m] (ASOOM: keep 1-150 m)
@@ -82,15 +82,19 @@ class DenseStereo {
   // Precomputes what does not depend on the pair and allocates every buffer. Throws
   // std::invalid_argument for parameters StereoBM would refuse (num_disparities not a positive multiple
   // of 16, block_size not odd in [5, 255], block_size^2 * 2 * prefilter_cap >= 65536, prefilter_cap not in
-  // [1, 63], negative texture_threshold / uniqueness_ratio / speckle values) or a camera without size.
+  // [1, 63], min_disparity not in [0, 1000], negative texture_threshold / uniqueness_ratio / speckle
+  // values, depth range not 0 <= min < max) or a camera without size.
   DenseStereo(const PinholeCamera& camera, const StereoParams& params);
   ~DenseStereo();
   DenseStereo(const DenseStereo&) = delete;
   DenseStereo& operator=(const DenseStereo&) = delete;
 
-  // `prev` and `cur` must be images of `camera`. Appends points to `out` (cleared first) and returns
-  // their number; an error (counted) for a baseline below min_baseline_m or a pair that does not
-  // overlap. Allocation-free once `out` has grown to its working size.
+  // `prev` and `cur` must be images of `camera`; `cur` is the reference (left) image and gives the
+  // points' colour and class. Appends points to `out` (cleared first) and returns their number; an error
+  // (counted in stats().refused) for missing image data, a baseline below min_baseline_m, or a pair that
+  // does not overlap: no common rectified rows/columns, a camera looking more than ~84 degrees off the
+  // rectified axis (baseline along the view), or a baseline so long that the largest disparity searched
+  // means a depth beyond max_depth_m. Allocation-free once `out` has grown to its working size.
   Result<std::size_t> compute(const StereoImage& prev, const StereoImage& cur, std::vector<MapPoint>& out,
                               StereoTiming* timing = nullptr);
 
@@ -106,8 +110,9 @@ class DenseStereo {
   // 1 where the rectified reference pixel has source pixels and is further than border_dilate_px from
   // any pixel that has none.
   [[nodiscard]] const std::vector<std::uint8_t>& valid_mask() const noexcept;
-  // Remap tables: per rectified pixel, the source (x, y) in the original distorted image (pairs of
-  // floats, row-major; (-1, -1) where the ray leaves the source image), like cv::initUndistortRectifyMap.
+  // Remap tables: per rectified pixel, the source (x, y) in the original distorted image, like the two
+  // CV_32FC1 maps of cv::initUndistortRectifyMap: 2 * width * height floats, the row-major x plane then
+  // the y plane; -1 in both where the ray leaves the source image.
   [[nodiscard]] const std::vector<float>& map_reference() const noexcept;
   [[nodiscard]] const std::vector<float>& map_other() const noexcept;
   [[nodiscard]] const RectifiedGeometry& rectified() const noexcept;
