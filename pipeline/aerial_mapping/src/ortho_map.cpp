@@ -87,6 +87,7 @@ void OrthoMap::apply(const Patch& patch, bool to_base, const std::unordered_map<
         std::swap(cell.elevation_sum, cell.rival_sum);
         std::swap(cell.count, cell.rival_count);
         cell.best_cos = -2.0F;  // colour and class were accepted against the old surface
+        cell.cls_cos = -2.0F;
         cell.cls = 255;
       }
     } else if (c.count > cell.rival_count) {  // a third surface: keep the better supported of the two rivals
@@ -94,7 +95,10 @@ void OrthoMap::apply(const Patch& patch, bool to_base, const std::unordered_map<
       cell.rival_count = c.count;
     }
     if (cell.count >= min_points && std::fabs(z - cell.elevation()) <= gate) {
-      if (c.cls != 255 && (cell.cls == 255 || c.cos > cell.best_cos)) cell.cls = c.cls;
+      if (c.cls != 255 && (cell.cls == 255 || c.cos > cell.cls_cos)) {
+        cell.cls = c.cls;
+        cell.cls_cos = c.cos;
+      }
       if (c.cos > cell.best_cos) {
         cell.best_cos = c.cos;
         cell.r = c.r;
@@ -135,7 +139,7 @@ void OrthoMap::add_keyframe(std::uint32_t id, const Eigen::Isometry3d& map_from_
   const double gate = p_.elevation_gate_m;
   for (std::size_t cidx = 0; cidx < w * h; ++cidx) {
     const std::uint32_t b = start_[cidx], e = start_[cidx + 1];
-    if (e - b < static_cast<std::uint32_t>(std::max(1, p_.min_points))) continue;  // too few to trust
+    if (e - b < static_cast<std::uint32_t>(std::max(1, p_.min_keyframe_points))) continue;  // too few to trust
     // Robust height: the median, then the mean of the points within the gate of it (a wrong stereo
     // match lands metres away and must not drag the cell).
     heights_.clear();

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 
 #include "airground/core/pose_math.hpp"
 #include "airground/platform/clock.hpp"
@@ -12,6 +13,8 @@
 namespace ag::mapping {
 
 namespace {
+
+constexpr std::size_t kDepthSampleStride = 64;  // every 64th stereo point estimates the ground depth
 
 Eigen::Isometry3d interpolate_pose(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b, double alpha) noexcept {
   Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
@@ -243,6 +246,7 @@ Status OrthoMapStage::init(StageContext& ctx) {
   mp.tile_cells = static_cast<int>(v.integer("tile_cells"));
   mp.elevation_gate_m = v.real("elevation_gate_m");
   mp.min_points = static_cast<int>(v.integer("min_points"));
+  mp.min_keyframe_points = static_cast<int>(v.integer("min_keyframe_points"));
   mp.window_keyframes = static_cast<int>(v.integer("window_keyframes"));
   mp.rebuild_translation_m = v.real("rebuild_translation_m");
   mp.rebuild_rotation_rad = v.real("rebuild_rotation_rad");
@@ -262,7 +266,11 @@ Status OrthoMapStage::init(StageContext& ctx) {
   auto st = ctx.channels.latest_writer<MapStatusMsg>("map_status");
   if (!st) return st.error();
   status_out_ = st.value();
-  prev_ = std::make_unique<KeyframeMsg>();
+  baseline_depth_ratio_ = v.real("baseline_depth_ratio");
+  const auto history = static_cast<std::size_t>(v.integer("pair_history"));
+  history_.clear();
+  for (std::size_t i = 0; i < history; ++i) history_.push_back(std::make_unique<KeyframeMsg>());
+  depth_scratch_.reserve(kImagePixels / kDepthSampleStride + 1);
   points_.reserve(kImagePixels);
   corrections_.reserve(KeyframePosesMsg::kCapacity);
   return ok_status();
@@ -295,17 +303,37 @@ void OrthoMapStage::step(TimeNs now) noexcept {
   if (const KeyframeMsg* kf = keyframes_.front()) {
     ++c_.keyframes_in;
     const Eigen::Isometry3d cur = newest_pose(*kf);
-    const Eigen::Isometry3d* binned = have_prev_ ? map_->keyframe_pose(prev_->id) : nullptr;
-    const Eigen::Isometry3d prev = binned != nullptr ? *binned : newest_pose(*prev_);
-    // A pair whose baseline runs along the optical axis (climbing, descending) has its epipole in the
-    // image: rectification would be degenerate, so it is not matched (counted).
-    const Eigen::Vector3d base = cur.translation() - prev.translation();
-    const double along_axis = std::fabs(base.dot(cur.linear().col(2))) / std::max(base.norm(), 1e-9);
-    if (have_prev_ && prev_->segment == kf->segment && along_axis > max_baseline_axis_cos_) {
-      ++c_.pairs_refused;
-    } else if (have_prev_ && prev_->segment == kf->segment) {
+    // The stereo partner: among the earlier keyframes of this segment, the one whose baseline is nearest
+    // baseline_depth_ratio x the ground depth (a longer baseline than ASOOM's previous keyframe divides
+    // the depth error from pose noise and matching noise by the same factor), as long as the pair is
+    // not degenerate (baseline within 60 deg of the optical axis: climbing, descending).
+    const double want = baseline_depth_ratio_ * (c_.ground_depth_m > 0 ? c_.ground_depth_m : 0.0);
+    const KeyframeMsg* partner = nullptr;
+    Eigen::Isometry3d partner_pose = Eigen::Isometry3d::Identity();
+    double best = std::numeric_limits<double>::infinity();
+    bool any_same_segment = false, any_degenerate = false;
+    for (std::size_t k = 0; k < history_count_; ++k) {  // newest first
+      const KeyframeMsg& h = *history_[(history_head_ + history_.size() - 1 - k) % history_.size()];
+      if (h.segment != kf->segment) break;
+      any_same_segment = true;
+      const Eigen::Isometry3d hp = newest_pose(h);
+      const Eigen::Vector3d base = cur.translation() - hp.translation();
+      const double along_axis = std::fabs(base.dot(cur.linear().col(2))) / std::max(base.norm(), 1e-9);
+      if (along_axis > max_baseline_axis_cos_) {
+        any_degenerate = true;
+        continue;
+      }
+      const double score = std::fabs(base.norm() - want);
+      if (score < best) {
+        best = score;
+        partner = &h;
+        partner_pose = hp;
+      }
+      if (want <= 0) break;  // ASOOM: the previous keyframe
+    }
+    if (partner != nullptr) {
       const TimeNs t0 = thread_cpu_now();
-      auto r = stereo_->compute(StereoImage{prev_->rgb.data(), prev_->cls.data(), prev},
+      auto r = stereo_->compute(StereoImage{partner->rgb.data(), partner->cls.data(), partner_pose},
                                 StereoImage{kf->rgb.data(), kf->cls.data(), cur}, points_);
       c_.last_stereo_ms = cpu_ms_since(t0);
       if (r) {
@@ -313,14 +341,28 @@ void OrthoMapStage::step(TimeNs now) noexcept {
         map_->add_keyframe(kf->id, cur, points_);
         c_.last_bin_ms = cpu_ms_since(t1);
         ++c_.pairs_matched;
+        c_.last_baseline_m = (cur.translation() - partner_pose.translation()).norm();
+        // Ground depth for the next choice: median camera-to-point height of a sample of the points.
+        depth_scratch_.clear();
+        const double cz = cur.translation().z();
+        for (std::size_t i = 0; i < points_.size(); i += kDepthSampleStride)
+          depth_scratch_.push_back(static_cast<float>(cz - static_cast<double>(points_[i].z)));
+        if (!depth_scratch_.empty()) {
+          auto mid = depth_scratch_.begin() + static_cast<std::ptrdiff_t>(depth_scratch_.size() / 2);
+          std::nth_element(depth_scratch_.begin(), mid, depth_scratch_.end());
+          if (*mid > 0) c_.ground_depth_m = static_cast<double>(*mid);
+        }
       } else {
         ++c_.pairs_refused;
       }
+    } else if (any_same_segment && any_degenerate) {
+      ++c_.pairs_refused;
     } else {
       ++c_.segment_starts;
     }
-    std::memcpy(prev_.get(), kf, sizeof(KeyframeMsg));
-    have_prev_ = true;
+    std::memcpy(history_[history_head_].get(), kf, sizeof(KeyframeMsg));
+    history_head_ = (history_head_ + 1) % history_.size();
+    history_count_ = std::min(history_count_ + 1, history_.size());
     keyframes_.pop();
   }
   status_.stamp = now;

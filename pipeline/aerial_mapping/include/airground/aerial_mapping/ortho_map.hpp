@@ -28,6 +28,7 @@ struct OrthoMapParams {
   int tile_cells{64};                // [cells] tile edge (64 x 0.5 m = 32 m)
   double elevation_gate_m{1.0};      // [m] colour/class accepted only this close to the cell's mean (ASOOM: 1 m)
   int min_points{4};                 // [points] a cell needs this many before it takes a class
+  int min_keyframe_points{3};        // [points] one keyframe's points in a cell below this are dropped (no robust median)
   int window_keyframes{256};         // keyframes kept re-binnable (>= the pose graph's free window)
   double rebuild_translation_m{0.2}; // [m] a keyframe moved further than this is re-binned
   double rebuild_rotation_rad{0.005};  // [rad] ... or turned by more than this
@@ -44,6 +45,7 @@ struct Cell {
   float rival_sum{0};       // [m x points]
   std::uint32_t rival_count{0};
   float best_cos{-2.0F};    // cosine to the optical axis of the accepted colour observation
+  float cls_cos{-2.0F};     // ... and of the accepted class observation (unknown ones never count)
   std::uint8_t r{0}, g{0}, b{0};
   std::uint8_t cls{255};    // class id, 255 unknown
   [[nodiscard]] float elevation() const noexcept { return count ? elevation_sum / static_cast<float>(count) : 0.0F; }

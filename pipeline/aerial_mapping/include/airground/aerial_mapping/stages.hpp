@@ -117,13 +117,15 @@ class PoseGraphStage final : public Stage {
 struct OrthoMapStageCounters {
   std::uint64_t keyframes_in{0}, pairs_matched{0}, pairs_refused{0}, segment_starts{0};
   double last_stereo_ms{0}, last_bin_ms{0};
+  double last_baseline_m{0};      // [m] of the last matched pair
+  double ground_depth_m{0};       // [m] median depth of the last matched pair's points
 };
 
 class OrthoMapStage final : public Stage {
  public:
   static constexpr ParamSpec kParams[] = {
       ParamSpec::integer("min_disparity", 1, 0, 256, "px", "block matching: smallest disparity (ASOOM: 1)"),
-      ParamSpec::integer("num_disparities", 112, 16, 256, "px", "block matching: disparity range, multiple of 16 (112: a 30 m roof under 40 m flight)"),
+      ParamSpec::integer("num_disparities", 160, 16, 256, "px", "block matching: disparity range, multiple of 16 (160: a 30 m roof at 50 m flight with a 6 m baseline)"),
       ParamSpec::integer("block_size", 9, 5, 31, "px", "block matching: odd SAD window (ASOOM: 9)"),
       ParamSpec::integer("prefilter_cap", 31, 1, 63, "", "block matching: x-Sobel prefilter clip"),
       ParamSpec::integer("texture_threshold", 10, 0, 10000, "", "block matching: minimum block texture"),
@@ -134,10 +136,13 @@ class OrthoMapStage final : public Stage {
       ParamSpec::real("min_depth_m", 1.0, 0.1, 1000.0, "m", "points nearer are dropped (ASOOM: 1)"),
       ParamSpec::real("max_depth_m", 150.0, 1.0, 10000.0, "m", "points further are dropped (ASOOM: 150)"),
       ParamSpec::real("min_baseline_m", 0.5, 0.01, 100.0, "m", "keyframe pairs closer than this are not matched"),
+      ParamSpec::real("baseline_depth_ratio", 0.12, 0.0, 1.0, "", "pair each keyframe with the earlier one whose baseline is nearest this x the ground depth (0 = the previous keyframe, ASOOM)"),
+      ParamSpec::integer("pair_history", 8, 1, 32, "keyframes", "earlier keyframes kept as stereo partners"),
       ParamSpec::real("resolution_m", 0.5, 0.05, 10.0, "m", "map cell size"),
       ParamSpec::integer("tile_cells", 64, 8, 1024, "cells", "tile edge"),
       ParamSpec::real("elevation_gate_m", 1.0, 0.05, 100.0, "m", "colour/class accepted only this close to the cell's mean elevation (ASOOM: 1)"),
       ParamSpec::integer("min_points", 4, 1, 10000, "points", "points a cell needs before it takes a class"),
+      ParamSpec::integer("min_keyframe_points", 3, 1, 1000, "points", "one keyframe's points in a cell below this are dropped"),
       ParamSpec::integer("window_keyframes", 256, 2, 512, "keyframes", "keyframes kept re-binnable after pose-graph corrections"),
       ParamSpec::real("rebuild_translation_m", 0.2, 0.0, 100.0, "m", "a keyframe moved further than this is re-binned (ASOOM: 2)"),
       ParamSpec::real("rebuild_rotation_rad", 0.005, 0.0, 3.2, "rad", "... or turned more than this (ASOOM: 0.1)"),
@@ -161,8 +166,11 @@ class OrthoMapStage final : public Stage {
   RingReader<KeyframeMsg, kKeyframeRing> keyframes_;
   LatestReader<KeyframePosesMsg> poses_;
   LatestWriter<MapStatusMsg> status_out_;
-  std::unique_ptr<KeyframeMsg> prev_;
-  bool have_prev_{false};
+  // Earlier keyframes (newest last), the candidates for the next keyframe's stereo partner.
+  std::vector<std::unique_ptr<KeyframeMsg>> history_;
+  std::size_t history_count_{0}, history_head_{0};  // ring over history_
+  double baseline_depth_ratio_{0.12};
+  std::vector<float> depth_scratch_;
   std::vector<MapPoint> points_;
   std::vector<std::pair<std::uint32_t, Eigen::Isometry3d>> corrections_;
   Eigen::Matrix3d body_from_camera_{Eigen::Matrix3d::Identity()};

@@ -1,0 +1,163 @@
+// The ortho-map's cells and tiles: elevation, class and colour rules, versions, and rebuilding only the
+// tiles a corrected keyframe touched.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <vector>
+
+#include "airground/aerial_mapping/ortho_map.hpp"
+
+namespace ag::mapping {
+namespace {
+
+Eigen::Isometry3d nadir_at(double x, double y, double z) {
+  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+  t.translation() = Eigen::Vector3d(x, y, z);
+  // camera z (optical axis) down, x east, y south
+  t.linear() << 1, 0, 0, 0, -1, 0, 0, 0, -1;
+  return t;
+}
+
+// A square of points on the plane z = h, 16 per 0.5 m cell, centred on (cx, cy), half-size r metres.
+std::vector<MapPoint> square(double cx, double cy, double r, double h, std::uint8_t cls, float cos_axis = 0.99F) {
+  std::vector<MapPoint> pts;
+  for (double y = cy - r + 0.0625; y < cy + r; y += 0.125)
+    for (double x = cx - r + 0.0625; x < cx + r; x += 0.125)
+      pts.push_back(MapPoint{static_cast<float>(x), static_cast<float>(y), static_cast<float>(h), 100, 110, 120, cls, cos_axis});
+  return pts;
+}
+
+TEST(OrthoMap, CellTakesTheMeanElevationAndTheClassOfTheMostCentralView) {
+  OrthoMap map;
+  map.add_keyframe(0, nadir_at(0, 0, 40), square(0, 0, 4, 1.0, 0, 0.90F));
+  map.add_keyframe(1, nadir_at(0, 0, 40), square(0, 0, 4, 1.4, 2, 0.99F));  // more central: its class wins
+  map.add_keyframe(2, nadir_at(0, 0, 40), square(0, 0, 4, 1.2, 1, 0.95F));
+  const Cell* c = map.cell_at(0.25, 0.25);
+  ASSERT_NE(c, nullptr);
+  EXPECT_NEAR(c->elevation(), 1.2, 1e-4);
+  EXPECT_EQ(c->count, 48u);
+  EXPECT_EQ(c->cls, 2);
+  EXPECT_EQ(map.cell_at(50, 50), nullptr);
+}
+
+TEST(OrthoMap, UnknownNeverOverwritesAClass) {
+  OrthoMap map;
+  map.add_keyframe(0, nadir_at(0, 0, 40), square(0, 0, 2, 0.0, 4, 0.5F));
+  map.add_keyframe(1, nadir_at(0, 0, 40), square(0, 0, 2, 0.0, 255, 1.0F));  // better view, but unknown
+  const Cell* c = map.cell_at(0.1, 0.1);
+  ASSERT_NE(c, nullptr);
+  EXPECT_EQ(c->cls, 4);
+  // ... while a known class from a better view does replace it.
+  map.add_keyframe(2, nadir_at(0, 0, 40), square(0, 0, 2, 0.0, 0, 1.0F));
+  EXPECT_EQ(map.cell_at(0.1, 0.1)->cls, 0);
+}
+
+TEST(OrthoMap, WrongMatchesInACellDoNotDragItsElevation) {
+  OrthoMap map;
+  auto pts = square(0, 0, 1, 2.0, 0);
+  // A quarter of the points of every cell 20 m too high (a wrong stereo match).
+  for (std::size_t i = 0; i < pts.size(); i += 4) pts[i].z = 22.0F;
+  map.add_keyframe(0, nadir_at(0, 0, 40), pts);
+  const Cell* c = map.cell_at(0.25, 0.25);
+  ASSERT_NE(c, nullptr);
+  EXPECT_NEAR(c->elevation(), 2.0, 1e-3);
+}
+
+TEST(OrthoMap, ClassNeedsMinPointsBeforeItIsSet) {
+  OrthoMapParams p;
+  p.min_points = 40;
+  OrthoMap map(p);
+  map.add_keyframe(0, nadir_at(0, 0, 40), square(0, 0, 1, 0.0, 2));  // 16 points per cell
+  EXPECT_EQ(map.cell_at(0.1, 0.1)->cls, 255);
+  map.add_keyframe(1, nadir_at(0, 0, 40), square(0, 0, 1, 0.0, 2));
+  map.add_keyframe(2, nadir_at(0, 0, 40), square(0, 0, 1, 0.0, 2));  // 48 now
+  EXPECT_EQ(map.cell_at(0.1, 0.1)->cls, 2);
+}
+
+// Keyframes along a line across four tiles (32 m each); then one keyframe's pose is corrected.
+TEST(OrthoMap, CorrectionRebuildsOnlyTheTilesTheMovedKeyframeTouched) {
+  OrthoMap map;
+  std::vector<std::pair<std::uint32_t, Eigen::Isometry3d>> poses;
+  for (std::uint32_t k = 0; k < 12; ++k) {
+    const double x = 4.0 + 10.0 * k;
+    const Eigen::Isometry3d pose = nadir_at(x, 10, 40);
+    map.add_keyframe(k, pose, square(x, 10, 3, 0.1 * k, static_cast<std::uint8_t>(k % 3)));
+    poses.emplace_back(k, pose);
+  }
+  std::map<std::uint64_t, std::uint64_t> versions;
+  map.for_each_tile([&](const Tile& t) { versions[t.key.packed()] = t.version; });
+  ASSERT_EQ(versions.size(), 4u);
+
+  // Unchanged poses: nothing is rebuilt.
+  EXPECT_EQ(map.correct(poses), 0u);
+  // Keyframe 7 (x = 74 m, in tile 2) moves 1.5 m east.
+  poses[7].second.translation().x() += 1.5;
+  const std::size_t rebuilt = map.correct(poses);
+  EXPECT_EQ(rebuilt, 1u);
+  std::size_t changed = 0;
+  map.for_each_tile([&](const Tile& t) {
+    if (t.version != versions[t.key.packed()]) {
+      ++changed;
+      EXPECT_EQ(t.key.tx, 2);
+    }
+  });
+  EXPECT_EQ(changed, 1u);
+
+  // The rebuilt map equals one built from scratch with the corrected poses.
+  OrthoMap fresh;
+  for (std::uint32_t k = 0; k < 12; ++k) {
+    const double x = 4.0 + 10.0 * k;
+    // points were given in the map frame at the old pose: they move with the keyframe
+    auto pts = square(x, 10, 3, 0.1 * k, static_cast<std::uint8_t>(k % 3));
+    if (k == 7)
+      for (auto& q : pts) q.x += 1.5F;
+    fresh.add_keyframe(k, poses[k].second, pts);
+  }
+  for (double x = 0.25; x < 125; x += 0.5)
+    for (double y = 6.25; y < 14; y += 0.5) {
+      const Cell* a = map.cell_at(x, y);
+      const Cell* b = fresh.cell_at(x, y);
+      ASSERT_EQ(a == nullptr, b == nullptr);
+      if (a == nullptr) continue;
+      EXPECT_EQ(a->count, b->count) << x << "," << y;
+      EXPECT_NEAR(a->elevation(), b->elevation(), 1e-4) << x << "," << y;
+      EXPECT_EQ(a->cls, b->cls) << x << "," << y;
+    }
+}
+
+TEST(OrthoMap, KeyframesLeavingTheWindowStayInTheMapAndMemoryIsBounded) {
+  OrthoMapParams p;
+  p.window_keyframes = 4;
+  OrthoMap map(p);
+  for (std::uint32_t k = 0; k < 10; ++k) map.add_keyframe(k, nadir_at(10.0 * k, 0, 40), square(10.0 * k, 0, 3, 1.0, 0));
+  EXPECT_EQ(map.window_size(), 4u);
+  EXPECT_EQ(map.stats().keyframes_frozen, 6u);
+  EXPECT_EQ(map.keyframe_pose(2), nullptr);       // frozen: no longer correctable
+  ASSERT_NE(map.keyframe_pose(8), nullptr);
+  ASSERT_NE(map.cell_at(0.25, 0.25), nullptr);    // ... but its cells are still mapped
+  EXPECT_EQ(map.cell_at(0.25, 0.25)->cls, 0);
+  EXPECT_NEAR(map.cell_at(0.25, 0.25)->elevation(), 1.0, 1e-5);
+}
+
+TEST(OrthoMap, RasterIsNorthUp) {
+  OrthoMap map;
+  map.add_keyframe(0, nadir_at(0, 0, 40), square(0, 5, 1, 3.0, 4));   // north: building
+  map.add_keyframe(1, nadir_at(0, 0, 40), square(0, -5, 1, 0.0, 0));  // south: road
+  const MapRaster r = map.raster();
+  ASSERT_GT(r.grid.height, 10);
+  // First and last classified rows.
+  int first = -1, last = -1;
+  for (int row = 0; row < r.grid.height; ++row)
+    for (int col = 0; col < r.grid.width; ++col) {
+      const std::uint8_t c = r.cls[static_cast<std::size_t>(row) * static_cast<std::size_t>(r.grid.width) + static_cast<std::size_t>(col)];
+      if (c == 255) continue;
+      if (first < 0) first = c;
+      last = c;
+    }
+  EXPECT_EQ(first, 4);  // row 0 is the north edge
+  EXPECT_EQ(last, 0);
+}
+
+}  // namespace
+}  // namespace ag::mapping
