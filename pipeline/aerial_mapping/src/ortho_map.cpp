@@ -5,6 +5,8 @@
 #include <cmath>
 #include <limits>
 
+#include "airground/core/classes.hpp"
+
 namespace ag::mapping {
 
 namespace {
@@ -15,6 +17,12 @@ std::int64_t floor_div(std::int64_t a, std::int64_t b) noexcept {
 }
 
 std::int64_t cell_index(double v, double inv_res) noexcept { return static_cast<std::int64_t>(std::floor(v * inv_res)); }
+
+// Tree, building and vehicle stand above the ground; the other classes are the ground itself.
+bool raised(std::uint8_t c) noexcept {
+  return c == raw(ClassId::kTree) || c == raw(ClassId::kBuilding) || c == raw(ClassId::kVehicle);
+}
+bool same_kind(std::uint8_t c, std::uint8_t cell) noexcept { return c != 255 && raised(c) == raised(cell); }
 
 double rotation_angle(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) noexcept {
   return Eigen::AngleAxisd(a.transpose() * b).angle();
@@ -140,17 +148,37 @@ void OrthoMap::add_keyframe(std::uint32_t id, const Eigen::Isometry3d& map_from_
   for (std::size_t cidx = 0; cidx < w * h; ++cidx) {
     const std::uint32_t b = start_[cidx], e = start_[cidx + 1];
     if (e - b < static_cast<std::uint32_t>(std::max(1, p_.min_keyframe_points))) continue;  // too few to trust
+    // The cell's class: the labelled point nearest the image centre.
+    std::uint8_t central = 255;
+    float central_cos = -2.0F;
+    for (std::uint32_t k = b; k < e; ++k) {
+      const MapPoint& m = points[order_[k]];
+      if (m.cls != 255 && m.cos_axis > central_cos) {
+        central_cos = m.cos_axis;
+        central = m.cls;
+      }
+    }
+    // Class-consistent height: when enough points carry a class of the same kind (raised: tree,
+    // building, vehicle; or flat) as the cell's, only they give its height. A roof edge projected a
+    // few decimetres into the road beside it then no longer lifts the road cell, nor the road the roof.
+    const bool group = p_.class_consistent_elevation && central != 255;
+    std::uint32_t same = 0;
+    if (group)
+      for (std::uint32_t k = b; k < e; ++k) same += same_kind(points[order_[k]].cls, central) ? 1U : 0U;
+    const bool use_group = group && same >= static_cast<std::uint32_t>(std::max(1, p_.min_keyframe_points));
+    auto counts = [&](const MapPoint& m) { return !use_group || same_kind(m.cls, central); };
     // Robust height: the median, then the mean of the points within the gate of it (a wrong stereo
     // match lands metres away and must not drag the cell).
     heights_.clear();
-    for (std::uint32_t k = b; k < e; ++k) heights_.push_back(points[order_[k]].z);
+    for (std::uint32_t k = b; k < e; ++k)
+      if (counts(points[order_[k]])) heights_.push_back(points[order_[k]].z);
     auto mid = heights_.begin() + static_cast<std::ptrdiff_t>(heights_.size() / 2);
     std::nth_element(heights_.begin(), mid, heights_.end());
     const double median = static_cast<double>(*mid);
     Acc& a = acc_[cidx];
     for (std::uint32_t k = b; k < e; ++k) {
       const MapPoint& m = points[order_[k]];
-      if (std::fabs(static_cast<double>(m.z) - median) > gate) continue;
+      if (!counts(m) || std::fabs(static_cast<double>(m.z) - median) > gate) continue;
       a.sx += static_cast<double>(m.x);
       a.sy += static_cast<double>(m.y);
       a.sz += static_cast<double>(m.z);

@@ -246,6 +246,7 @@ Status OrthoMapStage::init(StageContext& ctx) {
   mp.tile_cells = static_cast<int>(v.integer("tile_cells"));
   mp.elevation_gate_m = v.real("elevation_gate_m");
   mp.min_points = static_cast<int>(v.integer("min_points"));
+  mp.class_consistent_elevation = v.boolean("class_consistent_elevation");
   mp.min_keyframe_points = static_cast<int>(v.integer("min_keyframe_points"));
   mp.window_keyframes = static_cast<int>(v.integer("window_keyframes"));
   mp.rebuild_translation_m = v.real("rebuild_translation_m");

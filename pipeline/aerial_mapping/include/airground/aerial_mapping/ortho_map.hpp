@@ -28,6 +28,7 @@ struct OrthoMapParams {
   int tile_cells{64};                // [cells] tile edge (64 x 0.5 m = 32 m)
   double elevation_gate_m{1.0};      // [m] colour/class accepted only this close to the cell's mean (ASOOM: 1 m)
   int min_points{4};                 // [points] a cell needs this many before it takes a class
+  bool class_consistent_elevation{true};  // a cell's height from the points of its own kind (raised or flat) when enough
   int min_keyframe_points{3};        // [points] one keyframe's points in a cell below this are dropped (no robust median)
   int window_keyframes{256};         // keyframes kept re-binnable (>= the pose graph's free window)
   double rebuild_translation_m{0.2}; // [m] a keyframe moved further than this is re-binned

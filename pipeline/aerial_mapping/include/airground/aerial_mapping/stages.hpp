@@ -142,6 +142,7 @@ class OrthoMapStage final : public Stage {
       ParamSpec::integer("tile_cells", 64, 8, 1024, "cells", "tile edge"),
       ParamSpec::real("elevation_gate_m", 1.0, 0.05, 100.0, "m", "colour/class accepted only this close to the cell's mean elevation (ASOOM: 1)"),
       ParamSpec::integer("min_points", 4, 1, 10000, "points", "points a cell needs before it takes a class"),
+      ParamSpec::boolean("class_consistent_elevation", true, "a cell's height from its points of the same kind (raised: tree, building, vehicle; or flat) as its class"),
       ParamSpec::integer("min_keyframe_points", 3, 1, 1000, "points", "one keyframe's points in a cell below this are dropped"),
       ParamSpec::integer("window_keyframes", 256, 2, 512, "keyframes", "keyframes kept re-binnable after pose-graph corrections"),
       ParamSpec::real("rebuild_translation_m", 0.2, 0.0, 100.0, "m", "a keyframe moved further than this is re-binned (ASOOM: 2)"),
