@@ -64,6 +64,33 @@ TEST(OrthoMap, WrongMatchesInACellDoNotDragItsElevation) {
   EXPECT_NEAR(c->elevation(), 2.0, 1e-3);
 }
 
+// A road cell beside a wall: most of its points in this keyframe are roof points projected a little
+// too far (labelled building, 10 m up), the most central labelled point is road.
+std::vector<MapPoint> road_cell_with_roof_spill() {
+  std::vector<MapPoint> pts;
+  for (int i = 0; i < 20; ++i) {
+    const float x = 0.05F + 0.02F * static_cast<float>(i), y = 0.25F;
+    const bool roof = i % 5 < 3;  // 60 %
+    pts.push_back(MapPoint{x, y, roof ? 10.0F : 0.0F, 90, 90, 90, static_cast<std::uint8_t>(roof ? 4 : 0), roof ? 0.97F : 0.99F});
+  }
+  return pts;
+}
+
+TEST(OrthoMap, CellHeightComesFromThePointsOfItsOwnKind) {
+  OrthoMap map;
+  map.add_keyframe(0, nadir_at(0, 0, 40), road_cell_with_roof_spill());
+  const Cell* c = map.cell_at(0.25, 0.25);
+  ASSERT_NE(c, nullptr);
+  EXPECT_EQ(c->cls, 0);
+  EXPECT_NEAR(c->elevation(), 0.0, 1e-4);
+  // ASOOM's rule (every point counts) takes the roof's height for the road.
+  OrthoMapParams p;
+  p.class_consistent_elevation = false;
+  OrthoMap plain(p);
+  plain.add_keyframe(0, nadir_at(0, 0, 40), road_cell_with_roof_spill());
+  EXPECT_NEAR(plain.cell_at(0.25, 0.25)->elevation(), 10.0, 1e-4);
+}
+
 TEST(OrthoMap, ClassNeedsMinPointsBeforeItIsSet) {
   OrthoMapParams p;
   p.min_points = 40;
