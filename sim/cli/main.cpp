@@ -428,8 +428,9 @@ int eval_mapping_cmd(const Args& a) {
               r.georeg_error_m, r.scale_error, static_cast<unsigned long long>(r.keyframes), static_cast<unsigned long long>(r.tiles),
               static_cast<unsigned long long>(r.tiles_rebuilt), static_cast<unsigned long long>(r.gps_rejected),
               static_cast<unsigned long long>(r.vo_segments));
-  std::printf("stages: pose_graph p99 %.1f ms, ortho_map p99 %.1f ms, overruns %llu; resident %.0f MB; %.0f s simulated in %.0f s\n",
-              r.pose_graph_p99_ms, r.ortho_map_p99_ms, static_cast<unsigned long long>(r.stage_overruns), r.resident_mb, r.sim_s, r.wall_s);
+  std::printf("stages: pose_graph p99 %.1f ms, ortho_map p99 %.1f ms, overruns %llu; resident %.0f MB (grew %.0f MB while mapping; map %.0f MB); %.0f s simulated in %.0f s\n",
+              r.pose_graph_p99_ms, r.ortho_map_p99_ms, static_cast<unsigned long long>(r.stage_overruns), r.resident_mb,
+              r.resident_growth_mb, r.map_memory_mb, r.sim_s, r.wall_s);
   std::printf("metrics: %s/metrics.json\n", o.out_dir.c_str());
   return 0;
 }

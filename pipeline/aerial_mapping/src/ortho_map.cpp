@@ -218,6 +218,17 @@ void OrthoMap::freeze_oldest() {
   ++stats_.keyframes_frozen;
 }
 
+std::size_t OrthoMap::memory_bytes() const noexcept {
+  std::size_t n = tiles_.bucket_count() * sizeof(void*);
+  for (const auto& [k, t] : tiles_)
+    n += sizeof(Tile) + 32 + (t->base.capacity() + t->live.capacity()) * sizeof(Cell);
+  n += window_.capacity() * sizeof(Patch);
+  for (const Patch& p : window_) n += p.cells.capacity() * sizeof(PatchCell) + p.tiles.capacity() * sizeof(std::uint64_t);
+  n += (acc_.capacity() * sizeof(Acc)) + (start_.capacity() + fill_.capacity() + order_.capacity()) * sizeof(std::uint32_t) +
+       heights_.capacity() * sizeof(float);
+  return n;
+}
+
 const Eigen::Isometry3d* OrthoMap::keyframe_pose(std::uint32_t id) const noexcept {
   const auto it = std::lower_bound(window_.begin(), window_.end(), id, [](const Patch& p, std::uint32_t v) { return p.id < v; });
   return (it != window_.end() && it->id == id) ? &it->pose : nullptr;

@@ -40,7 +40,9 @@ struct MappingMetrics {
   std::uint64_t gps_rejected{0}, vo_segments{0}, stage_overruns{0};
   double sim_s{0}, wall_s{0};
   double pose_graph_p99_ms{0}, ortho_map_p99_ms{0};  // stage step times, thread CPU
-  double resident_mb{0};            // process resident set at the end
+  double resident_mb{0};            // process resident set at the end (simulator world, sensors and the UAV stages)
+  double resident_growth_mb{0};     // resident set at the end minus after the first 2 s of flight: what the UAV stages grew by
+  double map_memory_mb{0};          // the ortho-map's tiles and keyframe window, counted by the map
 };
 
 // Runs the evaluation and writes DIR/metrics.json, DIR/report.md, the map PNGs and GeoTIFFs.

@@ -112,6 +112,8 @@ class OrthoMap {
   // The pose a keyframe in the window was last binned with (nullptr once it left the window).
   [[nodiscard]] const Eigen::Isometry3d* keyframe_pose(std::uint32_t id) const noexcept;
   [[nodiscard]] std::size_t window_size() const noexcept { return window_.size(); }
+  // Heap bytes held by the tiles and the window's patches (what grows with the area and the flight).
+  [[nodiscard]] std::size_t memory_bytes() const noexcept;
 
   // North-up raster of the live layers over the mapped extent, or over `grid`.
   [[nodiscard]] MapRaster raster() const;
