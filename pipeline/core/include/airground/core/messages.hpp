@@ -93,4 +93,84 @@ struct MapStatusMsg {
   bool initialised{false};         // pose graph georeferenced
 };
 
+// ------------------------------------------------------------------------------------ map tiles
+
+// The aerial map travels as tiles of kTileCells x kTileCells cells of kMapResolutionM (DESIGN.md §4):
+// tile (tx, ty) covers map-frame x in [tx, tx + 1) * kTileCells * kMapResolutionM, likewise y.
+inline constexpr int kTileCells = 64;
+inline constexpr double kMapResolutionM = 0.5;
+inline constexpr std::size_t kTileCellCount = static_cast<std::size_t>(kTileCells) * kTileCells;
+inline constexpr std::size_t kMapTileRing = 64;
+
+// Channel "map_tiles" (ring): one changed tile of the aerial map (from the mapper on the quadrotor, from
+// gossip on the others). Cells row-major from the SOUTH-west corner (row = north index, col = east index).
+struct MapTileMsg {
+  TimeNs stamp{0};             // [ns] when the tile last changed
+  TimeNs published{0};
+  std::int32_t tx{0}, ty{0};   // tile index east, north
+  std::uint64_t version{0};    // the tile's version: newer replaces older
+  std::array<std::uint8_t, kTileCellCount> cls{};  // class id, 255 unknown
+  std::array<float, kTileCellCount> elevation{};   // [m] map frame, NaN where unknown
+};
+
+// ------------------------------------------------------------------------------ the ground robot
+
+inline constexpr std::size_t kMaxScanPoints = 64 * 2048;  // Ouster OS-1-64 at its densest mode
+inline constexpr std::size_t kLidarRing = 2;
+inline constexpr std::size_t kWheelOdometryRing = 128;
+
+// One return of an organised LiDAR scan; pixels without a return are absent.
+struct ScanReturn {
+  float x{0}, y{0}, z{0};    // [m] sensor frame (x forward, y left, z up)
+  float range{0};            // [m]
+  std::uint8_t cls{255};     // class id when the driver or a labeller knows it, else 255
+  std::uint16_t ring{0};     // beam, 0 = top
+  std::uint16_t col{0};      // measurement column
+};
+
+// Channel "lidar_scan" (ring): one revolution.
+struct LidarScanMsg {
+  TimeNs stamp{0};           // [ns] of the revolution (motion within it is not compensated)
+  TimeNs published{0};
+  std::uint32_t seq{0};
+  std::uint16_t rings{0}, columns{0};
+  LabelSource labels{LabelSource::kNone};  // whether `cls` is set
+  Pose3 sensor_in_body;      // [m, rad] mount of the sensor on the robot
+  std::uint32_t count{0};    // valid entries of points
+  std::array<ScanReturn, kMaxScanPoints> points{};
+};
+
+// Channel "wheel_odometry" (ring): the base's integrated odometry.
+struct WheelOdometryMsg {
+  TimeNs stamp{0};
+  TimeNs published{0};
+  Pose2 pose;                // [m, rad] in the odometry frame (fixed at start-up)
+  double v_mps{0}, w_radps{0};
+  bool moving{false};        // the wheels turned since the previous sample
+};
+
+// Channel "initial_pose" (latest value): a guess of the robot's pose in the map frame, from the mission
+// file, an operator or a team-mate (like nav2's /initialpose). A new stamp re-initialises the localizer.
+struct InitialPoseMsg {
+  TimeNs stamp{0};
+  TimeNs published{0};
+  Pose2 pose;                // [m, rad] map frame
+  double sigma_xy_m{16};     // [m] how far off it may be
+  double sigma_yaw_rad{0.5};
+};
+
+enum class LocalizationStatus : std::uint8_t { kNoMap = 0, kInitialising = 1, kTracking = 2, kLost = 3 };
+
+// Channel "localization" (latest value): the robot's pose in the map frame at 10 Hz.
+struct LocalizationMsg {
+  TimeNs stamp{0};
+  TimeNs published{0};
+  LocalizationStatus status{LocalizationStatus::kNoMap};
+  Pose2 pose;                // [m, rad] map frame
+  std::array<double, 9> covariance{};  // [m^2, m rad, rad^2] x, y, yaw row-major
+  double spread_m{0};        // [m] the filter's particle spread
+  std::uint32_t particles{0};
+  std::uint32_t updates{0};  // filter updates so far
+};
+
 }  // namespace ag
