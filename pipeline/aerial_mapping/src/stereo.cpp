@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
+#include <limits>
 #include <stdexcept>
 
 #include "stereo_internal.hpp"
@@ -32,6 +34,66 @@ int checked_camera_size(const PinholeCamera& c) {
   return c.width;
 }
 
+constexpr std::int16_t kNoDisparity = std::numeric_limits<std::int16_t>::max();
+#if defined(__AVX2__)
+constexpr int kMinLanes = 16;
+#else
+constexpr int kMinLanes = 8;  // one SSE2/NEON register (a wider vector would change the ABI of the helpers)
+#endif
+using S16 = std::int16_t __attribute__((vector_size(2 * kMinLanes)));
+
+[[gnu::always_inline]] inline S16 load16(const std::int16_t* p) noexcept {
+  S16 v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+[[gnu::always_inline]] inline void store16(std::int16_t* p, const S16& v) noexcept { std::memcpy(p, &v, sizeof v); }
+[[gnu::always_inline]] inline S16 vmin(const S16& a, const S16& b) noexcept { return a < b ? a : b; }
+
+// dst = minimum of the positive values of src over the (2r+1)^2 window around each pixel (clipped at
+// the image border), kNoDisparity where there is none; tmp: width * height, pad: width + 2 * r +
+// kMinLanes. dst may be src.
+void window_min(const std::int16_t* src, int width, int height, int r, std::int16_t* tmp, std::int16_t* dst,
+                std::int16_t* pad) {
+  const std::size_t w = sz(width), rr = sz(r);
+  std::fill(pad, pad + w + 2 * rr + kMinLanes, kNoDisparity);
+  const S16 zero = S16{}, none = S16{} + kNoDisparity;
+  for (int y = 0; y < height; ++y) {
+    const std::int16_t* in = src + sz(y) * w;
+    std::size_t x = 0;
+    for (; x + kMinLanes <= w; x += kMinLanes) {
+      const S16 v = load16(in + x);
+      store16(pad + rr + x, v > zero ? v : none);
+    }
+    for (; x < w; ++x) pad[rr + x] = in[x] > 0 ? in[x] : kNoDisparity;
+    std::int16_t* out = tmp + sz(y) * w;
+    for (x = 0; x < w; x += kMinLanes) {  // the last vector may spill into pad's tail
+      S16 acc = load16(pad + x);
+      for (std::size_t k = 1; k <= 2 * rr; ++k) acc = vmin(acc, load16(pad + x + k));
+      if (x + kMinLanes <= w) {
+        store16(out + x, acc);
+      } else {
+        for (std::size_t l = 0; x + l < w; ++l) out[x + l] = acc[l];
+      }
+    }
+  }
+  for (int y = 0; y < height; ++y) {
+    std::int16_t* out = dst + sz(y) * w;
+    const int y0 = std::max(0, y - r), y1 = std::min(height - 1, y + r);
+    std::size_t x = 0;
+    for (; x + kMinLanes <= w; x += kMinLanes) {
+      S16 acc = load16(tmp + sz(y0) * w + x);
+      for (int yy = y0 + 1; yy <= y1; ++yy) acc = vmin(acc, load16(tmp + sz(yy) * w + x));
+      store16(out + x, acc);
+    }
+    for (; x < w; ++x) {
+      std::int16_t acc = tmp[sz(y0) * w + x];
+      for (int yy = y0 + 1; yy <= y1; ++yy) acc = std::min(acc, tmp[sz(yy) * w + x]);
+      out[x] = acc;
+    }
+  }
+}
+
 }  // namespace
 
 struct DenseStereo::Impl {
@@ -46,6 +108,8 @@ struct DenseStereo::Impl {
         matcher(p, max_width, max_height) {
     if (p.border_dilate_px < 0 || !(p.min_depth_m >= 0.0) || !(p.max_depth_m > p.min_depth_m) || !(p.min_baseline_m >= 0.0))
       throw std::invalid_argument("StereoParams: border_dilate_px >= 0, 0 <= min_depth_m < max_depth_m, min_baseline_m >= 0");
+    if (p.edge_margin_px < 0 || p.edge_margin_px > 64 || p.edge_jump_px < 0 || p.edge_jump_px > 1000)
+      throw std::invalid_argument("StereoParams: edge_margin_px in [0, 64], edge_jump_px in [0, 1000]");
     const std::size_t src = sz(c.width) * sz(c.height), cap = sz(max_width) * sz(max_height);
     grey_ref.assign(src, 0);
     grey_other.assign(src, 0);
@@ -54,6 +118,12 @@ struct DenseStereo::Impl {
     map_other.reserve(2 * cap);
     raw.reserve(cap);
     disp.reserve(cap);
+    if (p.edge_margin_px > 0) {
+      wa.reserve(cap);
+      wb.reserve(cap);
+      wt.reserve(cap);
+      pad16.assign(sz(max_width) + 2 * sz(p.edge_margin_px) + sz(kMinLanes), 0);
+    }
     pad.assign(sz(max_width) + 2 * sz(std::max(p.border_dilate_px, 0)) + 64, 0);
     scratch.assign(2 * sz(max_width + detail::kRectifyLanes), 0.0f);
   }
@@ -69,6 +139,7 @@ struct DenseStereo::Impl {
   std::vector<std::uint8_t> rect_ref, rect_other, invalid_ref, invalid_other, valid_ref, valid_other, tmp;
   std::vector<float> map_ref, map_other;
   std::vector<std::int16_t> raw, disp;
+  std::vector<std::int16_t> wa, wb, wt, pad16;  // edge guard: window minima and scratch
   std::vector<std::uint8_t> pad;
   std::vector<float> scratch;
 };
@@ -84,6 +155,8 @@ Result<std::size_t> DenseStereo::compute(const StereoImage& prev, const StereoIm
   out.clear();
   ++m.stats.pairs;  // every pair offered, refused ones included
   m.stats.valid_disparities = 0;
+  m.stats.lr_rejected = 0;
+  m.stats.edge_rejected = 0;
   if (prev.rgb == nullptr || cur.rgb == nullptr || cur.cls == nullptr) {
     ++m.stats.refused;
     return Error::make(ErrorCode::kInvalidArgument, "stereo pair: missing image data");
@@ -141,6 +214,48 @@ Result<std::size_t> DenseStereo::compute(const StereoImage& prev, const StereoIm
       valid += ok ? 1u : 0u;
     }
   }
+  m.stats.lr_rejected = m.matcher.lr_rejected();
+  m.stats.edge_rejected = 0;
+  const auto t_edge = std::chrono::steady_clock::now();
+  if (p.edge_margin_px > 0) {
+    // Foreground fattening: near a depth edge the block straddles both surfaces and the one with more
+    // texture wins, so the foreground's disparity spreads up to half a block over the background (in
+    // the reference image where the background is visible in both views, in the other image's columns
+    // where the background beside the foreground is occluded in the other view and the spread pixels
+    // border the unmatched occlusion). Drop every disparity more than edge_jump_px above the smallest
+    // one within edge_margin_px, in both images' columns.
+    const int r = p.edge_margin_px, jump = 16 * p.edge_jump_px;
+    m.wa.resize(n);
+    m.wb.resize(n);
+    m.wt.resize(n);
+    // wb: window minimum in the reference's columns; wa: the same in the other image's columns.
+    window_min(m.disp.data(), w, h, r, m.wt.data(), m.wb.data(), m.pad16.data());
+    std::fill(m.wa.begin(), m.wa.end(), kNoDisparity);
+    for (int y = 0; y < h; ++y) {
+      const std::size_t row = sz(y) * sz(w);
+      for (int x = 0; x < w; ++x) {
+        const std::int16_t d = m.disp[row + sz(x)];
+        if (d <= 0) continue;
+        std::int16_t& o = m.wa[row + sz(x - (d + 8) / 16)];  // the border mask keeps the column >= 0
+        o = std::min(o, d);
+      }
+    }
+    window_min(m.wa.data(), w, h, r, m.wt.data(), m.wa.data(), m.pad16.data());
+    std::uint64_t dropped = 0;
+    for (int y = 0; y < h; ++y) {
+      const std::size_t row = sz(y) * sz(w);
+      for (int x = 0; x < w; ++x) {
+        std::int16_t& d = m.disp[row + sz(x)];
+        if (d <= 0) continue;
+        if (d - m.wb[row + sz(x)] > jump || d - m.wa[row + sz(x - (d + 8) / 16)] > jump) {
+          d = -1;
+          ++dropped;
+        }
+      }
+    }
+    valid -= dropped;
+    m.stats.edge_rejected = dropped;
+  }
   m.stats.valid_disparities = valid;
   const auto t2 = std::chrono::steady_clock::now();
 
@@ -190,6 +305,7 @@ Result<std::size_t> DenseStereo::compute(const StereoImage& prev, const StereoIm
   if (timing != nullptr) {
     timing->rectify_ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
     timing->match_ms = std::chrono::duration<double, std::milli>(t2 - t1).count();
+    timing->edge_ms = std::chrono::duration<double, std::milli>(t2 - t_edge).count();
     timing->project_ms = ms_since(t2);
   }
   return out.size();

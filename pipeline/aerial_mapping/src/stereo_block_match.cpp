@@ -62,6 +62,10 @@ BlockMatcher::BlockMatcher(const StereoParams& params, int max_width, int max_he
   colsad_.assign(sz(max_width) * sz(ndisp_), 0);
   sad_.assign(sz(ndisp_), 0);
   coltex_.assign(sz(max_width), 0);
+  if (p_.lr_max_diff >= 0) {
+    rcost_.assign(sz(max_width) + sz(kLanes), 0);
+    rcol_.assign(sz(max_width) + sz(kLanes), 0);
+  }
   labels_.assign(n, 0);
   stack_.assign(n, 0);
   small_.assign(n + 1, 0);
@@ -106,6 +110,7 @@ void BlockMatcher::match(int width, int height, std::int16_t* disp) {
   const int nd = ndisp_, maxd = max_disp_, half = half_, bs = p_.block_size;
   const int cap = p_.prefilter_cap;
   std::fill(disp, disp + sz(width) * sz(height), filtered_);
+  lr_rejected_ = 0;
   // StereoBM's valid window (getValidDisparityROI): full blocks in both images for every disparity.
   const int x_lo = maxd + half, x_hi = width - half;
   const int y_lo = half, y_hi = height - half;
@@ -118,6 +123,9 @@ void BlockMatcher::match(int width, int height, std::int16_t* disp) {
   std::uint16_t* const sad = sad_.data();
   const std::uint8_t* const L = pre_left_.data();
   const std::uint8_t* const R = pre_right_.data();
+  const bool lr = p_.lr_max_diff >= 0;
+  std::uint16_t* const rcost = rcost_.data();
+  std::uint16_t* const rcol = rcol_.data();
   std::memset(cs, 0, sz(ncols) * sz(nd) * sizeof(std::uint16_t));
   std::fill(tex, tex + ncols, 0);
 
@@ -163,6 +171,10 @@ void BlockMatcher::match(int width, int height, std::int16_t* disp) {
   for (int y = y_lo; y < y_hi; ++y) {
     if (y > y_lo) update(y + half, y - half - 1);
     std::int16_t* drow = disp + sz(y) * sz(width);
+    if (lr) {
+      std::fill(rcost, rcost + width, std::numeric_limits<std::uint16_t>::max());
+      std::fill(rcol, rcol + width, std::uint16_t{0});
+    }
     // Block sums at the first valid column.
     std::memset(sad, 0, sz(nd) * sizeof(std::uint16_t));
     int tsum = 0;
@@ -180,6 +192,20 @@ void BlockMatcher::match(int width, int height, std::int16_t* disp) {
         tsum += tex[i + bs - 1] - tex[i - 1];
       }
       if (tsum < p_.texture_threshold) continue;
+      if (lr) {
+        // The right image's winner take all, from the same SAD vector: lane k is right column
+        // x - maxd + k at disparity maxd - k; keep the least SAD per right column and where it came from.
+        std::uint16_t* rc = rcost + (x - maxd);
+        std::uint16_t* rx = rcol + (x - maxd);
+        const U16 xv = U16{} + static_cast<std::uint16_t>(x);
+        for (int k = 0; k < nd; k += kLanes) {
+          const U16 s = load<U16>(sad + k);
+          const U16 c = load<U16>(rc + k);
+          const auto lt = s < c;
+          store(rc + k, lt ? s : c);
+          store(rx + k, lt ? xv : load<U16>(rx + k));
+        }
+      }
       // Winner take all: the smallest SAD, the first index (largest disparity) among equals.
       U16 mv = load<U16>(sad);
       U16 mi = U16{};
@@ -210,6 +236,23 @@ void BlockMatcher::match(int width, int height, std::int16_t* disp) {
       const int m = best > 0 ? sad[best - 1] : sad[1];
       const int dd = p + m - 2 * static_cast<int>(sad[best]) + std::abs(p - m);
       drow[x] = static_cast<std::int16_t>(((maxd - best) * 256 + (dd != 0 ? (p - m) * 256 / dd : 0) + 15) >> 4);
+    }
+    if (lr) {
+      // SGBM's disp12MaxDiff test at the two integer disparities around the sub-pixel one.
+      const int maxdiff = p_.lr_max_diff;
+      const auto disagrees = [&](int xr, int d) {
+        if (xr < 0 || xr >= width || rcol[xr] == 0) return false;
+        return std::abs(static_cast<int>(rcol[xr]) - xr - d) > maxdiff;
+      };
+      for (int x = x_lo; x < x_hi; ++x) {
+        const int d16 = drow[x];
+        if (d16 == filtered_) continue;
+        const int d_lo = d16 >> 4, d_hi = (d16 + 15) >> 4;
+        if (disagrees(x - d_lo, d_lo) && disagrees(x - d_hi, d_hi)) {
+          drow[x] = filtered_;
+          ++lr_rejected_;
+        }
+      }
     }
   }
 }

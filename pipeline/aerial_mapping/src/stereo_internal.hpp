@@ -28,9 +28,10 @@ struct RectifyRotations {
 
 // Chooses the rectified image window of a pair: focal length = camera.fx, rows = where both cameras'
 // content overlaps (+ block margin), columns = the reference content that a disparity in
-// [min_disparity, max_disparity] can match, shifted right by the matcher's dead band (max disparity +
-// half block) so that StereoBM's first valid column falls on the first matchable column. The window is
-// clamped to max_width x max_height. Errors when the pair cannot overlap.
+// [min_disparity, max_disparity] whose depth f * baseline / d is in [min_depth_m, max_depth_m] can
+// match, shifted right by the matcher's dead band (max disparity + half block) so that StereoBM's first
+// valid column falls on the first matchable column. The window is clamped to max_width x max_height.
+// Errors when the pair cannot overlap.
 Result<RectifiedGeometry> plan_rectification(const PinholeCamera& camera, const StereoParams& params,
                                              int max_width, int max_height,
                                              const Eigen::Isometry3d& map_from_reference,
@@ -62,7 +63,12 @@ void dilate_invalid(const std::uint8_t* invalid, int width, int height, int radi
 
 // StereoBM with PREFILTER_XSOBEL on two rectified grey images of up to max_width x max_height, the same
 // results as cv::StereoBM::compute into CV_16S (1/16 px, invalid = (min_disparity - 1) * 16) followed by
-// its filterSpeckles, with speckle range speckle_range * 16. Every buffer is allocated in the constructor.
+// its filterSpeckles, with speckle range speckle_range * 16 -- when lr_max_diff < 0. With lr_max_diff >= 0
+// a left-right consistency check (cv::StereoSGBM's disp12MaxDiff) runs between matching and the speckle
+// filter: the right image's disparity at column x_r is the d minimising SAD(x_r + d, d) over the textured
+// left blocks (taken from the same SAD vectors, no second match), and a left disparity d (1/16 px) is
+// invalidated when the right disparities at both x - floor(d) and x - ceil(d) exist and differ from
+// floor(d) resp. ceil(d) by more than lr_max_diff. Every buffer is allocated in the constructor.
 class BlockMatcher {
  public:
   BlockMatcher(const StereoParams& params, int max_width, int max_height);
@@ -70,6 +76,8 @@ class BlockMatcher {
   // left, right: width x height grey, row-major, no padding; disp: width x height.
   void compute(const std::uint8_t* left, const std::uint8_t* right, int width, int height, std::int16_t* disp);
   [[nodiscard]] std::int16_t filtered_value() const noexcept { return filtered_; }
+  // Left disparities the left-right check removed in the last compute() (before the speckle filter).
+  [[nodiscard]] std::uint64_t lr_rejected() const noexcept { return lr_rejected_; }
 
  private:
   void prefilter(const std::uint8_t* src, int width, int height, std::uint8_t* dst) const;
@@ -80,10 +88,13 @@ class BlockMatcher {
   int max_width_, max_height_;
   int ndisp_, max_disp_, half_;
   std::int16_t filtered_;
+  std::uint64_t lr_rejected_{0};
   std::vector<std::uint8_t> pre_left_, pre_right_;
   std::vector<std::uint16_t> colsad_;   // [column][disparity index] vertical SAD sums of the current row band
   std::vector<std::uint16_t> sad_;      // [disparity index] the sliding block SAD
   std::vector<std::int32_t> coltex_;    // [column] vertical sums of |prefiltered - cap|
+  std::vector<std::uint16_t> rcost_;    // left-right check, per right column of the current row: least SAD
+  std::vector<std::uint16_t> rcol_;     //   and the left column it came from (0 = none)
   std::vector<std::uint32_t> labels_;   // speckle filter: region label per pixel (0 = none)
   std::vector<std::uint32_t> stack_;    // speckle filter: wavefront of pixel indices
   std::vector<std::uint8_t> small_;     // speckle filter: per label, 1 = region too small

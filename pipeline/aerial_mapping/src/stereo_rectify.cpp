@@ -142,7 +142,12 @@ Result<RectifiedGeometry> plan_rectification(const PinholeCamera& camera, const 
   if (!border_box(camera, g.rect_from_reference, g.f, a) || !border_box(camera, g.rect_from_other, g.f, b))
     return no_overlap("a camera looks more than 84 degrees away from the rectified axis (baseline along the view?)");
   const double y0 = std::max(a.y0, b.y0), y1 = std::min(a.y1, b.y1);
-  const double left = std::max(a.x0, b.x0 + min_d), right = std::min(a.x1, b.x1 + max_d);
+  // Reference columns x match other columns x - d; only disparities that give a depth in
+  // [min_depth_m, max_depth_m] matter (with a long baseline the far limit cuts the smallest ones).
+  const double d_lo = std::max(static_cast<double>(min_d), g.f * g.baseline_m / params.max_depth_m);
+  const double d_hi = params.min_depth_m > 0.0 ? std::min(static_cast<double>(max_d), g.f * g.baseline_m / params.min_depth_m)
+                                               : static_cast<double>(max_d);
+  const double left = std::max(a.x0, b.x0 + d_lo), right = std::min(a.x1, b.x1 + d_hi);
   if (y1 - y0 < params.block_size || right - left < params.block_size)
     return no_overlap("the rectified images share no block (rows " + std::to_string(y0) + ".." + std::to_string(y1) +
                       ", columns " + std::to_string(left) + ".." + std::to_string(right) + ")");

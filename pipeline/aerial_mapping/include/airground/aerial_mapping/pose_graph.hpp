@@ -1,5 +1,7 @@
 // The ASOOM pose graph on Ceres: one node per camera frame (body pose in the map frame), odometry
-// between-factors whose translation is multiplied by the scale of the frame's odometry segment,
+// between-factors whose translation is multiplied by the scale of the frame's odometry segment at the
+// frame's time (monocular scale drifts: a log-scale knot every scale_knot_s seconds of the segment, tied
+// to the previous knot by a random-walk prior),
 // roll/pitch factors from the gravity-aligned odometry, and position-only GPS factors interpolated to
 // frame times with a sigma that grows with the gap. After a tracking loss the odometry restarts in a new
 // segment (own origin, yaw and scale): no between-factor links it to the previous one, GPS places it.
@@ -32,6 +34,12 @@ struct PoseGraphParams {
   int min_gps_fixes{3};               // GPS fixes a segment needs before it counts as initialised
   double min_gps_baseline_m{4.0};     // [m] spread of those fixes (scale and yaw need motion)
   int max_iterations{30};             // Levenberg-Marquardt iterations per solve
+  // Drifting monocular scale: piecewise-constant log-scale, one knot per scale_knot_s of a segment, each
+  // between-factor on the knot of its time; consecutive knots tied by a random-walk prior of sigma
+  // scale_drift_per_sqrt_s x sqrt(scale_knot_s). scale_knot_s = 0: one scale per segment (ASOOM).
+  // 1, 2, 5 and 10 s measured alike (the random-walk prior sets how fast the scale may move).
+  double scale_knot_s{2.0};           // [s] knot spacing; 0 = one scale per segment
+  double scale_drift_per_sqrt_s{0.002};  // [1/sqrt(s)] random walk of the odometry's log-scale
 };
 
 using NodeId = std::int64_t;
@@ -51,6 +59,8 @@ struct PoseGraphStats {
   double last_final_cost{0};
   std::uint64_t last_free_nodes{0};   // nodes the last solve could move (<= window_frames, except a new segment's first solve)
   std::uint64_t last_iterations{0};   // Levenberg-Marquardt iterations of the last solve
+  std::uint64_t last_free_knots{0};   // log-scale knots the last solve could move
+  std::uint64_t scale_knots{0};       // log-scale knots in all segments
 };
 
 class PoseGraph {
@@ -84,7 +94,11 @@ class PoseGraph {
   [[nodiscard]] Eigen::Isometry3d pose(NodeId node) const noexcept;
   [[nodiscard]] TimeNs stamp(NodeId node) const noexcept;
   [[nodiscard]] std::uint32_t segment_of(NodeId node) const noexcept;
-  [[nodiscard]] double scale(std::uint32_t segment) const noexcept;  // [m per odometry unit]
+  // [m per odometry unit] the segment's current scale: its newest knot (0 for an unknown segment).
+  [[nodiscard]] double scale(std::uint32_t segment) const noexcept;
+  // [m per odometry unit] the scale the node's odometry step (from the previous node) is multiplied by;
+  // 0 for an undefined node id.
+  [[nodiscard]] double scale_at(NodeId node) const noexcept;
   [[nodiscard]] std::size_t size() const noexcept;                   // nodes
   [[nodiscard]] NodeId last() const noexcept;                        // newest node or kNoNode
   [[nodiscard]] const PoseGraphStats& stats() const noexcept;
