@@ -1,0 +1,118 @@
+// Aerial class distance fields: for every channel, the truncated Euclidean distance from each cell of
+// the aerial class map to the nearest cell that is a source of the channel, quantised to one byte.
+//
+// The map arrives as ortho-map tiles (tile_cells^2 class ids, row 0 at the south edge, tile (0, 0)
+// starting at the map-frame origin) over a fixed extent given in tiles (the mission area). A changed
+// tile only recomputes the fields within the truncation distance of it: an exact two-pass transform
+// (column sweeps, then Felzenszwalb-Huttenlocher lower envelopes along rows) over the tile plus two
+// margins, a few milliseconds, so the fields follow a map that is still being built.
+//
+// Unknown cells (class 255, and everything outside the extent) are unknown: each cell stores its class
+// next to its distances, so the filter leaves the bins that fall on unknown cells out of a particle's
+// cost. With unknown_is_source, unknown cells also count as sources of every channel, so a distance
+// next to unexplored ground is the optimistic min(distance to the class, distance to the unknown): the
+// class may be just behind the edge of what the quadrotor has seen.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "airground/localization/scan.hpp"
+#include "airground/platform/config.hpp"
+
+namespace ag::loc {
+
+struct DistanceFieldParams {
+  double resolution_m{0.5};     // [m] cell size of the aerial map (DESIGN.md: 0.5 m)
+  int tile_cells{64};           // [cells] tile edge of the aerial map
+  double truncation_m{25.0};    // [m] distances are clamped here (their code: 50 px)
+  bool unknown_is_source{true}; // unknown cells count as sources of every channel (optimistic distances)
+  int full_block_tiles{4};      // recompute_all() works in blocks of this many tiles squared
+};
+
+inline constexpr ParamSpec kDistanceFieldParamSpecs[] = {
+    ParamSpec::real("field_truncation_m", 25.0, 1.0, 60.0, "m", "distances are clamped here (their code: 50 px)"),
+    ParamSpec::boolean("field_unknown_is_source", true, "unknown cells count as sources (optimistic distances near the unknown)"),
+};
+// resolution_m and tile_cells come from the aerial map, not from here.
+DistanceFieldParams load_distance_field_params(const SectionView& s, double resolution_m, int tile_cells);
+
+// The extent of the fields in aerial-map tiles: tiles [tile_x0, tile_x0 + tiles_x) x [tile_y0, ...).
+struct TileExtent {
+  std::int32_t tile_x0{0}, tile_y0{0};
+  std::int32_t tiles_x{0}, tiles_y{0};
+};
+// The smallest extent covering the map-frame rectangle [x0, x1] x [y0, y1].
+TileExtent extent_covering(double x0, double y0, double x1, double y1, double resolution_m, int tile_cells) noexcept;
+
+class ClassDistanceFields {
+ public:
+  // Allocates everything for the extent; all cells start unknown and the fields are consistent.
+  ClassDistanceFields(const DistanceFieldParams& params, const LocalizationChannels& channels, const TileExtent& extent);
+
+  // Copies one tile's class ids (tile_cells^2, row-major, row 0 = south). Returns false when the tile is
+  // outside the extent, the size is wrong, or the version equals the stored one. The fields around it
+  // are stale until update(). Never allocates.
+  bool set_tile(std::int32_t tx, std::int32_t ty, std::uint64_t version, std::span<const std::uint8_t> cls) noexcept;
+  // Recomputes the fields around up to `max_tiles` changed tiles (oldest change first); returns the
+  // number of tiles done. Never allocates.
+  std::size_t update(std::size_t max_tiles = SIZE_MAX) noexcept;
+  // Recomputes every field from the classes (and clears the changed set). Never allocates.
+  void recompute_all() noexcept;
+  [[nodiscard]] std::size_t pending_tiles() const noexcept { return n_dirty_; }
+  [[nodiscard]] std::uint64_t tile_version(std::int32_t tx, std::int32_t ty) const noexcept;
+
+  // Cells: width x height, row-major, row 0 at the south edge (map-frame y grows with the row). Each
+  // cell is `stride()` bytes: the channels' quantised distances (distance = byte x quantum_m()), then
+  // the cell's class id at [stride() - 1]. One more cell at index width x height is the "outside" cell
+  // (unknown, class 255), for lookups that leave the extent.
+  [[nodiscard]] const std::uint8_t* cells() const noexcept { return cells_.data(); }
+  [[nodiscard]] int stride() const noexcept { return kStride; }
+  [[nodiscard]] std::int32_t width() const noexcept { return width_; }
+  [[nodiscard]] std::int32_t height() const noexcept { return height_; }
+  [[nodiscard]] double origin_x() const noexcept { return origin_x_; }  // [m] west edge
+  [[nodiscard]] double origin_y() const noexcept { return origin_y_; }  // [m] south edge
+  [[nodiscard]] double resolution_m() const noexcept { return p_.resolution_m; }
+  [[nodiscard]] double quantum_m() const noexcept { return quantum_m_; }
+  [[nodiscard]] std::size_t outside_index() const noexcept { return static_cast<std::size_t>(width_) * static_cast<std::size_t>(height_); }
+  // Cell index of a map-frame point, outside_index() when outside the extent.
+  [[nodiscard]] std::size_t index_at(double x, double y) const noexcept;
+  [[nodiscard]] std::uint8_t class_at(double x, double y) const noexcept;
+  [[nodiscard]] double distance_m(double x, double y, int channel) const noexcept;  // [m] quantised, truncated
+  [[nodiscard]] const LocalizationChannels& channels() const noexcept { return channels_; }
+  [[nodiscard]] const DistanceFieldParams& params() const noexcept { return p_; }
+  [[nodiscard]] const TileExtent& extent() const noexcept { return extent_; }
+  [[nodiscard]] std::size_t memory_bytes() const noexcept;  // everything this object holds
+
+  static constexpr int kStride = kMaxChannels + 1;
+
+ private:
+  // Recomputes the output rectangle [x0, x1) x [y0, y1) (cells, clamped to the extent).
+  void recompute_rect(std::int32_t x0, std::int32_t y0, std::int32_t x1, std::int32_t y1) noexcept;
+
+  DistanceFieldParams p_;
+  LocalizationChannels channels_;
+  TileExtent extent_;
+  std::int32_t width_{0}, height_{0};
+  double origin_x_{0}, origin_y_{0};
+  double quantum_m_{0.1};
+  std::int32_t margin_{0};  // [cells] ceil(truncation / resolution)
+  std::int32_t max_out_{0};  // [cells] largest output rectangle edge the scratch holds
+  std::array<std::uint8_t, 256> source_mask_{};  // class id -> channel bits
+  std::vector<std::uint8_t> cells_;
+  std::vector<std::uint64_t> tile_version_;
+  std::vector<std::uint8_t> tile_dirty_;
+  std::vector<std::uint32_t> dirty_;  // changed tiles in order of change (a ring of tile indices)
+  std::size_t dirty_head_{0}, n_dirty_{0};
+  std::vector<std::uint8_t> quantise_;  // squared distance [cells^2] -> byte
+  // scratch of one rectangle
+  std::vector<std::uint8_t> src_;   // [in_row][in_col] channel bits
+  std::vector<std::int16_t> g_;     // [channel][out_row][in_col] vertical distance [cells], > margin = none
+  std::vector<std::int32_t> env_v_;
+  std::vector<double> env_z_;
+  std::vector<std::int32_t> env_f_;
+};
+
+}  // namespace ag::loc

@@ -1,0 +1,251 @@
+// The semantic cross-view particle filter (ALGORITHMS.md §2): particles (x, y, yaw) in the map frame
+// move with the odometry, are weighted by how well the polar render of the labelled scan fits the aerial
+// class distance fields around them, and are resampled. Deterministic for a seed; never allocates after
+// construction.
+//
+// One update (when the robot has moved far enough since the last):
+//   1. the pending odometry increment moves every particle, with noise scaled by the distance travelled
+//      and the angle turned (none while standing: see OdometryGate);
+//   2. each particle is scored at yaw shifts of the render (cyclic shifts of its angle bins, hill-climbed
+//      from the particle's own yaw within -w..w bins, refined by a parabola; the particle takes the best
+//      yaw). The cost at a shift is the paper's: sum over the render's bins and channels of
+//      count x channel weight x distance at the bin's map position, divided by the weight that fell on
+//      known cells (c_known, [m]); bins on unknown cells are left out. The log weight is
+//        kMask:  -exponent x known_share x ln(c_known + gamma)   (their later code: mask the unknown;
+//                scaling by the known share makes a bin on an unknown cell neutral, so particles are
+//                neither drawn to nor pushed from the unexplored parts of a map still being built)
+//        kFixed: -exponent x ln(c + gamma), where unknown bins cost unknown_cost_m in c (the paper);
+//      i.e. weight = 1 / (cost + gamma) ^ exponent (theirs: exponent 1, gamma 0.2 - 0.7);
+//   3. weights accumulate, a little uniform weight is mixed in, and the set is resampled (systematic)
+//      when the effective sample size drops, to a KLD-sampling count between min and max;
+//   4. status: converged (tracking) once the spread stays below converged_spread_m with enough of the
+//      scan on known cells; lost when the spread blows up or the best known-cell cost stays far above
+//      its running level, and then the particles are re-spread around the last good pose (moved by the
+//      odometry since), wider at each attempt, with the widest range bins. The next render's range-bin
+//      size follows the spread.
+// Particles are evaluated in Morton order of their position so that neighbours share cached cells.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "airground/core/geometry.hpp"
+#include "airground/localization/class_distance_fields.hpp"
+#include "airground/localization/polar_render.hpp"
+#include "airground/platform/config.hpp"
+
+namespace ag::loc {
+
+enum class UnknownCost : std::uint8_t {
+  kMask = 0,   // bins on unknown cells are left out; the cost is normalised over known cells only (default)
+  kFixed = 1,  // bins on unknown cells cost unknown_cost_m (the paper's choice)
+};
+
+struct ParticleFilterParams {
+  // particle count
+  int min_particles{300};            // their later code: 300 with a good initial guess
+  int max_particles{4000};           // preallocated; used while uncertain
+  double kld_epsilon{0.05};          // KLD sampling: bound on the KL divergence
+  double kld_z{2.33};                // KLD sampling: upper standard-normal quantile (99 %)
+  double kld_bin_xy_m{1.0};          // [m] KLD histogram bin
+  double kld_bin_yaw_rad{0.175};     // [rad] KLD histogram bin (10 deg)
+  // motion
+  double motion_sigma_xy_per_m{0.15};       // [m/m] position noise per metre travelled (their 0.15 m per step)
+  double motion_sigma_yaw_per_m{0.004};     // [rad/m] yaw noise per metre travelled (their 0.004 rad per step)
+  double motion_sigma_yaw_per_rad{0.05};    // [rad/rad] yaw noise per radian turned
+  double motion_sigma_xy_min_m{0.05};       // [m] floor of the position noise of a moving update
+  double update_min_distance_m{0.5};        // [m] update once moved this far ...
+  double update_min_turn_rad{0.15};         // [rad] ... or turned this much
+  // measurement
+  int yaw_window_bins{2};            // yaw shifts tried each side of a particle's yaw [angle bins]
+  int yaw_window_bins_tracking{1};   // ... once converged
+  double gamma_m{0.3};               // [m] weight = 1 / (cost + gamma) ^ exponent (theirs: 0.2 - 0.7)
+  double weight_exponent{2.0};       // sharpens the weight (theirs: 1; 2 converged 4x sooner on a partial map)
+  double uniform_mix{0.01};          // fraction of uniform weight mixed in
+  double resample_ess_ratio{0.5};    // resample when the effective sample size falls below this x count
+  UnknownCost unknown_mode{UnknownCost::kMask};
+  double unknown_cost_m{1.0};        // [m] kFixed: cost of a bin on an unknown cell (1 m measured best)
+  double min_known_fraction{0.25};   // a particle's cost judges convergence and divergence only with this share known
+  // adaptive range bins
+  double range_bin_min_m{1.0};       // [m] (paper: 0.5; 1.0 measured better on partial maps)
+  double range_bin_max_m{4.0};       // [m] (paper: 4)
+  double range_bin_per_spread{1.5};  // range bin = this x spread, clamped
+  // convergence and divergence
+  double converged_spread_m{2.5};    // [m] publish once the spread stays below this (paper: 2.5 m)
+  int converged_updates{3};          // ... for this many updates
+  double lost_spread_m{8.0};         // [m] tracking is lost when the spread exceeds this
+  double lost_cost_ratio{2.0};       // ... or the best cost exceeds this x its running level
+  double lost_cost_min_m{1.0};       // [m] ... and this
+  int lost_updates{6};               // ... for this many updates in a row
+  int recovery_retry_updates{40};    // not converged this many updates after a re-spread: re-spread wider
+  double recovery_sigma_xy_m{6.0};   // [m] re-spread around the last good pose, first attempt
+  double recovery_sigma_yaw_rad{0.3};// [rad]
+  double recovery_growth{1.5};       // sigma x this at each further attempt
+  double recovery_sigma_xy_max_m{25.0};
+  double lost_drift_per_m{0.05};     // [m/m] the last good pose's uncertainty grows with the distance since
+};
+
+inline constexpr ParamSpec kParticleFilterParamSpecs[] = {
+    ParamSpec::integer("pf_min_particles", 300, 10, 100000, "particles", "fewest particles (their later code: 300)"),
+    ParamSpec::integer("pf_max_particles", 4000, 10, 100000, "particles", "most particles, preallocated (paper: 20000)"),
+    ParamSpec::real("pf_kld_epsilon", 0.05, 0.001, 1.0, "", "KLD sampling: bound on the KL divergence"),
+    ParamSpec::real("pf_kld_z", 2.33, 0.5, 5.0, "", "KLD sampling: standard-normal quantile"),
+    ParamSpec::real("pf_kld_bin_xy_m", 1.0, 0.05, 10.0, "m", "KLD histogram bin, position"),
+    ParamSpec::real("pf_kld_bin_yaw_rad", 0.175, 0.01, 1.0, "rad", "KLD histogram bin, yaw"),
+    ParamSpec::real("pf_motion_sigma_xy_per_m", 0.15, 0.0, 2.0, "m/m", "position noise per metre travelled (theirs: 0.15 m per step)"),
+    ParamSpec::real("pf_motion_sigma_yaw_per_m", 0.004, 0.0, 0.5, "rad/m", "yaw noise per metre travelled (theirs: 0.004 rad per step)"),
+    ParamSpec::real("pf_motion_sigma_yaw_per_rad", 0.05, 0.0, 1.0, "rad/rad", "yaw noise per radian turned"),
+    ParamSpec::real("pf_motion_sigma_xy_min_m", 0.05, 0.0, 2.0, "m", "floor of the position noise of a moving update"),
+    ParamSpec::real("pf_update_min_distance_m", 0.5, 0.01, 20.0, "m", "update once moved this far"),
+    ParamSpec::real("pf_update_min_turn_rad", 0.15, 0.01, 3.14, "rad", "... or turned this much"),
+    ParamSpec::integer("pf_yaw_window_bins", 2, 0, 20, "bins", "yaw shifts tried each side of a particle's yaw"),
+    ParamSpec::integer("pf_yaw_window_bins_tracking", 1, 0, 20, "bins", "... once converged"),
+    ParamSpec::real("pf_gamma_m", 0.3, 0.01, 10.0, "m", "weight = 1 / (cost + gamma)^exponent (theirs: 0.2-0.7)"),
+    ParamSpec::real("pf_weight_exponent", 2.0, 0.1, 10.0, "", "sharpens the weight (theirs: 1)"),
+    ParamSpec::real("pf_uniform_mix", 0.01, 0.0, 0.5, "", "fraction of uniform weight mixed in"),
+    ParamSpec::real("pf_resample_ess_ratio", 0.5, 0.0, 1.0, "", "resample below this effective sample size ratio"),
+    ParamSpec::text("pf_unknown_mode", "mask", "mask|fixed", "unknown aerial cells: masked out, or a fixed cost (paper)"),
+    ParamSpec::real("pf_unknown_cost_m", 1.0, 0.0, 60.0, "m", "fixed: cost of a bin on an unknown cell (1 m measured best)"),
+    ParamSpec::real("pf_min_known_fraction", 0.25, 0.0, 1.0, "", "a particle's cost judges convergence and divergence only with this share known"),
+    ParamSpec::real("pf_range_bin_min_m", 1.0, 0.1, 10.0, "m", "smallest range bin (paper: 0.5; 1.0 measured better on partial maps)"),
+    ParamSpec::real("pf_range_bin_max_m", 4.0, 0.1, 20.0, "m", "largest range bin (paper: 4)"),
+    ParamSpec::real("pf_range_bin_per_spread", 1.5, 0.0, 10.0, "", "range bin = this x spread, clamped"),
+    ParamSpec::real("pf_converged_spread_m", 2.5, 0.1, 50.0, "m", "publish once the spread stays below this (paper: 2.5)"),
+    ParamSpec::integer("pf_converged_updates", 3, 1, 1000, "updates", "... for this many updates"),
+    ParamSpec::real("pf_lost_spread_m", 8.0, 0.5, 200.0, "m", "lost when the spread exceeds this"),
+    ParamSpec::real("pf_lost_cost_ratio", 2.0, 1.0, 100.0, "", "... or the best cost exceeds this x its running level"),
+    ParamSpec::real("pf_lost_cost_min_m", 1.0, 0.0, 60.0, "m", "... and this"),
+    ParamSpec::integer("pf_lost_updates", 6, 1, 1000, "updates", "... for this many updates in a row"),
+    ParamSpec::integer("pf_recovery_retry_updates", 40, 1, 100000, "updates", "not converged this long after a re-spread: re-spread wider"),
+    ParamSpec::real("pf_recovery_sigma_xy_m", 6.0, 0.1, 200.0, "m", "re-spread around the last good pose, first attempt"),
+    ParamSpec::real("pf_recovery_sigma_yaw_rad", 0.3, 0.0, 3.14, "rad", "re-spread yaw sigma"),
+    ParamSpec::real("pf_recovery_growth", 1.5, 1.0, 10.0, "", "sigma x this at each further attempt"),
+    ParamSpec::real("pf_recovery_sigma_xy_max_m", 25.0, 0.1, 500.0, "m", "largest re-spread sigma"),
+    ParamSpec::real("pf_lost_drift_per_m", 0.05, 0.0, 1.0, "m/m", "last good pose uncertainty per metre since"),
+};
+ParticleFilterParams load_particle_filter_params(const SectionView& s);
+
+enum class FilterStatus : std::uint8_t {
+  kUninitialised = 0,  // no initial guess yet
+  kInitialising = 1,   // spread still above converged_spread_m: nothing to publish
+  kTracking = 2,       // converged
+  kLost = 3,           // diverged: re-spread around the last good pose, converging again
+};
+
+struct FilterEstimate {
+  Pose2 pose;                          // weighted mean [m, rad]
+  std::array<double, 9> covariance{};  // row-major 3x3 over (x, y, yaw) [m^2, m rad, rad^2]
+  double spread_m{0};                  // [m] sqrt of the largest eigenvalue of the xy covariance
+  double yaw_spread_rad{0};            // [rad] circular standard deviation
+  FilterStatus status{FilterStatus::kUninitialised};
+  std::uint32_t particles{0};
+  double best_cost_m{0};               // [m] lowest known-cell cost of the last update (-1: no particle saw enough known cells)
+  double cost_level_m{0};              // [m] running level of the best cost while tracking
+  double range_bin_m{0};               // [m] for the next render
+  std::uint64_t updates{0};
+  std::uint32_t recoveries{0};         // re-spreads after divergence (total)
+};
+
+struct UpdateReport {
+  bool updated{false};      // false: standing still (or no initial guess): nothing changed
+  bool resampled{false};
+  bool recovered{false};    // this update declared divergence and re-spread the particles
+  double moved_m{0};        // [m] odometry distance applied
+  double best_cost_m{0};    // [m] lowest known-cell cost (-1: no particle saw min_known_fraction of known cells)
+  double known_fraction{0}; // share of the render's weight on known cells, that particle
+};
+
+class ParticleFilter {
+ public:
+  // Scratch is sized for renders of `render`'s angle and range bins.
+  ParticleFilter(const ParticleFilterParams& params, const PolarRenderParams& render, std::uint64_t seed);
+
+  // Initial guesses: a Gaussian, or uniform over a disc and a yaw interval; max_particles particles.
+  void initialise_gaussian(const Pose2& guess, double sigma_xy_m, double sigma_yaw_rad) noexcept;
+  void initialise_disc(const Pose2& guess, double radius_m, double yaw_halfwidth_rad) noexcept;
+
+  // The robot moved by `delta` (body frame at the previous call: dx forward, dy left, dyaw), from the
+  // gated odometry (OdometryGate): accumulated until the next update.
+  void add_motion(const Pose2& delta) noexcept;
+  // The pending motion is large enough for an update (or none happened since initialisation).
+  [[nodiscard]] bool wants_update() const noexcept;
+  // Range-bin size the next render should use [m].
+  [[nodiscard]] double range_bin_m() const noexcept { return range_bin_m_; }
+
+  // Applies the pending motion and weighs the particles against `fields` with `render` (made at
+  // range_bin_m()). Does nothing unless wants_update() or `force`. Never allocates.
+  UpdateReport update(const ScanRenderPolar& render, const ClassDistanceFields& fields, bool force = false) noexcept;
+
+  [[nodiscard]] const FilterEstimate& estimate() const noexcept { return est_; }
+  [[nodiscard]] FilterStatus status() const noexcept { return est_.status; }
+  [[nodiscard]] std::size_t size() const noexcept { return n_; }
+  [[nodiscard]] Pose2 particle(std::size_t i) const noexcept { return {x_[i], y_[i], yaw_[i]}; }
+  [[nodiscard]] double weight(std::size_t i) const noexcept { return w_[i]; }
+  [[nodiscard]] const ParticleFilterParams& params() const noexcept { return p_; }
+  [[nodiscard]] std::size_t memory_bytes() const noexcept;  // everything this object holds
+  // The last pose judged good (tracking, cost in line), moved by the odometry since [m, rad].
+  [[nodiscard]] Pose2 last_good_pose() const noexcept { return last_good_; }
+  [[nodiscard]] bool has_last_good_pose() const noexcept { return has_last_good_; }
+
+  // The known-cell cost of one pose (no yaw shifts) [m], and the share of the render on known cells:
+  // for tests and diagnostics.
+  [[nodiscard]] double pose_cost(const Pose2& pose, const ScanRenderPolar& render, const ClassDistanceFields& fields,
+                                 double* known_fraction = nullptr) noexcept;
+
+ private:
+  struct Rng {
+    std::uint64_t s[4];
+    std::uint64_t next() noexcept;
+    double uniform() noexcept;   // [0, 1)
+    double normal() noexcept;    // N(0, 1)
+    bool has_spare{false};
+    double spare{0};
+  };
+  // Best log-weight (score) over yaw shifts of -window..window bins for a particle at (x, y, yaw), with
+  // the known share and known-cell cost at that shift; returns the yaw correction [rad] (the best
+  // shift, refined by a parabola).
+  double evaluate(double x, double y, double yaw, const ScanRenderPolar& render, const ClassDistanceFields& fields,
+                  int window, double& score, double& known_fraction, double& known_cost) noexcept;
+  void prepare_angles(const ScanRenderPolar& render) noexcept;  // also the bins' offsets: once per render
+  void apply_motion() noexcept;
+  void resample() noexcept;
+  std::size_t kld_count() noexcept;
+  void compute_estimate() noexcept;
+  void update_status(double best_cost, bool cost_valid) noexcept;
+  void respread(const Pose2& centre, double sigma_xy, double sigma_yaw) noexcept;
+  void set_range_bin() noexcept;
+
+  ParticleFilterParams p_;
+  int max_angle_bins_{0}, max_range_bins_{0};
+  int prepared_angle_bins_{0};
+  Rng rng_{};
+  std::size_t n_{0};
+  std::vector<double> x_, y_, yaw_, w_, score_;  // score: log weight of the last update
+  std::vector<double> nx_, ny_, nyaw_;  // resampling target
+  std::vector<std::uint64_t> kld_keys_;
+  std::vector<std::uint64_t> order_;  // evaluation order: Morton key << 32 | particle
+  std::vector<std::uint32_t> kld_stamp_;
+  std::uint32_t kld_gen_{0};
+  // per-particle scratch: map cell index per (angle incl. shifts, range bin); trig of the angles
+  std::vector<std::int32_t> idx_;
+  std::vector<std::int32_t> bin_offset_;  // per render bin: angle x padded range bins + range
+  std::vector<float> base_cos_, base_sin_;
+  std::vector<double> shift_cost_, shift_known_, shift_known_cost_;  // per shift: score, known share, known cost
+  Pose2 pending_{};           // accumulated motion since the last update (body frame then)
+  double pending_dist_{0};    // [m] path length
+  double pending_turn_{0};    // [rad] total |dyaw|
+  bool first_update_done_{false};
+  double range_bin_m_{4.0};
+  FilterEstimate est_{};
+  int converged_count_{0};
+  int bad_count_{0};
+  bool cost_level_valid_{false};
+  Pose2 last_good_{};
+  bool has_last_good_{false};
+  double dist_since_good_{0};
+  std::uint32_t attempt_{0};  // recovery attempts since the last tracking
+  int updates_since_respread_{0};
+};
+
+}  // namespace ag::loc

@@ -1,0 +1,66 @@
+// A ground robot's LiDAR scan as the localizer sees it, and the channels its labels are matched in.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <string>
+
+#include "airground/core/classes.hpp"
+#include "airground/core/messages.hpp"
+
+namespace ag::loc {
+
+// One return of an organised scan (an Ouster: rings x columns; pixels without a return are absent):
+// the "lidar_scan" channel's ScanReturn itself, so a stage labels and renders the message's points in
+// place. Sensor frame (x forward, y left, z up) [m]; ring 0 is the top beam (ring + 1 looks further
+// down); neighbouring columns are neighbouring azimuths; cls is written by a ScanLabeller.
+using ScanPoint = ScanReturn;
+
+// Channels are what the scan and the aerial map are compared in: one channel per class, or one per class
+// group. A channel has a weight, the scan labels counted into it and the aerial classes that are its
+// sources (the cells its distance field measures the distance to).
+inline constexpr int kMaxChannels = 7;  // + the class byte: 8 bytes per distance-field cell
+
+class LocalizationChannels {
+ public:
+  LocalizationChannels() noexcept;  // no channels; add them with add_channel()
+
+  // One channel per known class of `table` with a localization weight > 0 (ground-truth or segmentation
+  // labels): scan label c counts into the channel of aerial class c.
+  static LocalizationChannels per_class(const ClassTable& table = ClassTable::builtin());
+
+  // The paper's geometric labelling (GeometricLabeller): two channels,
+  //   ground   = road | dirt | grass  (the labeller writes kGroundLabel = road for flat points)
+  //   obstacle = tree | building | vehicle  (the labeller writes kObstacleLabel = building)
+  // Scan labels of any member class count into the group, so ground-truth labels work here too.
+  // Water is in neither group (no LiDAR returns).
+  static LocalizationChannels two_class(double ground_weight = 1.0, double obstacle_weight = 1.5);
+
+  [[nodiscard]] int count() const noexcept { return count_; }
+  // Channel a scan label counts into, -1 if it is not counted.
+  [[nodiscard]] int scan_channel(std::uint8_t label) const noexcept { return scan_[label]; }
+  // Bit k set: aerial class `cls` is a source of channel k.
+  [[nodiscard]] std::uint8_t map_sources(std::uint8_t cls) const noexcept { return sources_[cls]; }
+  [[nodiscard]] float weight(int channel) const noexcept { return weight_[static_cast<std::size_t>(channel)]; }
+  [[nodiscard]] const std::string& name(int channel) const noexcept { return name_[static_cast<std::size_t>(channel)]; }
+
+  // Adds a channel (count() < kMaxChannels); scan labels and map classes are assigned with the two below.
+  int add_channel(std::string name, double weight);
+  void count_scan_label(std::uint8_t label, int channel) noexcept { scan_[label] = static_cast<std::int8_t>(channel); }
+  void add_map_source(std::uint8_t cls, int channel) noexcept {
+    sources_[cls] = static_cast<std::uint8_t>(sources_[cls] | (1U << static_cast<unsigned>(channel)));
+  }
+
+ private:
+  int count_{0};
+  std::array<std::int8_t, 256> scan_{};
+  std::array<std::uint8_t, 256> sources_{};
+  std::array<float, kMaxChannels> weight_{};
+  std::array<std::string, kMaxChannels> name_{};
+};
+
+inline constexpr ClassId kGroundLabel = ClassId::kRoad;        // GeometricLabeller: flat, drivable-looking
+inline constexpr ClassId kObstacleLabel = ClassId::kBuilding;  // GeometricLabeller: high gradient or tall
+
+}  // namespace ag::loc

@@ -1,0 +1,265 @@
+// Aerial class distance fields: truncated exact Euclidean distance transforms over a tiled class map,
+// recomputed only around the tiles that changed.
+#include "airground/localization/class_distance_fields.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace ag::loc {
+
+namespace {
+constexpr std::uint64_t kNeverSet = std::numeric_limits<std::uint64_t>::max();
+}  // namespace
+
+DistanceFieldParams load_distance_field_params(const SectionView& s, double resolution_m, int tile_cells) {
+  DistanceFieldParams p;
+  p.resolution_m = resolution_m;
+  p.tile_cells = tile_cells;
+  p.truncation_m = s.real("field_truncation_m");
+  p.unknown_is_source = s.boolean("field_unknown_is_source");
+  return p;
+}
+
+TileExtent extent_covering(double x0, double y0, double x1, double y1, double resolution_m, int tile_cells) noexcept {
+  const double tile_m = resolution_m * tile_cells;
+  TileExtent e;
+  e.tile_x0 = static_cast<std::int32_t>(std::floor(std::min(x0, x1) / tile_m));
+  e.tile_y0 = static_cast<std::int32_t>(std::floor(std::min(y0, y1) / tile_m));
+  e.tiles_x = static_cast<std::int32_t>(std::floor(std::max(x0, x1) / tile_m)) - e.tile_x0 + 1;
+  e.tiles_y = static_cast<std::int32_t>(std::floor(std::max(y0, y1) / tile_m)) - e.tile_y0 + 1;
+  return e;
+}
+
+ClassDistanceFields::ClassDistanceFields(const DistanceFieldParams& params, const LocalizationChannels& channels,
+                                         const TileExtent& extent)
+    : p_(params), channels_(channels), extent_(extent) {
+  if (p_.resolution_m <= 0.0 || p_.tile_cells < 1 || p_.truncation_m <= 0.0 || p_.full_block_tiles < 1)
+    throw std::invalid_argument("ClassDistanceFields: resolution, tile size, truncation and block must be positive");
+  if (extent_.tiles_x < 1 || extent_.tiles_y < 1) throw std::invalid_argument("ClassDistanceFields: empty extent");
+  if (channels_.count() < 1 || channels_.count() > kMaxChannels) throw std::invalid_argument("ClassDistanceFields: channel count");
+  width_ = extent_.tiles_x * p_.tile_cells;
+  height_ = extent_.tiles_y * p_.tile_cells;
+  origin_x_ = static_cast<double>(extent_.tile_x0) * p_.tile_cells * p_.resolution_m;
+  origin_y_ = static_cast<double>(extent_.tile_y0) * p_.tile_cells * p_.resolution_m;
+  quantum_m_ = p_.truncation_m / 255.0;
+  const double trunc_cells = p_.truncation_m / p_.resolution_m;
+  margin_ = static_cast<std::int32_t>(std::ceil(trunc_cells - 1e-9));
+  if (margin_ > 16000) throw std::invalid_argument("ClassDistanceFields: truncation too large for the resolution");
+
+  for (std::size_t c = 0; c < 256; ++c) source_mask_[c] = channels_.map_sources(static_cast<std::uint8_t>(c));
+  if (p_.unknown_is_source) source_mask_[255] = static_cast<std::uint8_t>((1U << static_cast<unsigned>(channels_.count())) - 1U);
+  else source_mask_[255] = 0;
+
+  const std::size_t n_cells = outside_index() + 1;
+  cells_.assign(n_cells * kStride, p_.unknown_is_source ? 0 : 255);
+  for (std::size_t i = 0; i < n_cells; ++i) cells_[i * kStride + kStride - 1] = 255;
+  const auto n_tiles = static_cast<std::size_t>(extent_.tiles_x) * static_cast<std::size_t>(extent_.tiles_y);
+  tile_version_.assign(n_tiles, kNeverSet);
+  tile_dirty_.assign(n_tiles, 0);
+  dirty_.assign(n_tiles, 0);
+
+  // squared distance [cells^2] -> byte; beyond the truncation: 255
+  const auto max_d2 = static_cast<std::size_t>(std::floor(trunc_cells * trunc_cells));
+  quantise_.resize(max_d2 + 1);
+  for (std::size_t d2 = 0; d2 <= max_d2; ++d2) {
+    const double d = std::sqrt(static_cast<double>(d2)) * p_.resolution_m;
+    quantise_[d2] = static_cast<std::uint8_t>(std::min(255.0, std::round(d / quantum_m_)));
+  }
+
+  max_out_ = std::max(p_.tile_cells + 2 * margin_, p_.full_block_tiles * p_.tile_cells);
+  const auto in = static_cast<std::size_t>(max_out_ + 2 * margin_);
+  src_.resize(in * in);
+  g_.resize(static_cast<std::size_t>(channels_.count()) * static_cast<std::size_t>(max_out_) * in);
+  env_v_.resize(in + 1);
+  env_z_.resize(in + 2);
+  env_f_.resize(in + 1);
+  recompute_all();
+}
+
+std::size_t ClassDistanceFields::memory_bytes() const noexcept {
+  return sizeof(*this) + cells_.capacity() + tile_version_.capacity() * sizeof(std::uint64_t) + tile_dirty_.capacity() +
+         dirty_.capacity() * sizeof(std::uint32_t) + quantise_.capacity() + src_.capacity() +
+         g_.capacity() * sizeof(std::int16_t) + env_v_.capacity() * sizeof(std::int32_t) +
+         env_z_.capacity() * sizeof(double) + env_f_.capacity() * sizeof(std::int32_t);
+}
+
+std::uint64_t ClassDistanceFields::tile_version(std::int32_t tx, std::int32_t ty) const noexcept {
+  const std::int32_t lx = tx - extent_.tile_x0, ly = ty - extent_.tile_y0;
+  if (lx < 0 || ly < 0 || lx >= extent_.tiles_x || ly >= extent_.tiles_y) return 0;
+  const std::uint64_t v = tile_version_[static_cast<std::size_t>(ly) * static_cast<std::size_t>(extent_.tiles_x) + static_cast<std::size_t>(lx)];
+  return v == kNeverSet ? 0 : v;
+}
+
+bool ClassDistanceFields::set_tile(std::int32_t tx, std::int32_t ty, std::uint64_t version,
+                                   std::span<const std::uint8_t> cls) noexcept {
+  const std::int32_t lx = tx - extent_.tile_x0, ly = ty - extent_.tile_y0;
+  const auto tc = static_cast<std::size_t>(p_.tile_cells);
+  if (lx < 0 || ly < 0 || lx >= extent_.tiles_x || ly >= extent_.tiles_y || cls.size() != tc * tc) return false;
+  const std::size_t t = static_cast<std::size_t>(ly) * static_cast<std::size_t>(extent_.tiles_x) + static_cast<std::size_t>(lx);
+  if (tile_version_[t] == version) return false;
+  tile_version_[t] = version;
+  const auto w = static_cast<std::size_t>(width_);
+  for (std::size_t r = 0; r < tc; ++r) {
+    std::uint8_t* row = &cells_[((static_cast<std::size_t>(ly) * tc + r) * w + static_cast<std::size_t>(lx) * tc) * kStride];
+    for (std::size_t c = 0; c < tc; ++c) row[c * kStride + kStride - 1] = cls[r * tc + c];
+  }
+  if (tile_dirty_[t] == 0) {
+    tile_dirty_[t] = 1;
+    dirty_[(dirty_head_ + n_dirty_) % dirty_.size()] = static_cast<std::uint32_t>(t);
+    ++n_dirty_;
+  }
+  return true;
+}
+
+std::size_t ClassDistanceFields::update(std::size_t max_tiles) noexcept {
+  std::size_t done = 0;
+  const std::int32_t tc = p_.tile_cells;
+  while (n_dirty_ > 0 && done < max_tiles) {
+    const std::uint32_t t = dirty_[dirty_head_];
+    dirty_head_ = (dirty_head_ + 1) % dirty_.size();
+    --n_dirty_;
+    tile_dirty_[t] = 0;
+    const auto lx = static_cast<std::int32_t>(t % static_cast<std::uint32_t>(extent_.tiles_x));
+    const auto ly = static_cast<std::int32_t>(t / static_cast<std::uint32_t>(extent_.tiles_x));
+    recompute_rect(lx * tc - margin_, ly * tc - margin_, (lx + 1) * tc + margin_, (ly + 1) * tc + margin_);
+    ++done;
+  }
+  return done;
+}
+
+void ClassDistanceFields::recompute_all() noexcept {
+  const std::int32_t b = p_.full_block_tiles * p_.tile_cells;
+  for (std::int32_t y = 0; y < height_; y += b)
+    for (std::int32_t x = 0; x < width_; x += b) recompute_rect(x, y, x + b, y + b);
+  for (std::size_t i = 0; i < n_dirty_; ++i) tile_dirty_[dirty_[(dirty_head_ + i) % dirty_.size()]] = 0;
+  n_dirty_ = 0;
+  dirty_head_ = 0;
+}
+
+void ClassDistanceFields::recompute_rect(std::int32_t x0, std::int32_t y0, std::int32_t x1, std::int32_t y1) noexcept {
+  x0 = std::max(x0, 0);
+  y0 = std::max(y0, 0);
+  x1 = std::min(x1, width_);
+  y1 = std::min(y1, height_);
+  if (x1 <= x0 || y1 <= y0) return;
+  const std::int32_t m = margin_;
+  const std::int32_t ow = x1 - x0, oh = y1 - y0;
+  if (ow > max_out_ || oh > max_out_) return;  // internal callers never ask for more than the scratch holds
+  const std::int32_t iw = ow + 2 * m, ih = oh + 2 * m;
+  const std::int32_t ix0 = x0 - m, iy0 = y0 - m;
+  const auto uiw = static_cast<std::size_t>(iw);
+  const auto w = static_cast<std::size_t>(width_);
+  const int n_ch = channels_.count();
+
+  // Source bits of the input rectangle (outside the extent: unknown).
+  const std::uint8_t outside_bits = source_mask_[255];
+  for (std::int32_t yi = 0; yi < ih; ++yi) {
+    std::uint8_t* dst = &src_[static_cast<std::size_t>(yi) * uiw];
+    const std::int32_t gy = iy0 + yi;
+    if (gy < 0 || gy >= height_) {
+      std::fill_n(dst, uiw, outside_bits);
+      continue;
+    }
+    const std::uint8_t* row = &cells_[static_cast<std::size_t>(gy) * w * kStride + kStride - 1];
+    for (std::int32_t xi = 0; xi < iw; ++xi) {
+      const std::int32_t gx = ix0 + xi;
+      dst[xi] = (gx < 0 || gx >= width_) ? outside_bits : source_mask_[row[static_cast<std::size_t>(gx) * kStride]];
+    }
+  }
+
+  // Pass 1: vertical distance to the nearest source in each input column, for the output rows.
+  const std::int16_t none = static_cast<std::int16_t>(m + 1);
+  const std::size_t plane = static_cast<std::size_t>(oh) * uiw;
+  for (std::int32_t xi = 0; xi < iw; ++xi) {
+    std::array<std::int32_t, kMaxChannels> run{};
+    run.fill(m + 1);
+    for (std::int32_t yi = 0; yi < ih; ++yi) {
+      const std::uint8_t bits = src_[static_cast<std::size_t>(yi) * uiw + static_cast<std::size_t>(xi)];
+      const std::int32_t yo = yi - m;
+      for (int k = 0; k < n_ch; ++k) {
+        auto& r = run[static_cast<std::size_t>(k)];
+        r = (bits >> k) & 1U ? 0 : std::min(r + 1, m + 1);
+        if (yo >= 0 && yo < oh)
+          g_[static_cast<std::size_t>(k) * plane + static_cast<std::size_t>(yo) * uiw + static_cast<std::size_t>(xi)] =
+              static_cast<std::int16_t>(r);
+      }
+    }
+    run.fill(m + 1);
+    for (std::int32_t yi = ih - 1; yi >= 0; --yi) {
+      const std::uint8_t bits = src_[static_cast<std::size_t>(yi) * uiw + static_cast<std::size_t>(xi)];
+      const std::int32_t yo = yi - m;
+      for (int k = 0; k < n_ch; ++k) {
+        auto& r = run[static_cast<std::size_t>(k)];
+        r = (bits >> k) & 1U ? 0 : std::min(r + 1, m + 1);
+        if (yo >= 0 && yo < oh) {
+          std::int16_t& g = g_[static_cast<std::size_t>(k) * plane + static_cast<std::size_t>(yo) * uiw + static_cast<std::size_t>(xi)];
+          g = std::min(g, static_cast<std::int16_t>(r));
+        }
+      }
+    }
+  }
+
+  // Pass 2: lower envelope of the parabolas (x - q)^2 + g(q)^2 along each output row (Felzenszwalb-Huttenlocher).
+  const std::size_t max_d2 = quantise_.size() - 1;
+  for (int k = 0; k < n_ch; ++k)
+    for (std::int32_t yo = 0; yo < oh; ++yo) {
+      const std::int16_t* g = &g_[static_cast<std::size_t>(k) * plane + static_cast<std::size_t>(yo) * uiw];
+      std::uint8_t* out = &cells_[(static_cast<std::size_t>(y0 + yo) * w + static_cast<std::size_t>(x0)) * kStride + static_cast<std::size_t>(k)];
+      int n = -1;
+      for (std::int32_t q = 0; q < iw; ++q) {
+        if (g[q] >= none) continue;
+        const std::int32_t fq = static_cast<std::int32_t>(g[q]) * g[q];
+        if (n < 0) {
+          n = 0;
+          env_v_[0] = q;
+          env_f_[0] = fq;
+          env_z_[0] = -std::numeric_limits<double>::infinity();
+          env_z_[1] = std::numeric_limits<double>::infinity();
+          continue;
+        }
+        double s = 0.0;
+        for (;;) {  // z[0] = -inf ends the loop at n = 0
+          const std::int32_t v = env_v_[static_cast<std::size_t>(n)];
+          s = static_cast<double>((fq + q * q) - (env_f_[static_cast<std::size_t>(n)] + v * v)) / (2.0 * (q - v));
+          if (s > env_z_[static_cast<std::size_t>(n)]) break;
+          --n;
+        }
+        ++n;
+        env_v_[static_cast<std::size_t>(n)] = q;
+        env_f_[static_cast<std::size_t>(n)] = fq;
+        env_z_[static_cast<std::size_t>(n)] = s;
+        env_z_[static_cast<std::size_t>(n) + 1] = std::numeric_limits<double>::infinity();
+      }
+      if (n < 0) {
+        for (std::int32_t xo = 0; xo < ow; ++xo) out[static_cast<std::size_t>(xo) * kStride] = 255;
+        continue;
+      }
+      int e = 0;
+      for (std::int32_t xo = 0; xo < ow; ++xo) {
+        const std::int32_t xi = xo + m;
+        while (env_z_[static_cast<std::size_t>(e) + 1] < xi) ++e;
+        const std::int32_t dx = xi - env_v_[static_cast<std::size_t>(e)];
+        const auto d2 = static_cast<std::size_t>(dx * dx + env_f_[static_cast<std::size_t>(e)]);
+        out[static_cast<std::size_t>(xo) * kStride] = d2 <= max_d2 ? quantise_[d2] : std::uint8_t{255};
+      }
+    }
+}
+
+std::size_t ClassDistanceFields::index_at(double x, double y) const noexcept {
+  const double fc = (x - origin_x_) / p_.resolution_m, fr = (y - origin_y_) / p_.resolution_m;
+  if (!(fc >= 0.0) || !(fr >= 0.0) || fc >= width_ || fr >= height_) return outside_index();
+  return static_cast<std::size_t>(fr) * static_cast<std::size_t>(width_) + static_cast<std::size_t>(fc);
+}
+
+std::uint8_t ClassDistanceFields::class_at(double x, double y) const noexcept {
+  return cells_[index_at(x, y) * kStride + kStride - 1];
+}
+
+double ClassDistanceFields::distance_m(double x, double y, int channel) const noexcept {
+  if (channel < 0 || channel >= channels_.count()) return p_.truncation_m;
+  return cells_[index_at(x, y) * kStride + static_cast<std::size_t>(channel)] * quantum_m_;
+}
+
+}  // namespace ag::loc

@@ -1,0 +1,213 @@
+// Aerial class distance fields: equal to a brute-force truncated Euclidean distance, an incremental tile
+// update equals a full recompute, unknown cells stay unknown, and the memory of a 1 km^2 map.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <vector>
+
+#include "airground/localization/class_distance_fields.hpp"
+#include "synthetic_world.hpp"
+
+namespace ag::loc {
+namespace {
+
+using test::SyntheticWorld;
+using test::TestRng;
+
+// Brute force: the quantised truncated distance from cell (c, r) to the nearest source of `channel`
+// (unknown and outside cells are sources when unknown_is_source).
+std::uint8_t brute_force(const SyntheticWorld& w, const std::vector<std::uint8_t>& cls, const LocalizationChannels& ch,
+                         const DistanceFieldParams& p, int c, int r, int channel) {
+  const int m = static_cast<int>(std::ceil(p.truncation_m / p.resolution_m - 1e-9));
+  double best2 = 1e30;
+  for (int dr = -m; dr <= m; ++dr)
+    for (int dc = -m; dc <= m; ++dc) {
+      const int cc = c + dc, rr = r + dr;
+      const std::uint8_t k = w.inside(cc, rr) ? cls[w.index(cc, rr)] : std::uint8_t{255};
+      const bool src = k == 255 ? p.unknown_is_source : ((static_cast<unsigned>(ch.map_sources(k)) >> static_cast<unsigned>(channel)) & 1U) != 0;
+      if (src) best2 = std::min(best2, static_cast<double>(dc * dc + dr * dr));
+    }
+  const double t = p.truncation_m / p.resolution_m;
+  if (best2 > std::floor(t * t)) return 255;
+  const double q = p.truncation_m / 255.0;
+  return static_cast<std::uint8_t>(std::min(255.0, std::round(std::sqrt(best2) * p.resolution_m / q)));
+}
+
+SyntheticWorld random_blocks(int tiles, std::uint64_t seed, double unknown_share) {
+  SyntheticWorld w = test::make_world(tiles, tiles, seed);
+  TestRng rng(seed + 7);
+  // Punch unknown holes (the quadrotor has not seen everything yet).
+  const int holes = static_cast<int>(unknown_share * w.width * w.height / 400.0);
+  for (int i = 0; i < holes; ++i) {
+    const double x = rng.uniform(0, w.width * w.resolution), y = rng.uniform(0, w.height * w.resolution);
+    w.fill_rect(x, y, x + rng.uniform(2, 15), y + rng.uniform(2, 15), ClassId::kUnknown, 0.0F);
+  }
+  return w;
+}
+
+void expect_equal_to_brute_force(const SyntheticWorld& w, const ClassDistanceFields& f, const LocalizationChannels& ch,
+                                 const DistanceFieldParams& p, int stride_cells) {
+  int checked = 0, nonzero = 0, truncated = 0;
+  for (int r = 0; r < w.height; r += stride_cells)
+    for (int c = (r * 7) % stride_cells; c < w.width; c += stride_cells)
+      for (int k = 0; k < ch.count(); ++k) {
+        const double x = (c + 0.5) * w.resolution, y = (r + 0.5) * w.resolution;
+        const std::uint8_t want = brute_force(w, w.cls, ch, p, c, r, k);
+        const std::uint8_t got = f.cells()[f.index_at(x, y) * static_cast<std::size_t>(f.stride()) + static_cast<std::size_t>(k)];
+        ASSERT_EQ(got, want) << "cell " << c << "," << r << " channel " << k;
+        ++checked;
+        nonzero += want > 0 && want < 255 ? 1 : 0;
+        truncated += want == 255 ? 1 : 0;
+      }
+  EXPECT_GT(checked, 1000);
+  EXPECT_GT(nonzero, checked / 4) << "the test map must exercise real distances";
+  if (!p.unknown_is_source) {
+    EXPECT_GT(truncated, 0) << "and truncation";
+  }
+}
+
+TEST(ClassDistanceFields, EqualsBruteForceTruncatedEuclideanDistance) {
+  for (const bool unknown_source : {false, true}) {
+    const SyntheticWorld w = random_blocks(4, 11, 0.1);
+    DistanceFieldParams p;
+    p.truncation_m = 12.0;  // 24 cells: brute force stays quick
+    p.unknown_is_source = unknown_source;
+    const LocalizationChannels ch = LocalizationChannels::per_class();
+    ClassDistanceFields f(p, ch, w.extent());
+    test::load_world(w, f);
+    expect_equal_to_brute_force(w, f, ch, p, 3);
+  }
+}
+
+TEST(ClassDistanceFields, ClassGroupsOfTheGeometricLabelling) {
+  const SyntheticWorld w = random_blocks(3, 5, 0.05);
+  DistanceFieldParams p;
+  p.truncation_m = 10.0;
+  p.unknown_is_source = false;
+  const LocalizationChannels ch = LocalizationChannels::two_class();
+  ASSERT_EQ(ch.count(), 2);
+  ClassDistanceFields f(p, ch, w.extent());
+  test::load_world(w, f);
+  expect_equal_to_brute_force(w, f, ch, p, 2);
+  // on a building and on a road
+  for (int r = 0; r < w.height; r += 5)
+    for (int c = 0; c < w.width; c += 5) {
+      const std::uint8_t k = w.cls[w.index(c, r)];
+      const double x = (c + 0.5) * w.resolution, y = (r + 0.5) * w.resolution;
+      if (k == raw(ClassId::kBuilding)) {
+        EXPECT_EQ(f.distance_m(x, y, 1), 0.0);
+      }
+      if (k == raw(ClassId::kRoad)) {
+        EXPECT_EQ(f.distance_m(x, y, 0), 0.0);
+      }
+    }
+}
+
+TEST(ClassDistanceFields, IncrementalTileUpdatesEqualAFullRecompute) {
+  SyntheticWorld w = random_blocks(6, 21, 0.05);
+  DistanceFieldParams p;
+  p.truncation_m = 25.0;
+  const LocalizationChannels ch = LocalizationChannels::per_class();
+  ClassDistanceFields inc(p, ch, w.extent());
+  test::load_world(w, inc);
+  TestRng rng(99);
+  std::uint64_t version = 2;
+  for (int round = 0; round < 12; ++round) {
+    // change a few tiles (new buildings, newly seen ground, cells becoming unknown again)
+    const int changes = 1 + round % 3;
+    for (int k = 0; k < changes; ++k) {
+      const int tx = static_cast<int>(rng.uniform() * w.tiles_x()), ty = static_cast<int>(rng.uniform() * w.tiles_y());
+      const double x0 = tx * 32.0, y0 = ty * 32.0;
+      const double bx = x0 + rng.uniform(0, 24), by = y0 + rng.uniform(0, 24);
+      const auto id = static_cast<ClassId>(static_cast<int>(rng.uniform() * 6.0));
+      w.fill_rect(bx, by, std::min(bx + rng.uniform(2, 10), x0 + 32.0), std::min(by + rng.uniform(2, 10), y0 + 32.0),
+                  round % 4 == 3 ? ClassId::kUnknown : id, 0.0F);
+      const std::vector<std::uint8_t> t = w.tile(tx, ty);
+      EXPECT_TRUE(inc.set_tile(tx, ty, version++, t));
+    }
+    EXPECT_GT(inc.pending_tiles(), 0U);
+    inc.update();
+    EXPECT_EQ(inc.pending_tiles(), 0U);
+    ClassDistanceFields full(p, ch, w.extent());
+    test::load_world(w, full);
+    const std::size_t bytes = (inc.outside_index() + 1) * static_cast<std::size_t>(inc.stride());
+    ASSERT_EQ(0, std::memcmp(inc.cells(), full.cells(), bytes)) << "round " << round;
+  }
+}
+
+TEST(ClassDistanceFields, OnlyTheChangedTileAndItsMarginAreRewritten) {
+  SyntheticWorld w = random_blocks(8, 3, 0.0);
+  DistanceFieldParams p;
+  p.truncation_m = 10.0;
+  const LocalizationChannels ch = LocalizationChannels::per_class();
+  ClassDistanceFields f(p, ch, w.extent());
+  test::load_world(w, f);
+  std::vector<std::uint8_t> before(f.cells(), f.cells() + (f.outside_index() + 1) * 8);
+  // A building appears in the middle of tile (4, 4).
+  w.fill_rect(4 * 32.0 + 10, 4 * 32.0 + 10, 4 * 32.0 + 20, 4 * 32.0 + 20, ClassId::kBuilding, 5.0F);
+  ASSERT_TRUE(f.set_tile(4, 4, 2, w.tile(4, 4)));
+  ASSERT_EQ(f.update(), 1U);
+  int changed = 0;
+  for (int r = 0; r < f.height(); ++r)
+    for (int c = 0; c < f.width(); ++c) {
+      const std::size_t i = static_cast<std::size_t>(r) * static_cast<std::size_t>(f.width()) + static_cast<std::size_t>(c);
+      if (std::memcmp(&before[i * 8], f.cells() + i * 8, 8) == 0) continue;
+      ++changed;
+      // at most the truncation distance outside the tile
+      EXPECT_GE(c, 4 * 64 - 20);
+      EXPECT_LT(c, 5 * 64 + 20);
+      EXPECT_GE(r, 4 * 64 - 20);
+      EXPECT_LT(r, 5 * 64 + 20);
+    }
+  EXPECT_GT(changed, 400);
+  // the same version again is refused
+  EXPECT_FALSE(f.set_tile(4, 4, 2, w.tile(4, 4)));
+  EXPECT_EQ(f.tile_version(4, 4), 2U);
+  // outside the extent, or the wrong size: refused
+  EXPECT_FALSE(f.set_tile(8, 0, 3, w.tile(0, 0)));
+  EXPECT_FALSE(f.set_tile(0, 0, 3, std::vector<std::uint8_t>(10, 0)));
+}
+
+TEST(ClassDistanceFields, UnknownCellsAndOutsideAreUnknown) {
+  DistanceFieldParams p;
+  const LocalizationChannels ch = LocalizationChannels::per_class();
+  ClassDistanceFields f(p, ch, TileExtent{-1, -1, 2, 2});  // tiles -1..0: the map origin in the middle
+  EXPECT_DOUBLE_EQ(f.origin_x(), -32.0);
+  EXPECT_DOUBLE_EQ(f.origin_y(), -32.0);
+  EXPECT_EQ(f.class_at(0.1, 0.1), 255);  // nothing known yet
+  std::vector<std::uint8_t> tile(64 * 64, raw(ClassId::kRoad));
+  tile[0] = 255;  // one unknown cell at the south-west corner of tile (0, 0)
+  ASSERT_TRUE(f.set_tile(0, 0, 1, tile));
+  f.update();
+  EXPECT_EQ(f.class_at(0.1, 0.1), 255);
+  EXPECT_EQ(f.class_at(0.6, 0.1), raw(ClassId::kRoad));
+  EXPECT_EQ(f.class_at(31.9, 31.9), raw(ClassId::kRoad));
+  EXPECT_EQ(f.class_at(-0.1, 0.1), 255);   // tile (-1, 0) never arrived
+  EXPECT_EQ(f.class_at(40.0, 0.1), 255);   // outside the extent
+  EXPECT_EQ(f.index_at(40.0, 0.1), f.outside_index());
+  EXPECT_EQ(f.index_at(-32.01, 0.0), f.outside_index());
+  // Road at distance 0; building (none known) at the optimistic distance to the unknown next door.
+  EXPECT_EQ(f.distance_m(10.25, 10.25, 0), 0.0);
+  EXPECT_NEAR(f.distance_m(10.25, 10.25, 4), 10.5, f.quantum_m());  // nearest unknown: tile (-1, 0) at x < 0
+  ClassDistanceFields strict(DistanceFieldParams{0.5, 64, 25.0, false, 4}, ch, TileExtent{-1, -1, 2, 2});
+  ASSERT_TRUE(strict.set_tile(0, 0, 1, tile));
+  strict.update();
+  EXPECT_NEAR(strict.distance_m(10.25, 10.25, 4), 25.0, 1e-9);  // no building anywhere: truncated
+}
+
+TEST(ClassDistanceFields, MemoryOfAOneSquareKilometreMap) {
+  DistanceFieldParams p;
+  const LocalizationChannels ch = LocalizationChannels::per_class();
+  const TileExtent e = extent_covering(0, 0, 1000, 1000, 0.5, 64);
+  EXPECT_EQ(e.tiles_x, 32);
+  ClassDistanceFields f(p, ch, e);
+  const double mb = static_cast<double>(f.memory_bytes()) / (1024.0 * 1024.0);
+  std::printf("distance fields for 1 km^2 at 0.5 m (%d x %d cells, %d channels): %.1f MiB\n", f.width(), f.height(),
+              ch.count(), mb);
+  EXPECT_LT(mb, 64.0);
+}
+
+}  // namespace
+}  // namespace ag::loc

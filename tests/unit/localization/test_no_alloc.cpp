@@ -1,0 +1,136 @@
+// The localizer's real-time calls never allocate once constructed: the global operator new is replaced
+// here to count calls inside a window (as tests/unit/platform/test_no_alloc.cpp does).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cstdint>
+#include <cstdlib>
+#include <new>
+#include <vector>
+
+#include "airground/localization/semantic_localizer.hpp"
+#include "scenario.hpp"
+
+namespace {
+std::atomic<std::uint64_t> g_allocations{0};
+thread_local bool t_counting = false;
+
+void* allocate(std::size_t n) {
+  if (t_counting) g_allocations.fetch_add(1, std::memory_order_relaxed);
+  return std::malloc(n == 0 ? 1 : n);
+}
+void* allocate_aligned(std::size_t n, std::align_val_t al) {
+  if (t_counting) g_allocations.fetch_add(1, std::memory_order_relaxed);
+  const std::size_t a = std::max(static_cast<std::size_t>(al), sizeof(void*));
+  void* p = nullptr;
+  return posix_memalign(&p, a, n == 0 ? 1 : n) == 0 ? p : nullptr;
+}
+
+// Counts the allocations of the calling thread while alive.
+class AllocationWindow {
+ public:
+  AllocationWindow() : start_(g_allocations.load()) { t_counting = true; }
+  ~AllocationWindow() { t_counting = false; }
+  AllocationWindow(const AllocationWindow&) = delete;
+  AllocationWindow& operator=(const AllocationWindow&) = delete;
+  [[nodiscard]] std::uint64_t count() const { return g_allocations.load() - start_; }
+
+ private:
+  std::uint64_t start_;
+};
+}  // namespace
+
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+void* operator new(std::size_t n) {
+  if (void* p = allocate(n)) return p;
+  throw std::bad_alloc();
+}
+void* operator new[](std::size_t n) {
+  if (void* p = allocate(n)) return p;
+  throw std::bad_alloc();
+}
+void* operator new(std::size_t n, const std::nothrow_t&) noexcept { return allocate(n); }
+void* operator new[](std::size_t n, const std::nothrow_t&) noexcept { return allocate(n); }
+void* operator new(std::size_t n, std::align_val_t al) {
+  if (void* p = allocate_aligned(n, al)) return p;
+  throw std::bad_alloc();
+}
+void* operator new[](std::size_t n, std::align_val_t al) {
+  if (void* p = allocate_aligned(n, al)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete[](void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+#pragma GCC diagnostic pop
+
+namespace ag::loc {
+namespace {
+
+TEST(NoAllocation, TheCounterSeesAllocations) {
+  AllocationWindow w;
+  std::vector<int> v(100);
+  EXPECT_GE(w.count(), 1U);
+}
+
+TEST(NoAllocation, LabellingRenderingFilteringFusingAndFieldUpdates) {
+  // Everything is built first (constructors may allocate) ...
+  test::SyntheticWorld w = test::make_world(8, 8, 3);
+  const LocalizationChannels ch = LocalizationChannels::per_class();
+  ClassDistanceFields fields(DistanceFieldParams{}, ch, w.extent());
+  test::load_world(w, fields);
+  const auto route = test::snake_route(w, 1);
+  const std::vector<test::TruthSample> truth = test::drive_route(w, route);
+  std::vector<Pose2> odom = test::odometry(truth, test::OdometryNoise{}, 2);
+  // ... including a jump of the odometry, so that the filter also diverges and re-spreads in the window
+  const std::size_t jump = truth.size() / 2;
+  for (std::size_t k = jump; k < odom.size(); ++k)
+    odom[k] = compose(odom[jump - 1], compose(Pose2{0.0, 20.0, 0.4}, between(odom[jump - 1], odom[k])));
+  std::vector<std::vector<ScanPoint>> scans;
+  for (std::size_t k = 0; k < truth.size(); k += 3) {
+    scans.emplace_back();
+    test::ray_cast(w, truth[k].pose, test::LidarModel{}, k, scans.back());
+  }
+  std::vector<std::uint8_t> changed = w.tile(3, 3);
+  for (std::size_t i = 0; i < 200; ++i) changed[i] = raw(ClassId::kBuilding);
+  GroundTruthLabeller gt;
+  GeometricLabeller geometric(GeometricLabelParams{}, 32, 512);
+  std::vector<ScanPoint> geo = scans[0];
+  SemanticLocalizer loc(LocalizerParams{}, ch, 7);
+  loc.on_odometry(odom[0], truth[0].stamp);
+  loc.initialise_disc(Pose2{truth[0].pose.x + 10.0, truth[0].pose.y - 10.0, truth[0].pose.yaw + 0.4}, 20.0, 0.6,
+                      truth[0].stamp);
+
+  std::uint64_t updates = 0;
+  {
+    AllocationWindow window;
+    geometric.label(geo, test::LidarModel{}.rings, test::LidarModel{}.columns);
+    for (std::size_t k = 1; k < truth.size(); ++k) {
+      loc.on_odometry(odom[k], truth[k].stamp);
+      if (loc.wants_scan()) {
+        std::vector<ScanPoint>& scan = scans[k / 3];
+        gt.label(scan, test::LidarModel{}.rings, test::LidarModel{}.columns);
+        updates += loc.on_scan(scan, fields, truth[k].stamp).updated ? 1U : 0U;
+      }
+      const FusedPoseSample s = loc.pose();
+      (void)s;
+    }
+    EXPECT_TRUE(fields.set_tile(3, 3, 5, changed));
+    EXPECT_EQ(fields.update(), 1U);
+    fields.recompute_all();
+    EXPECT_EQ(window.count(), 0U) << "allocations in the localizer's real-time calls";
+  }
+  EXPECT_GT(updates, 100U);
+  EXPECT_GE(loc.filter().estimate().recoveries, 1U) << "the recovery path ran inside the window";
+  EXPECT_EQ(loc.filter().status(), FilterStatus::kTracking);
+}
+
+}  // namespace
+}  // namespace ag::loc
