@@ -22,6 +22,7 @@
 #include "airground/sim/radio.hpp"
 #include "airground/sim/visual_odometry.hpp"
 #include "airground/sim/wheel_odometry.hpp"
+#include "airground/sim/eval_localization.hpp"
 #include "airground/sim/eval_mapping.hpp"
 #include "airground/sim/generator.hpp"
 #include "airground/sim/importer.hpp"
@@ -48,6 +49,8 @@ constexpr const char* kUsage =
     "  airground-sim scan --world W --pose X Y YAW --out DIR [--columns 512|1024|2048] [--height 0.6]\n"
     "  airground-sim run --world W --ugvs N --seed S --duration T --out DIR [options]\n"
     "  airground-sim eval mapping --world W --seed S --out DIR [options]   (see eval mapping --help)\n"
+    "  airground-sim eval localization --world W --seed S --init-error 16 --map gt|online --out DIR [options]\n"
+    "                                  (see eval localization --help)\n"
     "  airground-sim config --out DIR   (every simulator model's parameters with units and ranges, as\n"
     "                                    YAML files that 'run --config-dir DIR' reads back)\n\n"
     "--world W is a world directory or 'default' (the built-in 400 m world, seed 42).\n"
@@ -93,6 +96,42 @@ constexpr const char* kEvalMappingHelp =
     "  --max-duration T        stop after T simulated seconds even if the survey is not done (3600)\n"
     "  --config-dir DIR        simulator model overrides (as for run)\n"
     "  --quiet                 no progress line\n";
+
+constexpr const char* kEvalLocalizationHelp =
+    "airground-sim eval localization --world W --seed S --init-error 16 --map gt|online --out DIR [options]\n\n"
+    "One ground robot drives a loop of about --route-km over the roads (planned from ground truth through\n"
+    "far-apart drivable points, from the staging pad; deterministic by seed) with its initial pose guess off\n"
+    "by exactly --init-error metres (direction by seed) and --init-yaw-error degrees (sign by seed). Its real\n"
+    "role table gets the simulated LiDAR (ground-truth labels), wheel odometry, that guess and the aerial map\n"
+    "tiles: --map gt the world's class map at 0.5 m, --map online the quadrotor's ortho-map as its mapping\n"
+    "stages build it (it flies its survey; the robot waits at its start until the map knows\n"
+    "--wait-map-fraction of the cells within --wait-map-radius, then drives while the map grows; tiles\n"
+    "reach the robot as soon as they change: perfect comms until gossip over the radio), --map none no map.\n"
+    "The pose the robot publishes on its 'localization' channel is sampled at 10 Hz against the truth.\n\n"
+    "Writes DIR/metrics.json (converged, convergence_time_s, loc_error_mean_m, loc_error_p95_m,\n"
+    "yaw_error_mean_deg, odom_only_error_mean_m, ...), report.md (with the metric definitions),\n"
+    "samples.csv, trajectory.png (truth, estimate, odometry only over the class map) and error.png.\n"
+    "A sample is good when the robot's status is tracking, its pose at most 0.5 s old and within --radius\n"
+    "of the truth at its stamp; converged = from some sample on every sample is good; the errors are over\n"
+    "those samples; convergence_time_s is the driving time to the first of them. Without a localization\n"
+    "stage on the robot, converged is false.\n"
+    "Defaults: --world default --seed 1 --init-error 16 --map gt --out eval-localization.\n\n"
+    "Options:\n"
+    "  --init-yaw-error D       initial yaw error [deg] (30)\n"
+    "  --route-km K             route length (2)                  --speed V   driving speed (1.2 m/s)\n"
+    "  --labels gt|geometric    the robot's scan labelling (its localization.labels parameter, when it has one)\n"
+    "  --set SECTION.KEY=VALUE  any parameter of the ground robot's role config (repeatable)\n"
+    "  --stand-still-s S        the robot stands still S seconds ...\n"
+    "  --stand-still-at T       ... from simulated time T (120; with --map online the wait counts)\n"
+    "  --yaw-drift-at-rest R    the wheel odometry's yaw drift while standing [rad/s] (model default 0)\n"
+    "  --radius M               convergence radius (3 m)\n"
+    "  --wait-map-radius M      --map online: wait for the map within M metres of the start (30; 0 = start at once)\n"
+    "  --wait-map-fraction F    ... until it knows this fraction of those cells (0.5)\n"
+    "  --lidar-columns C        512|1024|2048 (1024)\n"
+    "  --max-duration T         stop after T simulated seconds (default from the route length)\n"
+    "  --config-dir DIR         simulator model overrides (as for run)\n"
+    "  --threads N              sensor worker threads (all cores)\n"
+    "  --quiet                  no progress line\n";
 
 struct Args {
   std::vector<std::string> pos;
@@ -435,6 +474,82 @@ int eval_mapping_cmd(const Args& a) {
   return 0;
 }
 
+int eval_localization_cmd(const Args& a) {
+  EvalLocalizationOptions o;
+  o.world = a.get("world", o.world);
+  o.seed = static_cast<std::uint64_t>(number(a, "seed", static_cast<double>(o.seed)));
+  o.out_dir = a.get("out", o.out_dir);
+  o.init_error_m = number(a, "init-error", o.init_error_m);
+  o.init_yaw_error_deg = number(a, "init-yaw-error", o.init_yaw_error_deg);
+  const std::string map = a.get("map", "gt");
+  if (map == "gt") o.map = UgvMapSource::kGroundTruth;
+  else if (map == "online") o.map = UgvMapSource::kOnline;
+  else if (map == "none") o.map = UgvMapSource::kNone;
+  else usage_error("--map must be gt, online or none");
+  o.route_km = number(a, "route-km", o.route_km);
+  o.speed_mps = number(a, "speed", o.speed_mps);
+  o.labels = a.get("labels");
+  if (a.has("labels") && o.labels != "gt" && o.labels != "geometric") usage_error("--labels must be gt or geometric");
+  if (a.has("set")) {
+    const auto& kv = a.opt.at("set");
+    if (kv.empty()) usage_error("--set needs SECTION.KEY=VALUE");
+    for (const auto& s : kv)
+      if (s.find('=') == std::string::npos || s.find('.') == std::string::npos) usage_error("--set needs SECTION.KEY=VALUE, got '" + s + "'");
+    o.set = kv;
+  }
+  o.stand_still_s = number(a, "stand-still-s", 0);
+  o.stand_still_at_s = number(a, "stand-still-at", o.stand_still_at_s);
+  if (a.has("yaw-drift-at-rest")) {
+    o.yaw_drift_at_rest = number(a, "yaw-drift-at-rest", 0);
+    o.yaw_drift_at_rest_set = true;
+  }
+  o.convergence_radius_m = number(a, "radius", o.convergence_radius_m);
+  o.wait_map_radius_m = number(a, "wait-map-radius", o.wait_map_radius_m);
+  o.wait_map_fraction = number(a, "wait-map-fraction", o.wait_map_fraction);
+  o.lidar_columns = static_cast<int>(number(a, "lidar-columns", o.lidar_columns));
+  o.max_duration_s = number(a, "max-duration", 0);
+  o.config_dir = a.get("config-dir");
+  o.threads = static_cast<int>(number(a, "threads", 0));
+  o.quiet = a.has("quiet");
+  if (!(o.init_error_m >= 0) || !(o.init_yaw_error_deg >= 0) || o.init_yaw_error_deg > 180)
+    usage_error("--init-error must be >= 0 and --init-yaw-error in 0..180");
+  if (!(o.route_km > 0) || !(o.speed_mps > 0) || !(o.convergence_radius_m > 0)) usage_error("--route-km, --speed and --radius must be positive");
+  if (o.stand_still_s < 0 || o.stand_still_at_s < 0) usage_error("--stand-still-s and --stand-still-at must be >= 0");
+  if (o.wait_map_radius_m < 0 || o.wait_map_fraction < 0 || o.wait_map_fraction > 1) usage_error("--wait-map-radius >= 0, --wait-map-fraction in 0..1");
+  const bool tty = isatty(2) != 0;
+  double last_print = -1;
+  auto progress = [&](const LocalizationProgress& p) {
+    if (o.quiet) return;
+    if (!tty && p.sim_s - last_print < 60) return;
+    last_print = p.sim_s;
+    char err[32] = "-";
+    if (p.error_m >= 0) std::snprintf(err, sizeof err, "%.2f m", p.error_m);
+    std::fprintf(stderr, "%ssim %7.1f s  driven %6.0f / %.0f m%s  localization: %-12s error %-9s  real-time factor %.1fx%s",
+                 tty ? "\r" : "", p.sim_s, p.distance_m, p.route_m, p.released ? "" : " (waiting for the map)", p.status, err,
+                 p.rtf, tty ? "   " : "\n");
+  };
+  std::fprintf(stderr, "localization evaluation on world '%s' (seed %llu, map %s, initial error %.1f m / %.0f deg) -> %s\n",
+               o.world.c_str(), static_cast<unsigned long long>(o.seed), map.c_str(), o.init_error_m, o.init_yaw_error_deg, o.out_dir.c_str());
+  auto m = eval_localization(o, progress);
+  if (!o.quiet && tty) std::fprintf(stderr, "\n");
+  if (!m) return fail(m.error());
+  const LocalizationMetrics& r = m.value();
+  if (!r.localization_published)
+    std::printf("the ground robot never published a localization (no localization stage in its role table): not converged\n");
+  if (r.converged)
+    std::printf("converged after %.1f s of driving (%.0f m): loc_error_mean_m %.2f  loc_error_p95_m %.2f  yaw_error_mean_deg %.2f  "
+                "odom_only_error_mean_m %.2f  divergences %llu\n",
+                r.convergence_time_s, r.convergence_distance_m, r.loc_error_mean_m, r.loc_error_p95_m, r.yaw_error_mean_deg,
+                r.odom_only_error_mean_m, static_cast<unsigned long long>(r.divergences));
+  else
+    std::printf("not converged (tracking %.0f %% of the samples)  odom_only_error_mean_m %.2f\n", 100.0 * r.tracking_fraction,
+                r.odom_only_error_mean_m);
+  std::printf("route %.0f m, driven %.0f m, %llu map tiles and %llu scans published; %.0f s simulated in %.0f s; metrics: %s/metrics.json\n",
+              r.route_length_m, r.distance_m, static_cast<unsigned long long>(r.tiles_published),
+              static_cast<unsigned long long>(r.scans_published), r.sim_s, r.wall_s, o.out_dir.c_str());
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -463,12 +578,21 @@ int main(int argc, char** argv) {
       usage_error("unknown world command '" + sub + "'");
     }
     if (cmd == "eval") {
+      if (argc >= 3 && std::string(argv[2]) == "localization") {
+        if (help) {
+          std::fputs(kEvalLocalizationHelp, stdout);
+          return 0;
+        }
+        return eval_localization_cmd(parse(argc, argv, 3));
+      }
       if (argc < 3 || std::string(argv[2]) != "mapping") {
         if (help) {
           std::fputs(kEvalMappingHelp, stdout);
+          std::fputs("\n", stdout);
+          std::fputs(kEvalLocalizationHelp, stdout);
           return 0;
         }
-        usage_error("eval needs 'mapping'");
+        usage_error("eval needs 'mapping' or 'localization'");
       }
       if (help) {
         std::fputs(kEvalMappingHelp, stdout);

@@ -12,10 +12,15 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <deque>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <sstream>
+#include <unordered_map>
+#include <unordered_set>
 
+#include "airground/aerial_mapping/stages.hpp"
 #include "airground/core/messages.hpp"
 #include "airground/platform/clock.hpp"
 #include "airground/platform/executor.hpp"
@@ -90,9 +95,17 @@ class CsvLog {
   std::FILE* f_{nullptr};
 };
 
+class SimProbeStage;
+
 struct Ugv {
   Ugv(std::string n, int nd, DiffDriveRobot v, WheelOdometrySimulator o, PurePursuit p, const Pose2& s)
       : name(std::move(n)), node(nd), vehicle(std::move(v)), odometry(std::move(o)), pursuit(std::move(p)), start(s) {}
+  [[nodiscard]] Pose2 odometry_in_map(const Pose2& od) const noexcept {
+    const double c = std::cos(start.yaw), sn = std::sin(start.yaw);
+    return Pose2{start.x + c * od.x - sn * od.y, start.y + sn * od.x + c * od.y, wrap_angle(start.yaw + od.yaw)};
+  }
+  // The true pose at time t from the last kHistory physics steps (interpolated), or the newest.
+  [[nodiscard]] Pose2 truth_at(TimeNs t) const noexcept;
   std::string name;
   int node{0};
   DiffDriveRobot vehicle;
@@ -112,7 +125,53 @@ struct Ugv {
   CsvLog truth_log, odom_log, scan_log;
   std::FILE* scan_bin{nullptr};
   std::unique_ptr<RoleInstance> role;
+
+  // The robot's drivers in simulation: what the LiDAR, the wheel encoders, the operator (initial pose)
+  // and the map source publish to its stages.
+  int index{0};
+  RingWriter<LidarScanMsg, kLidarRing> scan_out{};
+  RingWriter<WheelOdometryMsg, kWheelOdometryRing> odom_out{};
+  RingWriter<MapTileMsg, kMapTileRing> tiles_out{};
+  LatestWriter<InitialPoseMsg> init_out{};
+  std::unique_ptr<LidarScanMsg> scan_msg{};  // one preallocated revolution, filled in place
+  std::uint32_t scan_seq{0};
+  InitialPoseMsg init_pose{};
+  bool init_published{false};
+  std::uint64_t scans_published{0}, odom_published{0}, tiles_published{0}, tiles_refused{0}, channel_drops{0};
+  std::vector<std::pair<std::int32_t, std::int32_t>> gt_order{};  // ground-truth tiles, nearest the start first
+  std::size_t gt_next{0};
+  std::deque<std::uint64_t> pending{};  // online: changed tiles (packed keys) not yet pushed
+  std::unordered_set<std::uint64_t> pending_set{};
+  // Scripted route, holds, waiting for the map.
+  bool scripted{false};
+  std::vector<Eigen::Vector2d> route{};
+  std::size_t route_progress{0};
+  bool route_done{false};
+  bool released{true};
+  TimeNs released_at{0};
+  TimeNs next_wait_check{0};
+  bool held{false};
+  static constexpr std::size_t kHistory = 128;
+  std::array<std::pair<TimeNs, Pose2>, kHistory> history{};
+  std::size_t history_n{0};
+  SimProbeStage* probe{nullptr};
 };
+
+Pose2 Ugv::truth_at(TimeNs t) const noexcept {
+  if (history_n == 0) return vehicle.pose();
+  const std::size_t n = std::min(history_n, kHistory);
+  auto at = [&](std::size_t back) -> const std::pair<TimeNs, Pose2>& { return history[(history_n - 1 - back) % kHistory]; };
+  if (t >= at(0).first) return at(0).second;
+  for (std::size_t k = 1; k < n; ++k) {
+    const auto& a = at(k);
+    if (a.first > t) continue;
+    const auto& b = at(k - 1);
+    const double w = static_cast<double>(t - a.first) / static_cast<double>(std::max<TimeNs>(1, b.first - a.first));
+    return Pose2{a.second.x + w * (b.second.x - a.second.x), a.second.y + w * (b.second.y - a.second.y),
+                 wrap_angle(a.second.yaw + w * wrap_angle(b.second.yaw - a.second.yaw))};
+  }
+  return at(n - 1).second;
+}
 
 struct Uav {
   Quadrotor vehicle;
@@ -136,6 +195,8 @@ struct Uav {
 };
 
 struct Team {
+  // The ground robots' table in simulation (their role plus the probe stage); outlives the role instances.
+  std::vector<StageSpec> ugv_stages;
   RunOptions opt;
   std::shared_ptr<const World> world;
   std::shared_ptr<const HeightfieldRaycaster> raycaster;
@@ -153,6 +214,15 @@ struct Team {
   TimeNs sensor_cpu{0};
   std::vector<Delivery> deliveries;
   std::uint64_t frame_pngs{0};
+  // The ground robots' map feed.
+  std::unique_ptr<MapTileMsg> tile_msg;         // scratch: one tile, built in place before each push
+  const mapping::OrthoMap* ortho{nullptr};     // the quadrotor's map (online source)
+  std::uint64_t ortho_version_seen{std::numeric_limits<std::uint64_t>::max()};
+  std::unordered_map<std::uint64_t, std::uint64_t> tile_versions;  // online: version last seen per tile
+  std::unordered_map<std::uint64_t, const mapping::Tile*> tile_ptrs;  // tiles are never removed from the map
+  std::vector<std::uint64_t> changed;          // scratch
+  TimeNs sample_period{0};
+  int lidar_rings{64};
 };
 
 Pose3 lidar_pose(const Ugv& u, double mount) {
@@ -180,6 +250,276 @@ void new_leg(Team& t, Ugv& u, TimeNs now) {
   u.retry_at = now + 2 * kNsPerS;  // stay put and try again later rather than search every tick
   AG_LOG_WARN("sim", "%s: no road route from (%.1f, %.1f); retrying in 2 s", u.name.c_str(), u.vehicle.pose().x, u.vehicle.pose().y);
 }
+
+// A route with a vertex at least every `step` metres: pure pursuit looks for its progress on the next
+// few segments only, so on a route that comes back along the same road (out and back) long segments
+// would let it mistake the way back for the way out.
+std::vector<Eigen::Vector2d> densify(const std::vector<Eigen::Vector2d>& route, double step) {
+  std::vector<Eigen::Vector2d> out;
+  if (route.empty()) return out;
+  out.push_back(route.front());
+  for (std::size_t i = 1; i < route.size(); ++i) {
+    const Eigen::Vector2d a = route[i - 1], d = route[i] - a;
+    const int n = std::max(1, static_cast<int>(std::ceil(d.norm() / step)));
+    for (int k = 1; k <= n; ++k) out.push_back(a + d * (static_cast<double>(k) / n));
+  }
+  return out;
+}
+
+// A scripted robot that hit something: route from here back onto its route a vertex ahead, then on.
+void rejoin_route(Team& t, Ugv& u, TimeNs now) {
+  const Pose2& p = u.vehicle.pose();
+  const std::size_t k = std::min(u.route_progress + 1, u.route.size() - 1);
+  std::vector<Eigen::Vector2d> path;
+  if (!t.router->route(p.x, p.y, u.route[k].x(), u.route[k].y(), path) || path.empty()) path.assign(1, Eigen::Vector2d(p.x, p.y));
+  path = densify(path, 1.0);
+  path.insert(path.end(), u.route.begin() + static_cast<std::ptrdiff_t>(k) + 1, u.route.end());
+  u.route.assign(path.begin(), path.end());
+  u.route_progress = 0;
+  u.pursuit.set_path(std::move(path));
+  (void)now;
+}
+
+// Ground-truth map tiles: the world's class raster resampled to the map's cells. A map cell takes the
+// majority class of the world cells whose centres lie in it (ties: the first in row-major order from the
+// north-west; the world cell under its centre when none does, as for worlds coarser than the map) and
+// the mean surface elevation (terrain + height) of those cells. Cells outside the world are unknown.
+void build_gt_tile(const World& w, std::int32_t tx, std::int32_t ty, MapTileMsg& m) {
+  const GridGeometry& g = w.grid();
+  const double res = kMapResolutionM;
+  m.tx = tx;
+  m.ty = ty;
+  m.version = 1;
+  for (int r = 0; r < kTileCells; ++r) {
+    for (int c = 0; c < kTileCells; ++c) {
+      const auto i = static_cast<std::size_t>(r) * kTileCells + static_cast<std::size_t>(c);
+      const double x = (static_cast<double>(tx) * kTileCells + c + 0.5) * res;
+      const double y = (static_cast<double>(ty) * kTileCells + r + 0.5) * res;
+      auto c0 = static_cast<std::int32_t>(std::ceil(g.col_f(x - 0.5 * res) - 0.5));
+      auto c1 = static_cast<std::int32_t>(std::ceil(g.col_f(x + 0.5 * res) - 0.5)) - 1;
+      auto r0 = static_cast<std::int32_t>(std::ceil(g.row_f(y + 0.5 * res) - 0.5));
+      auto r1 = static_cast<std::int32_t>(std::ceil(g.row_f(y - 0.5 * res) - 0.5)) - 1;
+      if (c0 > c1 || r0 > r1) {
+        c0 = c1 = g.col(x);
+        r0 = r1 = g.row(y);
+      }
+      std::array<std::uint16_t, 256> votes{};
+      std::uint8_t best = 255;
+      std::uint16_t best_n = 0;
+      double sum = 0;
+      int n = 0;
+      for (std::int32_t wr = r0; wr <= r1; ++wr)
+        for (std::int32_t wc = c0; wc <= c1; ++wc) {
+          if (!g.contains(wc, wr)) continue;
+          const std::uint8_t k = w.class_id.at<std::uint8_t>(wr, wc);
+          if (++votes[k] > best_n) {
+            best_n = votes[k];
+            best = k;
+          }
+          sum += static_cast<double>(w.surface_at(wc, wr));
+          ++n;
+        }
+      m.cls[i] = n > 0 ? best : std::uint8_t{255};
+      m.elevation[i] = n > 0 ? static_cast<float>(sum / n) : std::numeric_limits<float>::quiet_NaN();
+    }
+  }
+}
+
+void build_online_tile(const mapping::Tile& tile, MapTileMsg& m) {
+  m.tx = tile.key.tx;
+  m.ty = tile.key.ty;
+  m.version = tile.version;
+  for (std::size_t i = 0; i < kTileCellCount; ++i) {
+    const mapping::Cell& c = tile.live[i];
+    m.cls[i] = c.cls;
+    m.elevation[i] = c.count > 0 ? c.elevation() : std::numeric_limits<float>::quiet_NaN();
+  }
+}
+
+// The tiles of the world's extent, nearest to `p` first (ties by index, so the order is fixed).
+std::vector<std::pair<std::int32_t, std::int32_t>> gt_tile_order(const World& w, const Pose2& p) {
+  const GridGeometry& g = w.grid();
+  const double tile_m = kTileCells * kMapResolutionM;
+  const auto tx0 = static_cast<std::int32_t>(std::floor(g.origin_x / tile_m));
+  const auto tx1 = static_cast<std::int32_t>(std::ceil((g.origin_x + g.size_x()) / tile_m)) - 1;
+  const auto ty0 = static_cast<std::int32_t>(std::floor((g.origin_y - g.size_y()) / tile_m));
+  const auto ty1 = static_cast<std::int32_t>(std::ceil(g.origin_y / tile_m)) - 1;
+  std::vector<std::pair<std::int32_t, std::int32_t>> out;
+  for (std::int32_t ty = ty0; ty <= ty1; ++ty)
+    for (std::int32_t tx = tx0; tx <= tx1; ++tx) out.emplace_back(tx, ty);
+  auto d2 = [&](const std::pair<std::int32_t, std::int32_t>& k) {
+    const double cx = (k.first + 0.5) * tile_m - p.x, cy = (k.second + 0.5) * tile_m - p.y;
+    return cx * cx + cy * cy;
+  };
+  std::stable_sort(out.begin(), out.end(), [&](const auto& a, const auto& b) { return d2(a) < d2(b); });
+  return out;
+}
+
+// Online source: note every tile whose version changed since the last look, for every ground robot.
+void scan_online_map(Team& t) {
+  const mapping::OrthoMap& m = *t.ortho;
+  if (m.version() == t.ortho_version_seen) return;
+  t.ortho_version_seen = m.version();
+  t.changed.clear();
+  m.for_each_tile([&](const mapping::Tile& tile) {
+    const std::uint64_t key = tile.key.packed();
+    t.tile_ptrs[key] = &tile;
+    auto [it, fresh] = t.tile_versions.try_emplace(key, tile.version);
+    if (!fresh && it->second == tile.version) return;
+    it->second = tile.version;
+    t.changed.push_back(key);
+  });
+  std::sort(t.changed.begin(), t.changed.end());  // the map's hash order is not an order to rely on
+  for (auto& up : t.ugvs)
+    for (const std::uint64_t key : t.changed)
+      if (up->pending_set.insert(key).second) up->pending.push_back(key);
+}
+
+// Pushes this robot's next tiles while its ring takes them (a refused tile is pushed again next step,
+// so a reader that did take it may see it twice: same version, harmless).
+void publish_tiles(Team& t, Ugv& u, TimeNs now) {
+  MapTileMsg& m = *t.tile_msg;
+  for (int pushed = 0; pushed < t.opt.map_tiles_per_tick; ++pushed) {
+    if (t.opt.ugv_map == UgvMapSource::kGroundTruth) {
+      if (u.gt_next >= u.gt_order.size()) return;
+      build_gt_tile(*t.world, u.gt_order[u.gt_next].first, u.gt_order[u.gt_next].second, m);
+      m.stamp = 0;  // the world never changes
+    } else {
+      if (u.pending.empty()) return;
+      build_online_tile(*t.tile_ptrs.at(u.pending.front()), m);
+      m.stamp = now;
+    }
+    m.published = now;
+    if (u.tiles_out.push(m) > 0) {
+      ++u.tiles_refused;
+      return;
+    }
+    ++u.tiles_published;
+    if (t.opt.ugv_map == UgvMapSource::kGroundTruth) {
+      ++u.gt_next;
+    } else {
+      u.pending_set.erase(u.pending.front());
+      u.pending.pop_front();
+    }
+  }
+}
+
+// Online source: a robot waits at its start until the map knows most of its surroundings.
+bool map_covers(const mapping::OrthoMap& m, const Pose2& p, double radius, double fraction) {
+  std::uint64_t known = 0, total = 0;
+  const double res = kMapResolutionM;
+  for (double dy = -radius; dy <= radius; dy += res)
+    for (double dx = -radius; dx <= radius; dx += res) {
+      if (dx * dx + dy * dy > radius * radius) continue;
+      ++total;
+      const mapping::Cell* c = m.cell_at(p.x + dx, p.y + dy);
+      if (c != nullptr && c->cls != 255) ++known;
+    }
+  return total == 0 || static_cast<double>(known) >= fraction * static_cast<double>(total);
+}
+
+// The simulator's reader on a ground robot's channels, appended to its table: the newest "localization"
+// for the sampling callback and, for tests, what arrives on the robot's input channels.
+class SimProbeStage final : public Stage {
+ public:
+  static constexpr ParamSpec kParams[] = {
+      ParamSpec::boolean("scans", false, "read lidar_scan"),
+      ParamSpec::boolean("odometry", false, "read wheel_odometry"),
+      ParamSpec::boolean("tiles", false, "read map_tiles"),
+      ParamSpec::boolean("initial_pose", false, "read initial_pose"),
+  };
+  static std::unique_ptr<Stage> make() { return std::make_unique<SimProbeStage>(); }
+
+  Status init(StageContext& ctx) override {
+    const SectionView p = ctx.params();
+    auto loc = ctx.channels.latest_reader<LocalizationMsg>("localization");
+    if (!loc) return loc.error();
+    loc_ = loc.value();
+    if (p.boolean("scans")) {
+      auto r = ctx.channels.ring_reader<LidarScanMsg, kLidarRing>("lidar_scan");
+      if (!r) return r.error();
+      scans_ = r.value();
+      read_scans_ = true;
+    }
+    if (p.boolean("odometry")) {
+      auto r = ctx.channels.ring_reader<WheelOdometryMsg, kWheelOdometryRing>("wheel_odometry");
+      if (!r) return r.error();
+      odom_ = r.value();
+      read_odom_ = true;
+    }
+    if (p.boolean("tiles")) {
+      auto r = ctx.channels.ring_reader<MapTileMsg, kMapTileRing>("map_tiles");
+      if (!r) return r.error();
+      tiles_ = r.value();
+      read_tiles_ = true;
+    }
+    if (p.boolean("initial_pose")) {
+      auto r = ctx.channels.latest_reader<InitialPoseMsg>("initial_pose");
+      if (!r) return r.error();
+      init_ = r.value();
+      read_init_ = true;
+    }
+    return ok_status();
+  }
+
+  void step(TimeNs now) noexcept override {
+    const UgvChannelTap& tap = team->opt.ugv_tap;
+    const int i = ugv->index;
+    if (read_scans_)
+      for (LidarScanMsg* m = scans_.front(); m != nullptr; m = scans_.front()) {
+        if (tap.scan) tap.scan(i, *m);
+        scans_.pop();
+      }
+    if (read_odom_)
+      for (WheelOdometryMsg* m = odom_.front(); m != nullptr; m = odom_.front()) {
+        if (tap.odometry) tap.odometry(i, *m);
+        odom_.pop();
+      }
+    if (read_tiles_)
+      for (MapTileMsg* m = tiles_.front(); m != nullptr; m = tiles_.front()) {
+        if (tap.tile) tap.tile(i, *m);
+        tiles_.pop();
+      }
+    if (read_init_ && init_.fresh()) {
+      const InitialPoseMsg& m = init_.read();
+      if (tap.initial_pose) tap.initial_pose(i, m);
+    }
+    if (loc_.fresh()) received_ = true;
+    const LocalizationMsg& loc = loc_.read();
+    if (team->opt.sample && now >= next_sample_) {
+      next_sample_ += team->sample_period;
+      UgvSample s;
+      s.now = now;
+      s.ugv = i;
+      s.truth = ugv->vehicle.pose();
+      s.odometry = ugv->odom_last;
+      s.odometry_in_map = ugv->odometry_in_map(ugv->odom_last);
+      s.initial_guess = ugv->init_pose.pose;
+      s.localization_received = received_;
+      s.localization = &loc;
+      s.truth_at_localization = received_ ? ugv->truth_at(loc.stamp) : s.truth;
+      s.distance_m = ugv->vehicle.distance_travelled();
+      s.released = ugv->released;
+      s.held = ugv->held;
+      s.route_done = ugv->route_done;
+      s.role = ugv->role.get();
+      team->opt.sample(s);
+    }
+  }
+
+  Team* team{nullptr};
+  Ugv* ugv{nullptr};
+
+ private:
+  LatestReader<LocalizationMsg> loc_{};
+  RingReader<LidarScanMsg, kLidarRing> scans_{};
+  RingReader<WheelOdometryMsg, kWheelOdometryRing> odom_{};
+  RingReader<MapTileMsg, kMapTileRing> tiles_{};
+  LatestReader<InitialPoseMsg> init_{};
+  bool read_scans_{false}, read_odom_{false}, read_tiles_{false}, read_init_{false};
+  bool received_{false};
+  TimeNs next_sample_{0};
+};
 
 // The camera driver's job in simulation: the rendered frame at the mapper's 640x400, with its labels.
 void publish_image(Uav& a, TimeNs now) {
@@ -222,24 +562,73 @@ void SimWorldStage::step(TimeNs now) noexcept {
   const bool log_now = now >= t.next_log;
   if (log_now) t.next_log += t.log_period;
 
+  // The quadrotor's map as the ground robots' source: which tiles changed (as of the last step).
+  if (t.ortho != nullptr) scan_online_map(t);
+
   // Ground robots: scripted pursuit from ground truth, exact arcs, wheel odometry.
   for (auto& up : t.ugvs) {
     Ugv& u = *up;
-    if (u.pursuit.done() && now >= u.retry_at) {
+    if (!u.init_published) {  // the operator's (or mission file's) guess of the start pose
+      u.init_pose.stamp = now;
+      u.init_pose.published = now;
+      u.init_out.publish(u.init_pose);
+      u.init_published = true;
+    }
+    if (!u.released && now >= u.next_wait_check) {
+      u.next_wait_check += kNsPerS;
+      if (map_covers(*t.ortho, u.vehicle.pose(), t.opt.ugv_wait_map_radius_m, t.opt.ugv_wait_map_fraction)) {
+        u.released = true;
+        u.released_at = now;
+        AG_LOG_INFO("sim", "%s: the map covers its surroundings at %.1f s; driving", u.name.c_str(), to_seconds(now));
+      }
+    }
+    u.held = false;
+    for (const UgvHold& h : t.opt.ugv_holds)
+      if (h.ugv == u.index && now >= from_seconds(h.at_s) && now < from_seconds(h.at_s + h.duration_s)) u.held = true;
+    if (u.scripted) {
+      if (!u.route_done && u.pursuit.done()) {
+        u.route_done = true;
+        ++u.goals_reached;
+        AG_LOG_INFO("sim", "%s: route driven at %.1f s (%.0f m)", u.name.c_str(), to_seconds(now), u.vehicle.distance_travelled());
+      }
+      // Progress along the route (for rejoining it after a collision): the nearest vertex, never back.
+      const Pose2& p = u.vehicle.pose();
+      auto d2 = [&](std::size_t k) { return (u.route[k] - Eigen::Vector2d(p.x, p.y)).squaredNorm(); };
+      while (u.route_progress + 1 < u.route.size() && d2(u.route_progress + 1) < d2(u.route_progress)) ++u.route_progress;
+    } else if (u.pursuit.done() && now >= u.retry_at) {
       if (u.on_route) ++u.goals_reached;
       new_leg(t, u, now);
     }
     double v = 0, w = 0;
-    u.pursuit.command(u.vehicle.pose(), v, w);
+    if (u.released && !u.held) u.pursuit.command(u.vehicle.pose(), v, w);
     u.vehicle.command_twist(v, w);
     if (dt > 0 && u.vehicle.step(dt, *t.world)) {  // a collision: the vehicle stopped; replan from here
       AG_LOG_WARN("sim", "%s: collision at (%.2f, %.2f) yaw %.2f; replanning", u.name.c_str(), u.vehicle.pose().x,
                   u.vehicle.pose().y, u.vehicle.pose().yaw);
-      new_leg(t, u, now);
+      if (u.scripted) {
+        if (!u.route_done) rejoin_route(t, u, now);
+      } else {
+        new_leg(t, u, now);
+      }
     }
+    u.history[u.history_n % Ugv::kHistory] = {now, u.vehicle.pose()};
+    ++u.history_n;
     const OdometrySample od = u.odometry.step(now, u.vehicle.pose(), u.vehicle.wheel_left_rad_s(), u.vehicle.wheel_right_rad_s());
     ++u.odom_samples;
     u.odom_last = od.pose;
+    {  // the base's odometry over CAN, as the robot computes it with its nominal wheel radius and track
+      WheelOdometryMsg m;
+      m.stamp = od.stamp;
+      m.published = now;
+      m.pose = od.pose;
+      const WheelOdometryConfig& oc = u.odometry.config();
+      m.v_mps = 0.5 * oc.wheel_radius_m * (od.wheel_left_rad_s + od.wheel_right_rad_s);
+      m.w_radps = oc.wheel_radius_m * (od.wheel_right_rad_s - od.wheel_left_rad_s) / oc.track_width_m;
+      m.moving = od.moving;
+      if (u.odom_out.push(m) > 0) ++u.channel_drops;
+      ++u.odom_published;
+    }
+    if (t.opt.ugv_map != UgvMapSource::kNone) publish_tiles(t, u, now);
     if (log_now) {
       const Pose3 p = u.vehicle.pose3();
       if (u.truth_log) std::fprintf(u.truth_log.get(), "%.3f,%.3f,%.3f,%.3f,%.4f,%.4f,%.4f\n", to_seconds(now), p.x, p.y, p.z, p.roll, p.pitch, p.yaw);
@@ -346,6 +735,24 @@ void SimWorldStage::step(TimeNs now) noexcept {
         u.scan.clear();
         for (const auto& part : u.scan_parts) u.scan.insert(u.scan.end(), part.begin(), part.end());
         ++u.scans;
+        {  // the Ouster driver's revolution, labelled with the simulator's ground truth
+          LidarScanMsg& m = *u.scan_msg;
+          m.stamp = now;
+          m.published = now;
+          m.seq = u.scan_seq++;
+          m.rings = static_cast<std::uint16_t>(t.lidar_rings);
+          m.columns = static_cast<std::uint16_t>(t.opt.lidar_columns);
+          m.labels = LabelSource::kGroundTruth;
+          m.sensor_in_body = Pose3{0, 0, t.opt.lidar_mount_height_m, 0, 0, 0};
+          const std::size_t n = std::min(u.scan.size(), kMaxScanPoints);
+          m.count = static_cast<std::uint32_t>(n);
+          for (std::size_t k = 0; k < n; ++k) {
+            const LidarPoint& q = u.scan[k];
+            m.points[k] = ScanReturn{q.x, q.y, q.z, q.range, q.cls, q.ring, q.col};
+          }
+          if (u.scan_out.push(m) > 0) ++u.channel_drops;
+          ++u.scans_published;
+        }
         if (u.scan_log) std::fprintf(u.scan_log.get(), "%.3f,%llu,%zu\n", to_seconds(now), static_cast<unsigned long long>(u.scans), u.scan.size());
         if (u.scan_bin != nullptr) {  // per scan: int64 stamp, uint32 count, then packed points
           const std::uint32_t n = static_cast<std::uint32_t>(u.scan.size());
@@ -408,7 +815,9 @@ Status write_reports(const Team& t, const RunSummary& s) {
     << "\nstage_overruns: " << s.stage_overruns << "\nground_robots:\n";
   for (const auto& r : s.ugvs)
     y << "  - {name: " << r.name << ", distance_m: " << r.distance_m << ", collisions: " << r.collisions
-      << ", goals_reached: " << r.goals_reached << ", scans: " << r.scans << ", odometry_final_error_m: " << r.odometry_final_error_m << "}\n";
+      << ", goals_reached: " << r.goals_reached << ", scans: " << r.scans << ", odometry_final_error_m: " << r.odometry_final_error_m
+      << ", published: {scans: " << r.scans_published << ", odometry: " << r.odometry_published << ", tiles: " << r.tiles_published
+      << ", tiles_refused: " << r.tiles_refused << ", drops: " << r.channel_drops << ", initial_pose: " << (r.initial_pose_published ? "true" : "false") << "}}\n";
   std::ofstream j(t.out / "summary.json");
   j << "{\"sim_s\": " << s.sim_s << ", \"wall_s\": " << s.wall_s << ", \"real_time_factor\": " << s.real_time_factor
     << ", \"camera_frames\": " << s.camera_frames << ", \"gps_fixes\": " << s.gps_fixes << ", \"vo_samples\": " << s.vo_samples
@@ -418,7 +827,9 @@ Status write_reports(const Team& t, const RunSummary& s) {
   for (std::size_t i = 0; i < s.ugvs.size(); ++i) {
     const auto& r = s.ugvs[i];
     j << (i ? ", " : "") << "{\"name\": \"" << r.name << "\", \"distance_m\": " << r.distance_m << ", \"collisions\": " << r.collisions
-      << ", \"goals_reached\": " << r.goals_reached << ", \"scans\": " << r.scans << ", \"odometry_final_error_m\": " << r.odometry_final_error_m << "}";
+      << ", \"goals_reached\": " << r.goals_reached << ", \"scans\": " << r.scans << ", \"odometry_final_error_m\": " << r.odometry_final_error_m
+      << ", \"published\": {\"scans\": " << r.scans_published << ", \"odometry\": " << r.odometry_published << ", \"tiles\": " << r.tiles_published
+      << ", \"tiles_refused\": " << r.tiles_refused << ", \"drops\": " << r.channel_drops << ", \"initial_pose\": " << (r.initial_pose_published ? "true" : "false") << "}}";
   }
   j << "]}\n";
   std::ofstream m(t.out / "report.md");
@@ -446,6 +857,20 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   if (!(opt.duration_s > 0)) return Error::make(ErrorCode::kInvalidArgument, "--duration must be positive");
   if (opt.lidar_columns != 512 && opt.lidar_columns != 1024 && opt.lidar_columns != 2048)
     return Error::make(ErrorCode::kInvalidArgument, "LiDAR columns must be 512, 1024 or 2048");
+  if (!(opt.init_error_m >= 0) || !(opt.init_yaw_error_deg >= 0) || opt.init_yaw_error_deg > 180)
+    return Error::make(ErrorCode::kInvalidArgument, "the initial pose error must be >= 0 m and 0..180 deg");
+  if (opt.map_tiles_per_tick < 1) return Error::make(ErrorCode::kInvalidArgument, "map_tiles_per_tick must be >= 1");
+  if (opt.sample && !(opt.sample_hz > 0 && opt.sample_hz <= opt.physics_hz))
+    return Error::make(ErrorCode::kInvalidArgument, "the sampling rate must be in (0, physics rate]");
+  if (opt.ugv_map == UgvMapSource::kOnline && !opt.uav)
+    return Error::make(ErrorCode::kInvalidArgument, "the online map source needs the quadrotor");
+  if (opt.ugv_routes.size() > static_cast<std::size_t>(opt.ugvs))
+    return Error::make(ErrorCode::kInvalidArgument, "more scripted routes than ground robots");
+  for (const auto& r : opt.ugv_routes)
+    if (r.size() == 1) return Error::make(ErrorCode::kInvalidArgument, "a scripted route needs at least two points");
+  for (const UgvHold& h : opt.ugv_holds)
+    if (h.ugv < 0 || h.ugv >= opt.ugvs || !(h.duration_s >= 0))
+      return Error::make(ErrorCode::kInvalidArgument, "a hold names no ground robot or has a negative duration");
   auto world = resolve_world(opt.world);
   if (!world) return world.error();
 
@@ -511,12 +936,14 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   const bool rec = opt.record != RecordLevel::kNone;
   SimClock clock(0);
   // Robot role instances: the real stage tables, quiet status stages (the runner reports instead).
-  auto make_role = [&](const RoleDescription& role, int id, const std::string& name,
-                       std::vector<Config>& cfgs) -> Result<std::unique_ptr<RoleInstance>> {
+  auto make_role = [&](const RoleDescription& role, int id, const std::string& name, std::vector<Config>& cfgs,
+                       const std::vector<std::string>& extra = {}) -> Result<std::unique_ptr<RoleInstance>> {
     Config c = Config::defaults(role_schema(role));
     if (auto st = c.set("robot.id=" + std::to_string(id)); !st) return st.error();
     if (auto st = c.set("robot.name=" + name); !st) return st.error();
     if (auto st = c.set("status.log_counters=false"); !st) return st.error();
+    for (const auto& kv : extra)
+      if (auto st = c.set(kv, "ground robot config override"); !st) return st.error();
     cfgs.push_back(std::move(c));
     return RoleInstance::create(role, cfgs.back(), clock, name);
   };
@@ -555,8 +982,34 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     u->vo_out = vo_w.value();
     u->gps_out = gps_w.value();
     u->image = std::make_unique<CameraImageMsg>();
+    if (opt.ugv_map == UgvMapSource::kOnline) {
+      for (auto& slot : u->role->stages())
+        if (auto* om = dynamic_cast<const mapping::OrthoMapStage*>(slot.stage.get())) t.ortho = &om->map();
+      if (t.ortho == nullptr) return Error::make(ErrorCode::kInvalidArgument, "the online map source needs the quadrotor's ortho_map stage");
+      const mapping::OrthoMapParams& mp = t.ortho->params();
+      if (std::abs(mp.resolution_m - kMapResolutionM) > 1e-9 || mp.tile_cells != kTileCells)
+        return Error::make(ErrorCode::kInvalidArgument, "the online map source needs the ortho-map at 0.5 m cells in 64-cell tiles (the map_tiles format)");
+    }
     t.uav = std::move(u);
   }
+  // The ground robots' table: their role, plus the simulator's probe when someone reads their channels.
+  RoleDescription ugv_desc = ugv_role();
+  const bool probe = static_cast<bool>(opt.sample) || opt.ugv_tap.any();
+  if (probe) {
+    t.ugv_stages.assign(ugv_desc.stages.begin(), ugv_desc.stages.end());
+    const double hz = opt.physics_hz;
+    t.ugv_stages.push_back(StageSpec{"sim_probe", &SimProbeStage::make, hz, static_cast<std::uint32_t>(0.9e6 / hz), 1, -1,
+                                     SimProbeStage::kParams, "simulator: reads the robot's channels for tests and evaluations"});
+    ugv_desc.stages = t.ugv_stages;
+  }
+  std::vector<std::string> ugv_extra = opt.ugv_config;
+  if (opt.ugv_tap.scan) ugv_extra.emplace_back("sim_probe.scans=true");
+  if (opt.ugv_tap.odometry) ugv_extra.emplace_back("sim_probe.odometry=true");
+  if (opt.ugv_tap.tile) ugv_extra.emplace_back("sim_probe.tiles=true");
+  if (opt.ugv_tap.initial_pose) ugv_extra.emplace_back("sim_probe.initial_pose=true");
+  if (opt.ugvs > 0) t.tile_msg = std::make_unique<MapTileMsg>();
+  t.lidar_rings = beams.value().rings();
+  t.sample_period = opt.sample ? period_from_hz(opt.sample_hz) : 0;
   for (int i = 0; i < opt.ugvs; ++i) {
     const std::string name = "ugv" + std::to_string(i + 1);
     // Lined up on the staging pad, 2.5 m apart across the robots' heading.
@@ -564,9 +1017,22 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     const double off = (i - (opt.ugvs - 1) / 2.0) * 2.5;
     start.x += -std::sin(staging.yaw) * off;
     start.y += std::cos(staging.yaw) * off;
+    const bool scripted = static_cast<std::size_t>(i) < opt.ugv_routes.size() && !opt.ugv_routes[static_cast<std::size_t>(i)].empty();
+    if (scripted) {  // at the route's first point, facing the first point a few metres along it
+      const auto& r = opt.ugv_routes[static_cast<std::size_t>(i)];
+      start = Pose2{r.front().x(), r.front().y(), 0};
+      for (std::size_t k = 1; k < r.size(); ++k) {
+        const Eigen::Vector2d d = r[k] - r.front();
+        start.yaw = std::atan2(d.y(), d.x());
+        if (d.norm() > 2.0) break;
+      }
+    }
     auto u = std::make_unique<Ugv>(name, (opt.uav ? 1 : 0) + i, DiffDriveRobot(dd_cfg.value(), start),
                                    WheelOdometrySimulator(od_cfg.value(), opt.seed * 31 + static_cast<std::uint64_t>(i)),
                                    PurePursuit(PursuitParams{1.0, opt.ugv_speed_mps, 1.2, 0.8}), start);
+    // Settle the robot on the ground (height and attitude) before the first step: otherwise the scan at
+    // t = 0 would be cast from 0.6 m above the datum rather than above the terrain.
+    (void)u->vehicle.step(1e-9, w);
     u->scan.reserve(static_cast<std::size_t>(64 * opt.lidar_columns));
     for (auto& part : u->scan_parts) part.reserve(static_cast<std::size_t>(16 * opt.lidar_columns));
     if (rec) {
@@ -575,9 +1041,46 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
       u->scan_log = CsvLog(t.out / ("lidar_" + name + ".csv"), "t_s,scan,points");
       if (opt.record == RecordLevel::kFull) u->scan_bin = std::fopen((t.out / ("lidar_" + name + ".bin")).c_str(), "wb");
     }
-    auto role = make_role(ugv_role(), i + 1, name, cfgs);
+    auto role = make_role(ugv_desc, i + 1, name, cfgs, ugv_extra);
     if (!role) return role.error();
     u->role = std::move(role).value();
+    u->index = i;
+    ChannelRegistry& ch = u->role->channels();
+    auto scan_w = ch.ring_writer<LidarScanMsg, kLidarRing>("lidar_scan");
+    auto odom_w = ch.ring_writer<WheelOdometryMsg, kWheelOdometryRing>("wheel_odometry");
+    auto tile_w = ch.ring_writer<MapTileMsg, kMapTileRing>("map_tiles");
+    auto init_w = ch.latest_writer<InitialPoseMsg>("initial_pose");
+    if (!scan_w) return scan_w.error();
+    if (!odom_w) return odom_w.error();
+    if (!tile_w) return tile_w.error();
+    if (!init_w) return init_w.error();
+    u->scan_out = scan_w.value();
+    u->odom_out = odom_w.value();
+    u->tiles_out = tile_w.value();
+    u->init_out = init_w.value();
+    u->scan_msg = std::make_unique<LidarScanMsg>();
+    {  // the initial guess: the true start moved init_error_m in a direction and turned by ±init_yaw_error_deg
+      Rng rng(derive_seed(opt.seed, std::uint64_t{0x696E6974} + static_cast<std::uint64_t>(i)));
+      const double dir = rng.uniform(-kPi, kPi);
+      const double sign = rng.bernoulli(0.5) ? 1.0 : -1.0;
+      const double yaw_err = sign * opt.init_yaw_error_deg * kPi / 180.0;
+      u->init_pose.pose = Pose2{start.x + opt.init_error_m * std::cos(dir), start.y + opt.init_error_m * std::sin(dir), wrap_angle(start.yaw + yaw_err)};
+      u->init_pose.sigma_xy_m = std::max(opt.init_error_m, 0.5);
+      u->init_pose.sigma_yaw_rad = std::max(opt.init_yaw_error_deg, 2.0) * kPi / 180.0;
+    }
+    if (opt.ugv_map == UgvMapSource::kGroundTruth) u->gt_order = gt_tile_order(w, start);
+    if (scripted) {
+      u->scripted = true;
+      u->route = densify(opt.ugv_routes[static_cast<std::size_t>(i)], 1.0);
+      u->pursuit.set_path(u->route);
+    }
+    if (opt.ugv_map == UgvMapSource::kOnline && opt.ugv_wait_map_radius_m > 0) u->released = false;
+    for (auto& slot : u->role->stages())
+      if (auto* pr = dynamic_cast<SimProbeStage*>(slot.stage.get())) u->probe = pr;
+    if (u->probe != nullptr) {
+      u->probe->team = &t;
+      u->probe->ugv = u.get();
+    }
     t.ugvs.push_back(std::move(u));
   }
   {
@@ -607,7 +1110,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
 
   const TimeNs end = from_seconds(opt.duration_s);
   TimeNs chunk = std::max<TimeNs>(kNsPerS / 10, end / 100);
-  if (opt.stop_when_survey_done) chunk = std::min<TimeNs>(chunk, 2 * kNsPerS);
+  if (opt.stop_when_survey_done || opt.stop_when_routes_done) chunk = std::min<TimeNs>(chunk, 2 * kNsPerS);
   const auto wall0 = std::chrono::steady_clock::now();
   TimeNs ended = end;
   for (TimeNs tt = 0; tt < end;) {
@@ -616,6 +1119,18 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     if (opt.stop_when_survey_done && t.uav && t.uav->vehicle.finished()) {
       ended = tt;
       break;
+    }
+    if (opt.stop_when_routes_done) {
+      bool all = false;
+      for (const auto& u : t.ugvs) {
+        if (!u->scripted) continue;
+        all = u->route_done;
+        if (!all) break;
+      }
+      if (all) {
+        ended = tt;
+        break;
+      }
     }
     if (progress) {
       const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
@@ -658,6 +1173,14 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     const double ox = u.start.x + c * u.odom_last.x - sn * u.odom_last.y;
     const double oy = u.start.y + sn * u.odom_last.x + c * u.odom_last.y;
     r.odometry_final_error_m = std::hypot(ox - u.vehicle.pose().x, oy - u.vehicle.pose().y);
+    r.scans_published = u.scans_published;
+    r.odometry_published = u.odom_published;
+    r.tiles_published = u.tiles_published;
+    r.tiles_refused = u.tiles_refused;
+    r.channel_drops = u.channel_drops;
+    r.initial_pose_published = u.init_published;
+    r.released_s = u.released ? to_seconds(u.released_at) : -1.0;
+    r.route_done = u.route_done;
     s.ugvs.push_back(r);
     if (u.scan_bin != nullptr) std::fclose(u.scan_bin);
     u.scan_bin = nullptr;

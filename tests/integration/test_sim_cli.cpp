@@ -3,6 +3,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <string>
 
 #include "process.hpp"
@@ -70,6 +71,38 @@ TEST(SimCli, ModelConfigsRoundTripAndBadValuesAreRefused) {
   EXPECT_EQ(bad.exit_code, 1);
   EXPECT_NE(bad.err.find("gps.sigma_m"), std::string::npos) << bad.err;
   EXPECT_NE(bad.err.find("gps.yaml"), std::string::npos) << bad.err;
+}
+
+TEST(SimCli, EvalLocalizationHelpAndAShortRun) {
+  const auto help = run({sim_bin(), "eval", "localization", "--help"});
+  EXPECT_EQ(help.exit_code, 0);
+  for (const char* s : {"--init-error", "--map gt|online", "--route-km", "--labels", "--set", "--stand-still-s", "--yaw-drift-at-rest"})
+    EXPECT_NE(help.out.find(s), std::string::npos) << s;
+  EXPECT_EQ(run({sim_bin(), "eval", "localization", "--map", "satellite"}).exit_code, 2);
+  EXPECT_EQ(run({sim_bin(), "eval", "localization", "--set", "novalue"}).exit_code, 2);
+
+  const std::string w = tmp("loc-world");
+  fs::remove_all(w);
+  ASSERT_EQ(run({sim_bin(), "world", "generate", "--seed", "4", "--size", "200", "--targets", "2", "--out", w}, 120).exit_code, 0);
+  const std::string out = tmp("loc-eval");
+  fs::remove_all(out);
+  const auto r = run({sim_bin(), "eval", "localization", "--world", w, "--seed", "2", "--init-error", "16", "--map", "gt", "--route-km", "0.2",
+                      "--max-duration", "20", "--lidar-columns", "512", "--threads", "2", "--quiet", "--out", out}, 300);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const char* f : {"metrics.json", "report.md", "samples.csv", "trajectory.png", "error.png"})
+    EXPECT_TRUE(fs::exists(fs::path(out) / f)) << f;
+  std::ifstream j(fs::path(out) / "metrics.json");
+  std::stringstream ss;
+  ss << j.rdbuf();
+  const std::string metrics = ss.str();
+  for (const char* k : {"\"converged\"", "\"convergence_time_s\"", "\"loc_error_mean_m\"", "\"loc_error_p95_m\"", "\"yaw_error_mean_deg\"",
+                        "\"odom_only_error_mean_m\""})
+    EXPECT_NE(metrics.find(k), std::string::npos) << k;
+  // An unknown ground-robot parameter is the user's error, named.
+  const auto bad = run({sim_bin(), "eval", "localization", "--world", w, "--route-km", "0.1", "--max-duration", "2", "--lidar-columns", "512",
+                        "--quiet", "--set", "nosuch.key=1", "--out", tmp("loc-bad")}, 120);
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_NE(bad.err.find("nosuch"), std::string::npos) << bad.err;
 }
 
 }  // namespace

@@ -2,6 +2,8 @@
 // the world's sensors, vehicles and radio stepped deterministically, every sensor stream recorded.
 #pragma once
 
+#include <Eigen/Core>
+
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -15,6 +17,11 @@
 
 namespace ag {
 class RoleInstance;
+struct LidarScanMsg;
+struct WheelOdometryMsg;
+struct MapTileMsg;
+struct InitialPoseMsg;
+struct LocalizationMsg;
 }
 
 namespace ag::sim {
@@ -37,6 +44,50 @@ struct RunInspection {
 };
 
 enum class RecordLevel { kNone, kLight, kFull };
+
+// Where the ground robots' "map_tiles" channel gets the aerial map from.
+enum class UgvMapSource {
+  kNone,         // no tiles
+  kGroundTruth,  // the world's class raster resampled to the map's 0.5 m cells, every tile once at start
+  kOnline,       // the quadrotor's ortho-map: every tile whose version changed, to every ground robot at once
+                 // (perfect comms for now; the radio's gossip replaces this in a later issue)
+};
+
+// Hold ground robot `ugv` (0-based) standing still from at_s for duration_s simulated seconds.
+struct UgvHold {
+  int ugv{0};
+  double at_s{0};        // [s] simulated time
+  double duration_s{0};  // [s]
+};
+
+// What the sampling callback sees of one ground robot (RunOptions::sample), read after the robot's own
+// stages ran in that tick.
+struct UgvSample {
+  TimeNs now{0};
+  int ugv{0};                      // 0-based
+  Pose2 truth;                     // [m, rad] true pose, map frame
+  Pose2 odometry;                  // [m, rad] wheel odometry in its own frame (the pose at the start is 0)
+  Pose2 odometry_in_map;           // the odometry put into the map frame by the true start pose
+  Pose2 initial_guess;             // the pose published on "initial_pose" at the start
+  bool localization_received{false};  // the robot's "localization" channel was published at least once
+  const LocalizationMsg* localization{nullptr};  // the newest value on that channel (never nullptr)
+  Pose2 truth_at_localization;     // true pose at localization->stamp (within the last ~2.5 s), else `truth`
+  double distance_m{0};            // [m] travelled so far
+  bool released{false};            // driving has begun (false while it waits for the online map)
+  bool held{false};                // standing still by a UgvHold now
+  bool route_done{false};          // its scripted route (RunOptions::ugv_routes) is finished
+  RoleInstance* role{nullptr};     // the robot's role instance (channels are sealed: read stages, not channels)
+};
+
+// Test-side readers on a ground robot's input channels (a simulator-only stage appended to the robot's
+// table subscribes them when set): what the robot's stages receive, as they receive it.
+struct UgvChannelTap {
+  std::function<void(int ugv, const LidarScanMsg&)> scan{};
+  std::function<void(int ugv, const WheelOdometryMsg&)> odometry{};
+  std::function<void(int ugv, const MapTileMsg&)> tile{};
+  std::function<void(int ugv, const InitialPoseMsg&)> initial_pose{};
+  [[nodiscard]] bool any() const noexcept { return scan || odometry || tile || initial_pose; }
+};
 
 struct RunOptions {
   std::string world{"default"};  // a world directory or "default"
@@ -64,6 +115,32 @@ struct RunOptions {
   bool stop_when_survey_done{false};  // end the run when the quadrotor finished its survey (duration_s caps it)
   double survey_margin_m{20};     // [m] the survey area is the world minus this margin
   std::function<Status(const RunInspection&)> inspect{};  // called after the run, before the reports
+
+  // --- the ground robots' drivers in simulation (channels "lidar_scan", "wheel_odometry", "initial_pose",
+  // "map_tiles" of every ground robot's role instance)
+  UgvMapSource ugv_map{UgvMapSource::kNone};
+  int map_tiles_per_tick{16};     // at most this many tiles pushed to one robot per physics step (and
+                                  // never more than its ring takes: the rest follow on the next steps)
+  double init_error_m{0};         // [m] the initial pose published at start is the truth moved this far (random direction by seed)
+  double init_yaw_error_deg{0};   // [deg] ... and turned by this much (random sign); sigmas given = these (at least 0.5 m / 2 deg)
+  std::vector<std::string> ugv_config{};  // "section.key=value" set on every ground robot's role config
+
+  // --- scripted ground robots
+  // Per ground robot (index 0-based), a road route to drive once (a polyline in the map frame, e.g. from
+  // RoadRouter): the robot starts at its first point facing along it, drives it, then stands. Robots
+  // without one (empty or missing) drive random legs from the staging pad as before.
+  std::vector<std::vector<Eigen::Vector2d>> ugv_routes{};
+  std::vector<UgvHold> ugv_holds{};
+  bool stop_when_routes_done{false};  // end the run when every scripted route is driven (duration_s caps it)
+  // With ugv_map == kOnline: a robot stays at its start until the quadrotor's map has a class for this
+  // fraction of the cells within ugv_wait_map_radius_m of it (0 = start at once).
+  double ugv_wait_map_radius_m{0};
+  double ugv_wait_map_fraction{0.5};
+
+  // --- evaluation
+  double sample_hz{10};
+  std::function<void(const UgvSample&)> sample{};  // per ground robot at sample_hz (from t = 0)
+  UgvChannelTap ugv_tap{};
 };
 
 struct RobotSummary {
@@ -74,6 +151,15 @@ struct RobotSummary {
   std::uint64_t scans{0};
   std::uint64_t odometry_samples{0};
   double odometry_final_error_m{0};  // |odometry pose - truth| at the end (odometry frame aligned at start)
+  // What the simulated drivers published into the robot's channels.
+  std::uint64_t scans_published{0};     // "lidar_scan" messages
+  std::uint64_t odometry_published{0};  // "wheel_odometry" messages
+  std::uint64_t tiles_published{0};     // "map_tiles" messages pushed
+  std::uint64_t tiles_refused{0};       // pushes a full ring refused (that tile was pushed again later)
+  std::uint64_t channel_drops{0};       // scans or odometry messages a full ring refused
+  bool initial_pose_published{false};
+  double released_s{0};                 // [s] when it began to drive (waiting for the online map before)
+  bool route_done{false};               // its scripted route was driven to the end
 };
 
 struct RunSummary {
