@@ -1,0 +1,91 @@
+// The ground robot's localization stage (thin wrapper over SemanticLocalizer):
+//   map_tiles -> class distance fields (a few tiles per step)      initial_pose -> (re)initialise
+//   wheel_odometry -> gated motion          lidar_scan -> labels -> polar render -> particle filter
+//   -> "localization" (latest value, every step: the fused pose, its covariance and status)
+// Everything is allocated in init(); step() never allocates and never blocks.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <span>
+
+#include "airground/core/messages.hpp"
+#include "airground/localization/semantic_localizer.hpp"
+#include "airground/platform/config.hpp"
+#include "airground/platform/stage.hpp"
+
+namespace ag::loc {
+
+// What the stage saw and refused; published in its log lines and read by tests and evaluations.
+struct LocalizationStageCounters {
+  std::uint64_t scans_in{0}, scans_matched{0};
+  std::uint64_t scans_skipped_standing{0};   // the robot had not moved enough since the last update
+  std::uint64_t scans_before_map{0};          // no map tile yet, or no initial pose yet
+  std::uint64_t scans_malformed{0};           // point count beyond the message, or no rings/columns
+  std::uint64_t odometry_in{0};
+  std::uint64_t odometry_out_of_order{0};     // stamp not after the previous sample: dropped
+  std::uint64_t odometry_non_finite{0};       // NaN/inf pose: dropped
+  std::uint64_t tiles_in{0}, tiles_applied{0};
+  std::uint64_t tiles_outside_area{0};        // beyond the configured mission area: dropped
+  std::uint64_t tiles_stale{0};               // same version as the stored tile
+  std::uint64_t initial_poses{0};
+  std::uint64_t initial_pose_invalid{0};      // non-finite pose or sigma: ignored
+  std::uint64_t recoveries{0};
+};
+
+inline constexpr ParamSpec kLocalizationStageOwnParams[] = {
+    ParamSpec::text("labels", "gt", "gt|geometric",
+                    "scan labels: the driver's classes (simulator ground truth or a segmentation), or the paper's geometric ground/obstacle split"),
+    ParamSpec::real("area_x0_m", -500.0, -1e6, 1e6, "m", "mission area in the map frame: west edge (the distance fields cover it)"),
+    ParamSpec::real("area_y0_m", -500.0, -1e6, 1e6, "m", "mission area: south edge"),
+    ParamSpec::real("area_x1_m", 500.0, -1e6, 1e6, "m", "mission area: east edge"),
+    ParamSpec::real("area_y1_m", 500.0, -1e6, 1e6, "m", "mission area: north edge"),
+    ParamSpec::integer("field_tiles_per_step", 4, 1, 1024, "tiles", "changed map tiles folded into the distance fields per step"),
+    ParamSpec::integer("seed", 0, 0, 1'000'000'000, "", "particle filter seed; 0 = from the robot's name"),
+};
+// The stage's section: its own keys, then every localizer parameter.
+inline constexpr auto kLocalizationStageParams =
+    detail::concat_specs(kLocalizationStageOwnParams, kOdometryGateParamSpecs, kPolarRenderParamSpecs, kParticleFilterParamSpecs,
+                         kFusedPoseParamSpecs, kGeometricLabelParamSpecs, kDistanceFieldParamSpecs);
+
+class LocalizationStage final : public Stage {
+ public:
+  static constexpr std::span<const ParamSpec> kParams{kLocalizationStageParams};
+  static std::unique_ptr<Stage> make() { return std::make_unique<LocalizationStage>(); }
+
+  Status init(StageContext& ctx) override;
+  void step(TimeNs now) noexcept override;
+
+  [[nodiscard]] const SemanticLocalizer& localizer() const noexcept { return *loc_; }
+  [[nodiscard]] const ClassDistanceFields& fields() const noexcept { return *fields_; }
+  [[nodiscard]] const LocalizationStageCounters& counters() const noexcept { return c_; }
+  [[nodiscard]] bool geometric_labels() const noexcept { return geometric_; }
+  // The localizer's memory plus the distance fields and the labeller.
+  [[nodiscard]] std::size_t memory_bytes() const noexcept;
+
+ private:
+  void take_tiles() noexcept;
+  void take_initial_pose() noexcept;
+  void feed_odometry_until(TimeNs t) noexcept;  // every queued sample stamped at or before t
+  void take_scan(LidarScanMsg& scan) noexcept;
+
+  std::unique_ptr<ClassDistanceFields> fields_;
+  std::unique_ptr<SemanticLocalizer> loc_;
+  std::unique_ptr<ScanLabeller> labeller_;
+  bool geometric_{false};
+  const Clock* clock_{nullptr};
+  RingReader<LidarScanMsg, kLidarRing> scans_;
+  RingReader<WheelOdometryMsg, kWheelOdometryRing> odom_;
+  RingReader<MapTileMsg, kMapTileRing> tiles_;
+  LatestReader<InitialPoseMsg> init_;
+  LatestWriter<LocalizationMsg> out_;
+  LocalizationMsg msg_{};
+  std::size_t tiles_per_step_{4};
+  bool have_map_{false}, have_init_{false}, have_odom_{false};
+  TimeNs last_odom_stamp_{0};
+  TimeNs init_stamp_{-1};
+  LocalizationStageCounters c_;
+};
+
+}  // namespace ag::loc

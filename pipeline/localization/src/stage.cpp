@@ -1,0 +1,166 @@
+// The localization stage: channels in, SemanticLocalizer, the fused pose out.
+#include "airground/localization/stage.hpp"
+
+#include <cmath>
+#include <cstdint>
+#include <string>
+
+#include "airground/platform/log.hpp"
+
+namespace ag::loc {
+
+namespace {
+std::uint64_t seed_from_name(std::string_view name) noexcept {
+  std::uint64_t h = 1469598103934665603ULL;  // FNV-1a
+  for (const char ch : name) h = (h ^ static_cast<unsigned char>(ch)) * 1099511628211ULL;
+  return h;
+}
+bool finite(const Pose2& p) noexcept { return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.yaw); }
+}  // namespace
+
+Status LocalizationStage::init(StageContext& ctx) {
+  const SectionView v = ctx.params();
+  const double x0 = v.real("area_x0_m"), y0 = v.real("area_y0_m"), x1 = v.real("area_x1_m"), y1 = v.real("area_y1_m");
+  const std::string where = std::string(ctx.stage_name) + ".";
+  if (!(x1 > x0) || !(y1 > y0))
+    return Error::make(ErrorCode::kConfig, "config error: " + where + "area_x1_m/area_y1_m must be east/north of area_x0_m/area_y0_m");
+  const LocalizerParams p = load_localizer_params(v, kMapResolutionM, kTileCells);
+  if (p.filter.max_particles < p.filter.min_particles)
+    return Error::make(ErrorCode::kConfig, "config error: " + where + "pf_max_particles must be >= pf_min_particles");
+  if (p.filter.range_bin_max_m < p.filter.range_bin_min_m)
+    return Error::make(ErrorCode::kConfig, "config error: " + where + "pf_range_bin_max_m must be >= pf_range_bin_min_m");
+  geometric_ = v.text("labels") == "geometric";
+  const LocalizationChannels channels = geometric_ ? LocalizationChannels::two_class() : LocalizationChannels::per_class();
+  if (geometric_) labeller_ = std::make_unique<GeometricLabeller>(p.label, 128, 2048);
+  else labeller_ = std::make_unique<GroundTruthLabeller>();
+  const TileExtent extent = extent_covering(x0, y0, x1, y1, kMapResolutionM, kTileCells);
+  fields_ = std::make_unique<ClassDistanceFields>(p.fields, channels, extent);
+  const auto seed_param = static_cast<std::uint64_t>(v.integer("seed"));
+  loc_ = std::make_unique<SemanticLocalizer>(p, channels, seed_param != 0 ? seed_param : seed_from_name(ctx.instance));
+  tiles_per_step_ = static_cast<std::size_t>(v.integer("field_tiles_per_step"));
+  clock_ = &ctx.clock;
+
+  auto scans = ctx.channels.ring_reader<LidarScanMsg, kLidarRing>("lidar_scan");
+  if (!scans) return scans.error();
+  scans_ = scans.value();
+  auto odom = ctx.channels.ring_reader<WheelOdometryMsg, kWheelOdometryRing>("wheel_odometry");
+  if (!odom) return odom.error();
+  odom_ = odom.value();
+  auto tiles = ctx.channels.ring_reader<MapTileMsg, kMapTileRing>("map_tiles");
+  if (!tiles) return tiles.error();
+  tiles_ = tiles.value();
+  auto init = ctx.channels.latest_reader<InitialPoseMsg>("initial_pose");
+  if (!init) return init.error();
+  init_ = init.value();
+  auto out = ctx.channels.latest_writer<LocalizationMsg>("localization");
+  if (!out) return out.error();
+  out_ = out.value();
+  msg_ = LocalizationMsg{};
+  return ok_status();
+}
+
+std::size_t LocalizationStage::memory_bytes() const noexcept {
+  std::size_t n = sizeof(*this) + loc_->memory_bytes() + fields_->memory_bytes();
+  if (geometric_) n += static_cast<const GeometricLabeller&>(*labeller_).memory_bytes();
+  return n;
+}
+
+void LocalizationStage::take_tiles() noexcept {
+  for (MapTileMsg* t = tiles_.front(); t != nullptr; t = tiles_.front()) {
+    ++c_.tiles_in;
+    const TileExtent& e = fields_->extent();
+    if (t->tx < e.tile_x0 || t->ty < e.tile_y0 || t->tx >= e.tile_x0 + e.tiles_x || t->ty >= e.tile_y0 + e.tiles_y) {
+      if (c_.tiles_outside_area++ == 0)
+        AG_LOG_WARN("localization", "map tile (%d, %d) is outside the mission area (localization.area_*): dropped (counted)",
+                    static_cast<int>(t->tx), static_cast<int>(t->ty));
+    } else if (fields_->set_tile(t->tx, t->ty, t->version, std::span<const std::uint8_t>(t->cls.data(), t->cls.size()))) {
+      ++c_.tiles_applied;
+      have_map_ = true;
+    } else {
+      ++c_.tiles_stale;
+    }
+    tiles_.pop();
+  }
+  if (fields_->pending_tiles() > 0) (void)fields_->update(tiles_per_step_);
+}
+
+void LocalizationStage::take_initial_pose() noexcept {
+  if (!init_.fresh()) return;
+  const InitialPoseMsg& m = init_.read();
+  if (m.stamp == init_stamp_) return;
+  if (!finite(m.pose) || !std::isfinite(m.sigma_xy_m) || !std::isfinite(m.sigma_yaw_rad) || m.sigma_xy_m < 0 || m.sigma_yaw_rad < 0) {
+    if (c_.initial_pose_invalid++ == 0) AG_LOG_WARN("localization", "initial_pose with a non-finite or negative value: ignored (counted)");
+    return;
+  }
+  init_stamp_ = m.stamp;
+  ++c_.initial_poses;
+  have_init_ = true;
+  loc_->initialise_gaussian(m.pose, std::max(m.sigma_xy_m, 0.5), std::max(m.sigma_yaw_rad, 0.02), last_odom_stamp_);
+  AG_LOG_INFO("localization", "initial pose (%.1f, %.1f, %.2f rad) sigma %.1f m %.2f rad", m.pose.x, m.pose.y, m.pose.yaw, m.sigma_xy_m,
+              m.sigma_yaw_rad);
+}
+
+void LocalizationStage::feed_odometry_until(TimeNs t) noexcept {
+  for (WheelOdometryMsg* m = odom_.front(); m != nullptr && m->stamp <= t; m = odom_.front()) {
+    ++c_.odometry_in;
+    if (!finite(m->pose)) {
+      if (c_.odometry_non_finite++ == 0) AG_LOG_WARN("localization", "wheel_odometry with a non-finite pose: dropped (counted)");
+    } else if (have_odom_ && m->stamp <= last_odom_stamp_) {
+      ++c_.odometry_out_of_order;
+    } else {
+      loc_->on_odometry(m->pose, m->stamp);
+      last_odom_stamp_ = m->stamp;
+      have_odom_ = true;
+    }
+    odom_.pop();
+  }
+}
+
+void LocalizationStage::take_scan(LidarScanMsg& scan) noexcept {
+  ++c_.scans_in;
+  if (scan.count > scan.points.size() || scan.rings == 0 || scan.columns == 0) {
+    if (c_.scans_malformed++ == 0)
+      AG_LOG_WARN("localization", "lidar_scan %u has %u points for %u x %u: dropped (counted)", scan.seq, scan.count,
+                  static_cast<unsigned>(scan.rings), static_cast<unsigned>(scan.columns));
+    return;
+  }
+  if (!have_map_ || !have_init_) {
+    ++c_.scans_before_map;
+    return;
+  }
+  if (!loc_->wants_scan()) {
+    ++c_.scans_skipped_standing;
+    return;
+  }
+  const std::span<ScanPoint> pts(scan.points.data(), scan.count);
+  labeller_->label(pts, scan.rings, scan.columns);
+  const UpdateReport r = loc_->on_scan(pts, *fields_, scan.stamp);
+  if (r.updated) ++c_.scans_matched;
+  if (r.recovered) {
+    ++c_.recoveries;
+    AG_LOG_WARN("localization", "diverged (best cost %.2f m): re-spread around the last good pose", r.best_cost_m);
+  }
+}
+
+void LocalizationStage::step(TimeNs now) noexcept {
+  take_tiles();
+  take_initial_pose();
+  // Odometry up to each scan's time first, so the filter moves by exactly the motion before the scan.
+  for (LidarScanMsg* s = scans_.front(); s != nullptr; s = scans_.front()) {
+    feed_odometry_until(s->stamp);
+    take_scan(*s);
+    scans_.pop();
+  }
+  feed_odometry_until(INT64_MAX);  // the rest: a driver on another time base must not fill the ring
+  if (!have_init_) {
+    msg_.status = have_map_ ? LocalizationStatus::kInitialising : LocalizationStatus::kNoMap;
+    msg_.stamp = last_odom_stamp_;
+  } else {
+    loc_->fill(msg_);
+    if (!have_map_) msg_.status = LocalizationStatus::kNoMap;
+  }
+  msg_.published = now;
+  out_.publish(msg_);
+}
+
+}  // namespace ag::loc
