@@ -11,6 +11,7 @@
 
 #include "airground/localization/semantic_localizer.hpp"
 #include "scenario.hpp"
+#include "stage_rig.hpp"
 
 namespace {
 std::atomic<std::uint64_t> g_allocations{0};
@@ -130,6 +131,53 @@ TEST(NoAllocation, LabellingRenderingFilteringFusingAndFieldUpdates) {
   EXPECT_GT(updates, 100U);
   EXPECT_GE(loc.filter().estimate().recoveries, 1U) << "the recovery path ran inside the window";
   EXPECT_EQ(loc.filter().status(), FilterStatus::kTracking);
+}
+
+TEST(NoAllocation, TheStageStepTakingTilesOdometryScansAndANewInitialPose) {
+  test::SyntheticWorld w = test::make_world(6, 6, 9);
+  auto rig = test::StageRig::make(w, {"localization.field_tiles_per_step=2"});
+  ASSERT_NE(rig, nullptr);
+  const auto route = test::snake_route(w, 1);
+  const std::vector<test::TruthSample> truth = test::drive_route(w, route);
+  const std::vector<Pose2> odom = test::odometry(truth, test::OdometryNoise{}, 3);
+  const test::LidarModel lidar;
+  std::vector<std::vector<ScanPoint>> scans;
+  for (std::size_t k = 0; k < truth.size(); k += 3) {
+    scans.emplace_back();
+    test::ray_cast(w, truth[k].pose, lidar, k, scans.back());
+  }
+  std::vector<std::uint8_t> changed = w.tile(2, 2);
+  for (std::size_t i = 0; i < 300; ++i) changed[i] = raw(ClassId::kBuilding);
+  // Start-up outside the window: the map, the first odometry, the guess, a few updates.
+  rig->push_world(w, 0);
+  for (int i = 0; i < 20; ++i) rig->step(0);
+  rig->push_odometry(odom[0], truth[0].stamp);
+  rig->initial_pose(Pose2{truth[0].pose.x + 4.0, truth[0].pose.y - 3.0, truth[0].pose.yaw + 0.2}, 6.0, 0.3, 1);
+  rig->step(truth[0].stamp);
+  const std::size_t warm = 30;
+  for (std::size_t k = 1; k < warm; ++k) {
+    rig->push_odometry(odom[k], truth[k].stamp);
+    if (k % 3 == 0) rig->push_scan(scans[k / 3], truth[k].stamp, lidar.rings, lidar.columns);
+    rig->step(truth[k].stamp);
+  }
+  const std::uint64_t matched0 = rig->stage->counters().scans_matched;
+  {
+    AllocationWindow window;
+    for (std::size_t k = warm; k < truth.size(); ++k) {
+      rig->push_odometry(odom[k], truth[k].stamp);
+      if (k % 3 == 0) rig->push_scan(scans[k / 3], truth[k].stamp, lidar.rings, lidar.columns);
+      if (k == truth.size() / 2) {
+        rig->push_tile(2, 2, 7, changed);  // a changed tile mid-drive
+        rig->initial_pose(truth[k].pose, 2.0, 0.1, 2);  // and an operator's new guess
+      }
+      rig->step(truth[k].stamp);
+    }
+    EXPECT_EQ(window.count(), 0U) << "allocations in LocalizationStage::step()";
+  }
+  EXPECT_GT(rig->stage->counters().scans_matched, matched0 + 50) << "the window did real work";
+  EXPECT_EQ(rig->stage->counters().initial_poses, 2U);
+  EXPECT_EQ(rig->stage->fields().tile_version(2, 2), 7U);
+  EXPECT_EQ(rig->latest().status, LocalizationStatus::kTracking);
 }
 
 }  // namespace

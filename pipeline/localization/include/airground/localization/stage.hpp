@@ -61,6 +61,8 @@ class LocalizationStage final : public Stage {
   [[nodiscard]] const ClassDistanceFields& fields() const noexcept { return *fields_; }
   [[nodiscard]] const LocalizationStageCounters& counters() const noexcept { return c_; }
   [[nodiscard]] bool geometric_labels() const noexcept { return geometric_; }
+  // The message the last step() published on "localization".
+  [[nodiscard]] const LocalizationMsg& published() const noexcept { return msg_; }
   // The localizer's memory plus the distance fields and the labeller.
   [[nodiscard]] std::size_t memory_bytes() const noexcept;
 
