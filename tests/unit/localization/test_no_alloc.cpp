@@ -134,7 +134,7 @@ TEST(NoAllocation, LabellingRenderingFilteringFusingAndFieldUpdates) {
 }
 
 TEST(NoAllocation, TheStageStepTakingTilesOdometryScansAndANewInitialPose) {
-  test::SyntheticWorld w = test::make_world(6, 6, 9);
+  test::SyntheticWorld w = test::make_world(test::kSlowTarget ? 5 : 6, test::kSlowTarget ? 5 : 6, 9);
   auto rig = test::StageRig::make(w, {"localization.field_tiles_per_step=2"});
   ASSERT_NE(rig, nullptr);
   const auto route = test::snake_route(w, 1);

@@ -13,7 +13,7 @@ namespace ag::loc {
 namespace {
 
 struct Drive {
-  test::SyntheticWorld w = test::make_world(8, 8, 5);
+  test::SyntheticWorld w = test::make_world(test::kSlowTarget ? 5 : 8, test::kSlowTarget ? 5 : 8, 5);
   std::vector<test::TruthSample> truth;
   std::vector<Pose2> odom;
   Drive() {

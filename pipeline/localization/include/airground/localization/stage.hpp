@@ -41,7 +41,7 @@ inline constexpr ParamSpec kLocalizationStageOwnParams[] = {
     ParamSpec::real("area_y0_m", -500.0, -1e6, 1e6, "m", "mission area: south edge"),
     ParamSpec::real("area_x1_m", 500.0, -1e6, 1e6, "m", "mission area: east edge"),
     ParamSpec::real("area_y1_m", 500.0, -1e6, 1e6, "m", "mission area: north edge"),
-    ParamSpec::integer("field_tiles_per_step", 4, 1, 1024, "tiles", "changed map tiles folded into the distance fields per step"),
+    ParamSpec::integer("field_tiles_per_step", 2, 1, 1024, "tiles", "changed map tiles folded into the distance fields per step"),
     ParamSpec::integer("seed", 0, 0, 1'000'000'000, "", "particle filter seed; 0 = from the robot's name"),
 };
 // The stage's section: its own keys, then every localizer parameter.
