@@ -71,6 +71,12 @@ constexpr const char* kRunHelp =
     "  --lidar-hz F             LiDAR scans (10)                 --lidar-columns C  512|1024|2048 (1024)\n"
     "  --altitude M             survey altitude (40)             --uav-speed V      (5 m/s)\n"
     "  --ugv-speed V            scripted ground speed (1.2 m/s)  --overlap F        survey side overlap (0.6)\n"
+    "  --ugv-map online|gt|none the aerial map the ground robots localize in: the quadrotor's, as it builds\n"
+    "                           it (default with a quadrotor), the world's class map (default without), none\n"
+    "  --init-error M           each ground robot's initial pose guess is M metres off (16) ...\n"
+    "  --init-yaw-error D       ... and D degrees (30)\n"
+    "  --wait-map-radius M      --ugv-map online: a robot starts driving once the map knows half the cells\n"
+    "                           within M metres of it (30; 0 = at once)\n"
     "  --config-dir DIR         model parameters: gps.yaml, visual_odometry.yaml, wheel_odometry.yaml,\n"
     "                           radio.yaml, diff_drive.yaml, quadrotor.yaml, camera.yaml, lidar_noise.yaml\n"
     "                           (airground-sim config --out DIR writes the defaults)\n"
@@ -394,6 +400,15 @@ int run(const Args& a) {
   o.survey_overlap = number(a, "overlap", o.survey_overlap);
   o.config_dir = a.get("config-dir");
   o.threads = static_cast<int>(number(a, "threads", 0));
+  const std::string ugv_map = a.get("ugv-map", o.uav ? "online" : "gt");
+  if (ugv_map == "online") o.ugv_map = UgvMapSource::kOnline;
+  else if (ugv_map == "gt") o.ugv_map = UgvMapSource::kGroundTruth;
+  else if (ugv_map == "none") o.ugv_map = UgvMapSource::kNone;
+  else usage_error("--ugv-map must be online, gt or none");
+  if (o.ugv_map == UgvMapSource::kOnline && !o.uav) usage_error("--ugv-map online needs the quadrotor (drop --no-uav)");
+  o.init_error_m = number(a, "init-error", 16.0);
+  o.init_yaw_error_deg = number(a, "init-yaw-error", 30.0);
+  o.ugv_wait_map_radius_m = o.ugv_map == UgvMapSource::kOnline ? number(a, "wait-map-radius", 30.0) : 0.0;
   const std::string rec = a.get("record", "light");
   if (rec == "none") o.record = RecordLevel::kNone;
   else if (rec == "light") o.record = RecordLevel::kLight;
@@ -423,9 +438,11 @@ int run(const Args& a) {
               static_cast<unsigned long long>(r.camera_frames), static_cast<unsigned long long>(r.gps_fixes),
               static_cast<unsigned long long>(r.vo_samples), static_cast<unsigned long long>(r.vo_segments));
   for (const auto& u : r.ugvs)
-    std::printf("%s: %.0f m, %llu goals, %llu collisions, %llu scans, odometry error at end %.2f m\n", u.name.c_str(),
-                u.distance_m, static_cast<unsigned long long>(u.goals_reached), static_cast<unsigned long long>(u.collisions),
-                static_cast<unsigned long long>(u.scans), u.odometry_final_error_m);
+    std::printf("%s: %.0f m, %llu goals, %llu collisions, %llu scans, odometry error at end %.2f m; localization %s, tracking %.0f%%, "
+                "error mean %.2f m, p95 %.2f m\n",
+                u.name.c_str(), u.distance_m, static_cast<unsigned long long>(u.goals_reached),
+                static_cast<unsigned long long>(u.collisions), static_cast<unsigned long long>(u.scans), u.odometry_final_error_m,
+                u.loc_status.c_str(), 100.0 * u.loc_tracking_fraction, u.loc_error_mean_m, u.loc_error_p95_m);
   std::printf("radio: %llu sent, %llu delivered; report: %s/report.md\n", static_cast<unsigned long long>(r.radio_sent),
               static_cast<unsigned long long>(r.radio_delivered), o.out_dir.c_str());
   return 0;

@@ -142,21 +142,26 @@ void PurePursuit::command(const Pose2& pose, double& v, double& w) {
   const Eigen::Vector2d p(pose.x, pose.y);
   if (path_.size() == 1) path_.insert(path_.begin(), p);
   // Progress: the closest point on the next few segments (never going back).
+  // Near-ties go to the later segment and the current one is never walked back: where the path doubles
+  // back on itself (a dead end), the way out and the way back are equally close, and taking the way out
+  // again would put the carrot behind the robot for ever (it spun in place at a dead end).
   double best = std::numeric_limits<double>::max();
   std::size_t best_seg = next_;
   double best_t = 0;
   for (std::size_t k = next_; k + 1 < path_.size() && k < next_ + 4; ++k) {
     const Eigen::Vector2d a = path_[k], d = path_[k + 1] - a;
     const double len2 = std::max(d.squaredNorm(), 1e-9);
-    const double tt = std::clamp((p - a).dot(d) / len2, 0.0, 1.0);
+    double tt = std::clamp((p - a).dot(d) / len2, 0.0, 1.0);
+    if (k == next_) tt = std::max(tt, next_t_);
     const double dist = (a + tt * d - p).norm();
-    if (dist < best) {
-      best = dist;
+    if (dist <= best + 0.05) {
+      best = std::min(best, dist);
       best_seg = k;
       best_t = tt;
     }
   }
   next_ = best_seg;
+  next_t_ = best_t;
   // The carrot: lookahead metres further along the path from that point.
   Eigen::Vector2d target = path_.back();
   double left = p_.lookahead_m;

@@ -155,6 +155,12 @@ struct Ugv {
   std::array<std::pair<TimeNs, Pose2>, kHistory> history{};
   std::size_t history_n{0};
   SimProbeStage* probe{nullptr};
+  // The robot's own localization against the truth (the probe samples it).
+  std::uint64_t loc_samples{0}, loc_tracking{0};
+  std::vector<float> loc_errors{};           // [m] tracking samples
+  std::vector<Eigen::Vector2d> est_trail{};  // tracking estimates, for the picture
+  TimeNs loc_first_tracking{-1};
+  LocalizationStatus loc_last{LocalizationStatus::kNoMap};
 };
 
 Pose2 Ugv::truth_at(TimeNs t) const noexcept {
@@ -375,11 +381,11 @@ void scan_online_map(Team& t) {
       if (up->pending_set.insert(key).second) up->pending.push_back(key);
 }
 
-// Pushes this robot's next tiles while its ring takes them (a refused tile is pushed again next step,
-// so a reader that did take it may see it twice: same version, harmless).
+// Pushes this robot's next tiles while every reader's ring has room (the rest follow on later steps, so
+// each reader gets each version once; a refused push would be retried, as a driver's would).
 void publish_tiles(Team& t, Ugv& u, TimeNs now) {
   MapTileMsg& m = *t.tile_msg;
-  for (int pushed = 0; pushed < t.opt.map_tiles_per_tick; ++pushed) {
+  for (int pushed = 0; pushed < t.opt.map_tiles_per_tick && u.tiles_out.free_slots() > 0; ++pushed) {
     if (t.opt.ugv_map == UgvMapSource::kGroundTruth) {
       if (u.gt_next >= u.gt_order.size()) return;
       build_gt_tile(*t.world, u.gt_order[u.gt_next].first, u.gt_order[u.gt_next].second, m);
@@ -486,8 +492,23 @@ class SimProbeStage final : public Stage {
     }
     if (loc_.fresh()) received_ = true;
     const LocalizationMsg& loc = loc_.read();
-    if (team->opt.sample && now >= next_sample_) {
+    if (now >= next_sample_) {
       next_sample_ += team->sample_period;
+      if (received_) ugv->loc_last = loc.status;
+      if (received_ && ugv->released && !ugv->held) {
+        ++ugv->loc_samples;
+        if (loc.status == LocalizationStatus::kTracking) {
+          const Pose2 tr = ugv->truth_at(loc.stamp);
+          ++ugv->loc_tracking;
+          ugv->loc_errors.push_back(static_cast<float>(std::hypot(loc.pose.x - tr.x, loc.pose.y - tr.y)));
+          if (ugv->loc_first_tracking < 0) ugv->loc_first_tracking = now;
+          if (ugv->est_trail.empty() || (ugv->est_trail.back() - Eigen::Vector2d(loc.pose.x, loc.pose.y)).norm() > 1.0)
+            ugv->est_trail.emplace_back(loc.pose.x, loc.pose.y);
+        }
+      }
+    }
+    if (team->opt.sample && now >= next_user_sample_) {
+      next_user_sample_ += team->sample_period;
       UgvSample s;
       s.now = now;
       s.ugv = i;
@@ -507,6 +528,8 @@ class SimProbeStage final : public Stage {
     }
   }
 
+  [[nodiscard]] bool received() const noexcept { return received_; }
+
   Team* team{nullptr};
   Ugv* ugv{nullptr};
 
@@ -518,7 +541,7 @@ class SimProbeStage final : public Stage {
   LatestReader<InitialPoseMsg> init_{};
   bool read_scans_{false}, read_odom_{false}, read_tiles_{false}, read_init_{false};
   bool received_{false};
-  TimeNs next_sample_{0};
+  TimeNs next_sample_{0}, next_user_sample_{0};
 };
 
 // The camera driver's job in simulation: the rendered frame at the mapper's 640x400, with its labels.
@@ -798,6 +821,9 @@ cv::Mat trajectories_image(const Team& t) {
   };
   if (t.uav) draw(t.uav->trail, cv::Scalar(255, 255, 255), 1);
   for (std::size_t i = 0; i < t.ugvs.size(); ++i) draw(t.ugvs[i]->trail, colours[i % 6], 2);
+  // Each robot's own localization while tracking: white dots over its true trail.
+  for (const auto& u : t.ugvs)
+    for (const Eigen::Vector2d& p : u->est_trail) cv::circle(bgr, px(p), 1, cv::Scalar(255, 255, 255), cv::FILLED);
   return bgr;
 }
 
@@ -817,7 +843,9 @@ Status write_reports(const Team& t, const RunSummary& s) {
     y << "  - {name: " << r.name << ", distance_m: " << r.distance_m << ", collisions: " << r.collisions
       << ", goals_reached: " << r.goals_reached << ", scans: " << r.scans << ", odometry_final_error_m: " << r.odometry_final_error_m
       << ", published: {scans: " << r.scans_published << ", odometry: " << r.odometry_published << ", tiles: " << r.tiles_published
-      << ", tiles_refused: " << r.tiles_refused << ", drops: " << r.channel_drops << ", initial_pose: " << (r.initial_pose_published ? "true" : "false") << "}}\n";
+      << ", tiles_refused: " << r.tiles_refused << ", drops: " << r.channel_drops << ", initial_pose: " << (r.initial_pose_published ? "true" : "false") << "}"
+      << ", localization: {status: \"" << r.loc_status << "\", tracking_fraction: " << r.loc_tracking_fraction << ", first_tracking_s: " << r.loc_first_tracking_s
+      << ", error_mean_m: " << r.loc_error_mean_m << ", error_p95_m: " << r.loc_error_p95_m << ", error_max_m: " << r.loc_error_max_m << "}}\n";
   std::ofstream j(t.out / "summary.json");
   j << "{\"sim_s\": " << s.sim_s << ", \"wall_s\": " << s.wall_s << ", \"real_time_factor\": " << s.real_time_factor
     << ", \"camera_frames\": " << s.camera_frames << ", \"gps_fixes\": " << s.gps_fixes << ", \"vo_samples\": " << s.vo_samples
@@ -829,7 +857,10 @@ Status write_reports(const Team& t, const RunSummary& s) {
     j << (i ? ", " : "") << "{\"name\": \"" << r.name << "\", \"distance_m\": " << r.distance_m << ", \"collisions\": " << r.collisions
       << ", \"goals_reached\": " << r.goals_reached << ", \"scans\": " << r.scans << ", \"odometry_final_error_m\": " << r.odometry_final_error_m
       << ", \"published\": {\"scans\": " << r.scans_published << ", \"odometry\": " << r.odometry_published << ", \"tiles\": " << r.tiles_published
-      << ", \"tiles_refused\": " << r.tiles_refused << ", \"drops\": " << r.channel_drops << ", \"initial_pose\": " << (r.initial_pose_published ? "true" : "false") << "}}";
+      << ", \"tiles_refused\": " << r.tiles_refused << ", \"drops\": " << r.channel_drops << ", \"initial_pose\": " << (r.initial_pose_published ? "true" : "false") << "}"
+      << ", \"localization\": {\"status\": \"" << r.loc_status << "\", \"tracking_fraction\": " << r.loc_tracking_fraction
+      << ", \"first_tracking_s\": " << r.loc_first_tracking_s << ", \"error_mean_m\": " << r.loc_error_mean_m << ", \"error_p95_m\": " << r.loc_error_p95_m
+      << ", \"error_max_m\": " << r.loc_error_max_m << "}}";
   }
   j << "]}\n";
   std::ofstream m(t.out / "report.md");
@@ -837,9 +868,19 @@ Status write_reports(const Team& t, const RunSummary& s) {
     << "World `" << t.opt.world << "`, seed " << t.opt.seed << ", " << (t.opt.uav ? "1 quadrotor + " : "") << t.opt.ugvs
     << " ground robots, " << s.sim_s << " s simulated in " << s.wall_s << " s (real-time factor " << s.real_time_factor << "x).\n\n"
     << "![trajectories](trajectories.png)\n\n"
-    << "| robot | distance [m] | goals reached | collisions | LiDAR scans | odometry error at end [m] |\n|---|---|---|---|---|---|\n";
-  for (const auto& r : s.ugvs)
-    m << "| " << r.name << " | " << r.distance_m << " | " << r.goals_reached << " | " << r.collisions << " | " << r.scans << " | " << r.odometry_final_error_m << " |\n";
+    << "| robot | distance [m] | goals reached | collisions | LiDAR scans | odometry error at end [m] | localization at end | tracking [%] | "
+       "localization error mean / p95 / max [m] |\n|---|---|---|---|---|---|---|---|---|\n";
+  for (const auto& r : s.ugvs) {
+    char err[96];
+    if (r.loc_error_mean_m >= 0) std::snprintf(err, sizeof err, "%.2f / %.2f / %.2f", r.loc_error_mean_m, r.loc_error_p95_m, r.loc_error_max_m);
+    else std::snprintf(err, sizeof err, "-");
+    m << "| " << r.name << " | " << r.distance_m << " | " << r.goals_reached << " | " << r.collisions << " | " << r.scans << " | " << r.odometry_final_error_m
+      << " | " << r.loc_status << " | " << static_cast<int>(std::lround(100.0 * r.loc_tracking_fraction)) << " | " << err << " |\n";
+  }
+  m << "\nLocalization: each robot's own pose on its `localization` channel (no GPS: LiDAR against the aerial map, "
+    << (t.opt.ugv_map == UgvMapSource::kOnline ? "the map the quadrotor builds online" : t.opt.ugv_map == UgvMapSource::kGroundTruth ? "the world's class map" : "no map given")
+    << ", initial guess " << t.opt.init_error_m << " m / " << t.opt.init_yaw_error_deg << " deg off), sampled at " << t.opt.sample_hz
+    << " Hz while driving; errors over the tracking samples. White dots in the picture: the estimates.\n";
   m << "\nQuadrotor: " << s.uav_distance_m << " m flown, " << s.uav_waypoints_reached << " survey waypoints, "
     << s.camera_frames << " camera frames, " << s.gps_fixes << " GPS fixes, " << s.vo_samples << " VO samples in "
     << s.vo_segments << " tracking segments.\n\nRadio: " << s.radio_sent << " datagrams sent, " << s.radio_delivered
@@ -994,7 +1035,8 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   }
   // The ground robots' table: their role, plus the simulator's probe when someone reads their channels.
   RoleDescription ugv_desc = ugv_role();
-  const bool probe = static_cast<bool>(opt.sample) || opt.ugv_tap.any();
+  // Always: the probe also scores every robot's localization for the summary.
+  const bool probe = opt.ugvs > 0;
   if (probe) {
     t.ugv_stages.assign(ugv_desc.stages.begin(), ugv_desc.stages.end());
     const double hz = opt.physics_hz;
@@ -1009,7 +1051,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   if (opt.ugv_tap.initial_pose) ugv_extra.emplace_back("sim_probe.initial_pose=true");
   if (opt.ugvs > 0) t.tile_msg = std::make_unique<MapTileMsg>();
   t.lidar_rings = beams.value().rings();
-  t.sample_period = opt.sample ? period_from_hz(opt.sample_hz) : 0;
+  t.sample_period = period_from_hz(opt.sample_hz);
   for (int i = 0; i < opt.ugvs; ++i) {
     const std::string name = "ugv" + std::to_string(i + 1);
     // Lined up on the staging pad, 2.5 m apart across the robots' heading.
@@ -1181,6 +1223,21 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     r.initial_pose_published = u.init_published;
     r.released_s = u.released ? to_seconds(u.released_at) : -1.0;
     r.route_done = u.route_done;
+    if (u.probe != nullptr && u.probe->received()) {
+      static constexpr const char* kNames[] = {"no map", "initialising", "tracking", "lost"};
+      r.loc_status = kNames[static_cast<int>(u.loc_last) & 3];
+    }
+    r.loc_tracking_fraction = u.loc_samples > 0 ? static_cast<double>(u.loc_tracking) / static_cast<double>(u.loc_samples) : 0.0;
+    r.loc_first_tracking_s = u.loc_first_tracking >= 0 ? to_seconds(u.loc_first_tracking) : -1.0;
+    if (!u.loc_errors.empty()) {
+      std::vector<float> e = u.loc_errors;
+      std::sort(e.begin(), e.end());
+      double sum = 0;
+      for (const float v : e) sum += static_cast<double>(v);
+      r.loc_error_mean_m = sum / static_cast<double>(e.size());
+      r.loc_error_p95_m = static_cast<double>(e[std::min(e.size() - 1, static_cast<std::size_t>(std::ceil(0.95 * static_cast<double>(e.size()))) - 1)]);
+      r.loc_error_max_m = static_cast<double>(e.back());
+    }
     s.ugvs.push_back(r);
     if (u.scan_bin != nullptr) std::fclose(u.scan_bin);
     u.scan_bin = nullptr;

@@ -92,6 +92,7 @@ TEST(FusedPose, OdometryBetweenEstimatesAndStatus) {
 
 TEST(FusedPose, EasesOntoACorrectionAndJumpsOverLargeOnes) {
   FusedPoseParams p;
+  p.correction_time_s = 1.0;  // the bounds below are for a 1 s time constant
   FusedPose f(p);
   f.reset(Pose2{}, 1.0, 0.1, Pose2{}, 0.0, 0);
   f.on_estimate(estimate(Pose2{0.0, 0.0, 0.0}, FilterStatus::kTracking), Pose2{}, 0.0, 0);

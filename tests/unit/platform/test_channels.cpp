@@ -77,6 +77,26 @@ TEST(Channels, AFullReaderRefusesOnlyItsOwnCopy) {
   EXPECT_EQ(*slow.value().front(), 0);
 }
 
+TEST(Channels, FreeSlotsIsTheFullestReadersRoom) {
+  ChannelRegistry reg;
+  auto w = reg.ring_writer<int, 4>("q");
+  auto slow = reg.ring_reader<int, 4>("q");
+  auto fast = reg.ring_reader<int, 4>("q");
+  ASSERT_TRUE(w.ok() && slow.ok() && fast.ok());
+  EXPECT_EQ(w.value().free_slots(), 4u);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_EQ(w.value().push(i), 0u);
+    ASSERT_NE(fast.value().front(), nullptr);
+    fast.value().pop();
+  }
+  EXPECT_EQ(w.value().free_slots(), 1u) << "the slow reader holds 3 of 4";
+  EXPECT_EQ(w.value().push(3), 0u);
+  EXPECT_EQ(w.value().free_slots(), 0u);
+  ASSERT_NE(slow.value().front(), nullptr);
+  slow.value().pop();
+  EXPECT_EQ(w.value().free_slots(), 1u);
+}
+
 TEST(Channels, ReadersMaySubscribeBeforeTheWriterAdvertises) {
   ChannelRegistry reg;
   auto r = reg.latest_reader<int>("pose");

@@ -2,6 +2,7 @@
 // every buffer stays single-producer single-consumer. Wired in init(), sealed before the first step.
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -87,6 +88,13 @@ class RingWriter {
       }
     }
     return refused;
+  }
+  // Slots every reader still has free (from the producer's side: a reader may free more meanwhile), so a
+  // producer can hold back what some reader could not take instead of re-sending it to all.
+  [[nodiscard]] std::size_t free_slots() const noexcept {
+    std::size_t f = N;
+    for (const auto& r : ch_->readers) f = std::min(f, N - std::min(N, r->size()));
+    return f;
   }
 
  private:

@@ -160,6 +160,13 @@ struct RobotSummary {
   bool initial_pose_published{false};
   double released_s{0};                 // [s] when it began to drive (waiting for the online map before)
   bool route_done{false};               // its scripted route was driven to the end
+  // Its own localization ("localization" channel) against the truth, sampled at sample_hz once it drives.
+  std::string loc_status{"none"};       // at the end: none (never published), no map, initialising, tracking, lost
+  double loc_tracking_fraction{0};      // samples with status tracking / samples while driving
+  double loc_first_tracking_s{-1};      // [s] simulated time of the first tracking sample
+  double loc_error_mean_m{-1};          // [m] over the tracking samples: |estimate - truth at its stamp|
+  double loc_error_p95_m{-1};
+  double loc_error_max_m{-1};
 };
 
 struct RunSummary {

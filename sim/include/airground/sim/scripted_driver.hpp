@@ -45,7 +45,11 @@ struct PursuitParams {
 class PurePursuit {
  public:
   explicit PurePursuit(PursuitParams p = {}) : p_(p) {}
-  void set_path(std::vector<Eigen::Vector2d> path) { path_ = std::move(path); next_ = 0; }
+  void set_path(std::vector<Eigen::Vector2d> path) {
+    path_ = std::move(path);
+    next_ = 0;
+    next_t_ = 0;
+  }
   // Linear [m/s] and angular [rad/s] velocity toward the path; done() once at the last point.
   void command(const Pose2& pose, double& v, double& w);
   [[nodiscard]] bool done() const noexcept { return path_.empty() || next_ >= path_.size(); }
@@ -55,6 +59,7 @@ class PurePursuit {
   PursuitParams p_;
   std::vector<Eigen::Vector2d> path_;
   std::size_t next_{0};
+  double next_t_{0};  // how far along segment next_ the robot has got [0, 1]
 };
 
 }  // namespace ag::sim
