@@ -111,7 +111,8 @@ constexpr const char* kEvalLocalizationHelp =
     "role table gets the simulated LiDAR (ground-truth labels), wheel odometry, that guess and the aerial map\n"
     "tiles: --map gt the world's class map at 0.5 m, --map online the quadrotor's ortho-map as its mapping\n"
     "stages build it (it flies its survey; the robot waits at its start until the map knows\n"
-    "--wait-map-fraction of the cells within --wait-map-radius, then drives while the map grows; tiles\n"
+    "--wait-map-fraction of the cells within --wait-map-radius and --wait-map-route of those along its\n"
+    "route, then drives while the map grows and is corrected; tiles\n"
     "reach the robot as soon as they change: perfect comms until gossip over the radio), --map none no map.\n"
     "The pose the robot publishes on its 'localization' channel is sampled at 10 Hz against the truth.\n\n"
     "Writes DIR/metrics.json (converged, convergence_time_s, loc_error_mean_m, loc_error_p95_m,\n"
@@ -133,6 +134,8 @@ constexpr const char* kEvalLocalizationHelp =
     "  --radius M               convergence radius (3 m)\n"
     "  --wait-map-radius M      --map online: wait for the map within M metres of the start (30; 0 = start at once)\n"
     "  --wait-map-fraction F    ... until it knows this fraction of those cells (0.5)\n"
+    "  --wait-map-route F       ... and this fraction of the cells within 3 m of its route (0.8; 0 = drive\n"
+    "                           into ground the quadrotor has not seen yet, where it can only dead-reckon)\n"
     "  --lidar-columns C        512|1024|2048 (1024)\n"
     "  --max-duration T         stop after T simulated seconds (default from the route length)\n"
     "  --config-dir DIR         simulator model overrides (as for run)\n"
@@ -523,6 +526,8 @@ int eval_localization_cmd(const Args& a) {
   o.convergence_radius_m = number(a, "radius", o.convergence_radius_m);
   o.wait_map_radius_m = number(a, "wait-map-radius", o.wait_map_radius_m);
   o.wait_map_fraction = number(a, "wait-map-fraction", o.wait_map_fraction);
+  o.wait_map_route = number(a, "wait-map-route", o.wait_map_route);
+  if (o.wait_map_route < 0 || o.wait_map_route > 1) usage_error("--wait-map-route must be in 0..1");
   o.lidar_columns = static_cast<int>(number(a, "lidar-columns", o.lidar_columns));
   o.max_duration_s = number(a, "max-duration", 0);
   o.config_dir = a.get("config-dir");

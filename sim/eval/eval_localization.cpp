@@ -270,6 +270,7 @@ Result<LocalizationMetrics> eval_localization(const EvalLocalizationOptions& o, 
   if (o.map == UgvMapSource::kOnline) {
     r.ugv_wait_map_radius_m = o.wait_map_radius_m;
     r.ugv_wait_map_fraction = o.wait_map_fraction;
+    r.ugv_wait_map_route_fraction = o.wait_map_route;
   }
   if (o.stand_still_s > 0) r.ugv_holds.push_back(UgvHold{0, o.stand_still_at_s, o.stand_still_s});
   // Turning in place and slowing for corners: about 1.4 x the straight-line time; waiting for the

@@ -424,6 +424,19 @@ bool map_covers(const mapping::OrthoMap& m, const Pose2& p, double radius, doubl
   return total == 0 || static_cast<double>(known) >= fraction * static_cast<double>(total);
 }
 
+// Online source: the share of the cells within 3 m of a route (sampled every 2 m) that have a class.
+double route_covered(const mapping::OrthoMap& m, const std::vector<Eigen::Vector2d>& route) {
+  std::uint64_t known = 0, total = 0;
+  for (std::size_t i = 0; i < route.size(); i += 2)
+    for (double dy = -3.0; dy <= 3.0; dy += 1.0)
+      for (double dx = -3.0; dx <= 3.0; dx += 1.0) {
+        ++total;
+        const mapping::Cell* c = m.cell_at(route[i].x() + dx, route[i].y() + dy);
+        if (c != nullptr && c->cls != 255) ++known;
+      }
+  return total == 0 ? 1.0 : static_cast<double>(known) / static_cast<double>(total);
+}
+
 // The simulator's reader on a ground robot's channels, appended to its table: the newest "localization"
 // for the sampling callback and, for tests, what arrives on the robot's input channels.
 class SimProbeStage final : public Stage {
@@ -599,7 +612,8 @@ void SimWorldStage::step(TimeNs now) noexcept {
     }
     if (!u.released && now >= u.next_wait_check) {
       u.next_wait_check += kNsPerS;
-      if (map_covers(*t.ortho, u.vehicle.pose(), t.opt.ugv_wait_map_radius_m, t.opt.ugv_wait_map_fraction)) {
+      if (map_covers(*t.ortho, u.vehicle.pose(), t.opt.ugv_wait_map_radius_m, t.opt.ugv_wait_map_fraction) &&
+          (!u.scripted || t.opt.ugv_wait_map_route_fraction <= 0 || route_covered(*t.ortho, u.route) >= t.opt.ugv_wait_map_route_fraction)) {
         u.released = true;
         u.released_at = now;
         AG_LOG_INFO("sim", "%s: the map covers its surroundings at %.1f s; driving", u.name.c_str(), to_seconds(now));

@@ -36,6 +36,7 @@ struct EvalLocalizationOptions {
   double stale_after_s{0.5};        // a localization older than this when sampled counts as not tracking
   double wait_map_radius_m{30};     // --map online: start driving once the map knows wait_map_fraction of
   double wait_map_fraction{0.5};    //   the cells within this radius (0 = at once)
+  double wait_map_route{0.8};       // --map online: ... and this share of the cells within 3 m of the route (0 = not)
   int lidar_columns{1024};
   double max_duration_s{0};         // 0 = from the route length (the run ends when the route is driven)
   std::string config_dir{};         // simulator model overrides (as for `run --config-dir`)

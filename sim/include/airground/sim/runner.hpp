@@ -136,6 +136,9 @@ struct RunOptions {
   // fraction of the cells within ugv_wait_map_radius_m of it (0 = start at once).
   double ugv_wait_map_radius_m{0};
   double ugv_wait_map_fraction{0.5};
+  // ... and, for a scripted robot, until the map has a class for this fraction of the cells within 3 m of
+  // its route (0 = not waited for): it then drives where the quadrotor has been, as a mission would send it.
+  double ugv_wait_map_route_fraction{0};
 
   // --- evaluation
   double sample_hz{10};
