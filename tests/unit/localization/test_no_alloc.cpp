@@ -1,5 +1,5 @@
-// The localizer's real-time calls never allocate once constructed: the global operator new is replaced
-// here to count calls inside a window (as tests/unit/platform/test_no_alloc.cpp does).
+// The localizer's real-time calls never allocate once constructed (operator new counted by
+// tests/common/counting_new.hpp).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -13,72 +13,16 @@
 #include "scenario.hpp"
 #include "stage_rig.hpp"
 
-namespace {
-std::atomic<std::uint64_t> g_allocations{0};
-thread_local bool t_counting = false;
-
-void* allocate(std::size_t n) {
-  if (t_counting) g_allocations.fetch_add(1, std::memory_order_relaxed);
-  return std::malloc(n == 0 ? 1 : n);
-}
-void* allocate_aligned(std::size_t n, std::align_val_t al) {
-  if (t_counting) g_allocations.fetch_add(1, std::memory_order_relaxed);
-  const std::size_t a = std::max(static_cast<std::size_t>(al), sizeof(void*));
-  void* p = nullptr;
-  return posix_memalign(&p, a, n == 0 ? 1 : n) == 0 ? p : nullptr;
-}
-
-// Counts the allocations of the calling thread while alive.
-class AllocationWindow {
- public:
-  AllocationWindow() : start_(g_allocations.load()) { t_counting = true; }
-  ~AllocationWindow() { t_counting = false; }
-  AllocationWindow(const AllocationWindow&) = delete;
-  AllocationWindow& operator=(const AllocationWindow&) = delete;
-  [[nodiscard]] std::uint64_t count() const { return g_allocations.load() - start_; }
-
- private:
-  std::uint64_t start_;
-};
-}  // namespace
-
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-void* operator new(std::size_t n) {
-  if (void* p = allocate(n)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n) {
-  if (void* p = allocate(n)) return p;
-  throw std::bad_alloc();
-}
-void* operator new(std::size_t n, const std::nothrow_t&) noexcept { return allocate(n); }
-void* operator new[](std::size_t n, const std::nothrow_t&) noexcept { return allocate(n); }
-void* operator new(std::size_t n, std::align_val_t al) {
-  if (void* p = allocate_aligned(n, al)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n, std::align_val_t al) {
-  if (void* p = allocate_aligned(n, al)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
-void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
-#pragma GCC diagnostic pop
+#include "../../common/counting_new.hpp"
 
 namespace ag::loc {
 namespace {
+using test_alloc::AllocationWindow;
 
 TEST(NoAllocation, TheCounterSeesAllocations) {
   AllocationWindow w;
   std::vector<int> v(100);
-  EXPECT_GE(w.count(), 1U);
+  EXPECT_GE(w.allocations(), 1U);
 }
 
 TEST(NoAllocation, LabellingRenderingFilteringFusingAndFieldUpdates) {
@@ -126,7 +70,7 @@ TEST(NoAllocation, LabellingRenderingFilteringFusingAndFieldUpdates) {
     EXPECT_TRUE(fields.set_tile(3, 3, 5, changed));
     EXPECT_EQ(fields.update(), 1U);
     fields.recompute_all();
-    EXPECT_EQ(window.count(), 0U) << "allocations in the localizer's real-time calls";
+    EXPECT_EQ(window.allocations(), 0U) << "allocations in the localizer's real-time calls";
   }
   EXPECT_GT(updates, 100U);
   EXPECT_GE(loc.filter().estimate().recoveries, 1U) << "the recovery path ran inside the window";
@@ -172,7 +116,7 @@ TEST(NoAllocation, TheStageStepTakingTilesOdometryScansAndANewInitialPose) {
       }
       rig->step(truth[k].stamp);
     }
-    EXPECT_EQ(window.count(), 0U) << "allocations in LocalizationStage::step()";
+    EXPECT_EQ(window.allocations(), 0U) << "allocations in LocalizationStage::step()";
   }
   EXPECT_GT(rig->stage->counters().scans_matched, matched0 + 50) << "the window did real work";
   EXPECT_EQ(rig->stage->counters().initial_poses, 2U);

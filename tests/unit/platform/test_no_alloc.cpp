@@ -18,83 +18,12 @@
 #include "airground/platform/status_stage.hpp"
 #include "roles.hpp"  // ugv_role()
 
-// ------------------------------------------------------------------------------- counting operator new
-
-namespace {
-std::atomic<std::uint64_t> g_allocations{0};
-thread_local bool t_counting = false;  // only the test thread, only inside an AllocationWindow
-
-void* allocate(std::size_t n) {
-  if (t_counting) g_allocations.fetch_add(1, std::memory_order_relaxed);
-  return std::malloc(n == 0 ? 1 : n);
-}
-void* allocate_aligned(std::size_t n, std::align_val_t al) {
-  if (t_counting) g_allocations.fetch_add(1, std::memory_order_relaxed);
-  const std::size_t a = std::max(static_cast<std::size_t>(al), sizeof(void*));
-  void* p = nullptr;
-  return posix_memalign(&p, a, n == 0 ? 1 : n) == 0 ? p : nullptr;
-}
-}  // namespace
-
-// GCC sees free() on memory from an operator new it inlined; for a replacement pair that is the point.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-void* operator new(std::size_t n) {
-  if (void* p = allocate(n)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n) {
-  if (void* p = allocate(n)) return p;
-  throw std::bad_alloc();
-}
-void* operator new(std::size_t n, const std::nothrow_t&) noexcept { return allocate(n); }
-void* operator new[](std::size_t n, const std::nothrow_t&) noexcept { return allocate(n); }
-void* operator new(std::size_t n, std::align_val_t al) {
-  if (void* p = allocate_aligned(n, al)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n, std::align_val_t al) {
-  if (void* p = allocate_aligned(n, al)) return p;
-  throw std::bad_alloc();
-}
-void* operator new(std::size_t n, std::align_val_t al, const std::nothrow_t&) noexcept { return allocate_aligned(n, al); }
-void* operator new[](std::size_t n, std::align_val_t al, const std::nothrow_t&) noexcept {
-  return allocate_aligned(n, al);
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
-void operator delete(void* p, const std::nothrow_t&) noexcept { std::free(p); }
-void operator delete[](void* p, const std::nothrow_t&) noexcept { std::free(p); }
-void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
-void operator delete(void* p, std::align_val_t, const std::nothrow_t&) noexcept { std::free(p); }
-void operator delete[](void* p, std::align_val_t, const std::nothrow_t&) noexcept { std::free(p); }
-#pragma GCC diagnostic pop
+#include "../../common/counting_new.hpp"
 
 namespace ag {
 namespace {
 
-// Counts operator new calls made by this thread while it lives.
-class AllocationWindow {
- public:
-  AllocationWindow() noexcept {
-    start_ = g_allocations.load(std::memory_order_relaxed);
-    t_counting = true;
-  }
-  ~AllocationWindow() { t_counting = false; }
-  AllocationWindow(const AllocationWindow&) = delete;
-  AllocationWindow& operator=(const AllocationWindow&) = delete;
-  [[nodiscard]] std::uint64_t allocations() const noexcept {
-    return g_allocations.load(std::memory_order_relaxed) - start_;
-  }
-
- private:
-  std::uint64_t start_{0};
-};
+using test_alloc::AllocationWindow;
 
 // Keeps the compiler from proving an allocation unused and removing it.
 void escape(const void* p) { asm volatile("" : : "g"(p) : "memory"); }
