@@ -38,7 +38,6 @@ Status LocalizationStage::init(StageContext& ctx) {
   const auto seed_param = static_cast<std::uint64_t>(v.integer("seed"));
   loc_ = std::make_unique<SemanticLocalizer>(p, channels, seed_param != 0 ? seed_param : seed_from_name(ctx.instance));
   tiles_per_step_ = static_cast<std::size_t>(v.integer("field_tiles_per_step"));
-  clock_ = &ctx.clock;
 
   auto scans = ctx.channels.ring_reader<LidarScanMsg, kLidarRing>("lidar_scan");
   if (!scans) return scans.error();

@@ -76,7 +76,6 @@ class LocalizationStage final : public Stage {
   std::unique_ptr<SemanticLocalizer> loc_;
   std::unique_ptr<ScanLabeller> labeller_;
   bool geometric_{false};
-  const Clock* clock_{nullptr};
   RingReader<LidarScanMsg, kLidarRing> scans_;
   RingReader<WheelOdometryMsg, kWheelOdometryRing> odom_;
   RingReader<MapTileMsg, kMapTileRing> tiles_;
