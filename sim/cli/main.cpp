@@ -101,6 +101,7 @@ constexpr const char* kEvalMappingHelp =
     "  --no-random-faults      no random tracking losses or GPS dropouts\n"
     "  --max-duration T        stop after T simulated seconds even if the survey is not done (3600)\n"
     "  --config-dir DIR        simulator model overrides (as for run)\n"
+    "  --set SECTION.KEY=VALUE any parameter of the quadrotor's role config, e.g. ortho_map.block_size=11 (repeatable)\n"
     "  --quiet                 no progress line\n";
 
 constexpr const char* kEvalLocalizationHelp =
@@ -467,6 +468,11 @@ int eval_mapping_cmd(const Args& a) {
   o.max_duration_s = number(a, "max-duration", o.max_duration_s);
   o.config_dir = a.get("config-dir");
   o.quiet = a.has("quiet");
+  if (a.has("set")) {
+    for (const auto& s : a.opt.at("set"))
+      if (s.find('=') == std::string::npos || s.find('.') == std::string::npos) usage_error("--set needs SECTION.KEY=VALUE, got '" + s + "'");
+    o.set = a.opt.at("set");
+  }
   if (!(o.speed_mps > 0) || !(o.altitude_m > 0)) usage_error("--speed and --altitude must be positive");
   const bool tty = isatty(2) != 0;
   double last_print = -1;
@@ -483,6 +489,10 @@ int eval_mapping_cmd(const Args& a) {
   const MappingMetrics& r = m.value();
   std::printf("map_class_accuracy %.4f  map_coverage %.4f  elevation_rmse_ground_m %.3f  elevation_rmse_m %.3f\n",
               r.map_class_accuracy, r.map_coverage, r.elevation_rmse_ground_m, r.elevation_rmse_m);
+  std::printf("elevation_coverage %.4f  ", r.elevation_coverage);
+  std::printf("elevation on flat ground: bias %+.3f m, |error| p50 %.3f m p95 %.3f m; all cells |error| p95 %.3f m, %.2f%% off by > 2 m\n",
+              r.elevation_bias_ground_m, r.elevation_p50_ground_m, r.elevation_p95_ground_m, r.elevation_p95_m, 100.0 * r.elevation_outliers);
+  std::printf("keyframe poses: height RMS %.3f m, tilt RMS %.3f deg, heading RMS %.3f deg\n", r.pose_z_rmse_m, r.pose_tilt_rmse_deg, r.pose_yaw_rmse_deg);
   std::printf("georeg_error_m %.3f  scale_error %.4f  keyframes %llu  tiles %llu (rebuilt %llu)  GPS rejected %llu  VO segments %llu\n",
               r.georeg_error_m, r.scale_error, static_cast<unsigned long long>(r.keyframes), static_cast<unsigned long long>(r.tiles),
               static_cast<unsigned long long>(r.tiles_rebuilt), static_cast<unsigned long long>(r.gps_rejected),

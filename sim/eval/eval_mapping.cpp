@@ -6,12 +6,17 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <sstream>
 
 #include "airground/aerial_mapping/stages.hpp"
 #include "airground/core/classes.hpp"
+#include "airground/core/pose_math.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "airground/sim/map_export.hpp"
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 namespace ag::sim {
 
@@ -21,6 +26,28 @@ namespace fs = std::filesystem;
 
 bool ground_class(std::uint8_t c) noexcept {
   return c == raw(ClassId::kRoad) || c == raw(ClassId::kDirt) || c == raw(ClassId::kGrass) || c == raw(ClassId::kWater);
+}
+
+double quantile(std::vector<float>& v, double q) {
+  if (v.empty()) return 0.0;
+  const auto k = static_cast<std::size_t>(q * static_cast<double>(v.size() - 1));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return static_cast<double>(v[k]);
+}
+
+// Signed elevation error per map cell (map - world surface range), north up: blue below, red above,
+// saturated at +-3 m; grey where the map has no elevation.
+cv::Mat error_image(const std::vector<float>& err, std::int32_t w, std::int32_t h) {
+  cv::Mat img(h, w, CV_8UC3, cv::Scalar(128, 128, 128));
+  for (std::int32_t r = 0; r < h; ++r)
+    for (std::int32_t c = 0; c < w; ++c) {
+      const float e = err[static_cast<std::size_t>(r) * static_cast<std::size_t>(w) + static_cast<std::size_t>(c)];
+      if (!std::isfinite(e)) continue;
+      const double t = std::clamp(static_cast<double>(e) / 3.0, -1.0, 1.0);
+      const auto hi = static_cast<std::uint8_t>(255), lo = static_cast<std::uint8_t>(255.0 * (1.0 - std::fabs(t)));
+      img.at<cv::Vec3b>(r, c) = t >= 0 ? cv::Vec3b(lo, lo, hi) : cv::Vec3b(hi, lo, lo);
+    }
+  return img;
 }
 
 double resident_mb() {
@@ -98,6 +125,7 @@ Result<MappingMetrics> eval_mapping(const EvalMappingOptions& o, const ProgressF
   r.uav_speed_mps = o.speed_mps;
   r.survey_overlap = o.overlap;
   r.config_dir = models.value();
+  r.uav_config = o.set;
   r.record = RecordLevel::kNone;
   r.keep_uav_truth = true;
   r.stop_when_survey_done = true;
@@ -105,6 +133,8 @@ Result<MappingMetrics> eval_mapping(const EvalMappingOptions& o, const ProgressF
 
   MappingMetrics m;
   mapping::MapRaster raster;
+  std::vector<float> error_map;
+  std::int32_t error_w = 0, error_h = 0;
   Datum datum;
   // The resident set once the run is set up (world, sensors, stages initialised): the baseline the
   // mapping state grows from.
@@ -136,15 +166,25 @@ Result<MappingMetrics> eval_mapping(const EvalMappingOptions& o, const ProgressF
       m.scale_error = std::fabs(graph.scale(graph.segment_of(last)) * in.vo_scale - 1.0);
     else
       m.scale_error = 1.0;
-    double se = 0;
+    double se = 0, ze = 0, tilt_e = 0, yaw_e = 0;
     std::uint64_t n = 0;
     for (std::uint32_t k = 0; k < pg->keyframes(); ++k) {
       const Eigen::Isometry3d est = pg->keyframe_pose(k);
       const Pose3 truth = truth_at(*in.uav_truth, pg->keyframe_stamp(k));
       se += std::pow(est.translation().x() - truth.x, 2) + std::pow(est.translation().y() - truth.y, 2);
+      ze += std::pow(est.translation().z() - truth.z, 2);
+      const Eigen::Matrix3d rt = to_isometry(truth).linear();
+      const double tilt = std::acos(std::clamp(est.linear().col(2).dot(rt.col(2)), -1.0, 1.0));
+      const Eigen::Vector3d fe = est.linear().col(0), ft = rt.col(0);
+      const double yaw = std::remainder(std::atan2(fe.y(), fe.x()) - std::atan2(ft.y(), ft.x()), 2 * M_PI);
+      tilt_e += tilt * tilt;
+      yaw_e += yaw * yaw;
       ++n;
     }
     m.georeg_error_m = n ? std::sqrt(se / static_cast<double>(n)) : 1e9;
+    m.pose_z_rmse_m = n ? std::sqrt(ze / static_cast<double>(n)) : 1e9;
+    m.pose_tilt_rmse_deg = n ? std::sqrt(tilt_e / static_cast<double>(n)) * 180.0 / M_PI : 1e9;
+    m.pose_yaw_rmse_deg = n ? std::sqrt(yaw_e / static_cast<double>(n)) * 180.0 / M_PI : 1e9;
 
     // Score over the surveyed area at the map's resolution.
     const mapping::OrthoMap& map = om->map();
@@ -161,7 +201,12 @@ Result<MappingMetrics> eval_mapping(const EvalMappingOptions& o, const ProgressF
     const GridGeometry& wg = w.grid();
     const int sub = std::max(1, static_cast<int>(std::lround(res / wg.resolution)));
     std::uint64_t classified = 0, correct = 0, total = 0, ground_n = 0, all_n = 0;
-    double ground_se = 0, all_se = 0;
+    double ground_se = 0, all_se = 0, ground_sum = 0;
+    std::vector<float> ground_abs, all_abs;
+    std::uint64_t outliers = 0;
+    error_map.assign(static_cast<std::size_t>(g.width) * static_cast<std::size_t>(g.height), std::numeric_limits<float>::quiet_NaN());
+    error_w = g.width;
+    error_h = g.height;
     for (std::int32_t row = 0; row < g.height; ++row)
       for (std::int32_t col = 0; col < g.width; ++col) {
         const auto i = static_cast<std::size_t>(row) * static_cast<std::size_t>(g.width) + static_cast<std::size_t>(col);
@@ -198,17 +243,28 @@ Result<MappingMetrics> eval_mapping(const EvalMappingOptions& o, const ProgressF
         const double err = ev < smin ? smin - ev : (ev > smax ? ev - smax : 0.0);
         all_se += err * err;
         ++all_n;
+        all_abs.push_back(static_cast<float>(err));
+        if (err > 2.0) ++outliers;
+        error_map[i] = static_cast<float>(ev < smin ? ev - smin : (ev > smax ? ev - smax : 0.0));
         if (all_ground) {
           const double d = ev - ssum / cnt;
           ground_se += d * d;
+          ground_sum += d;
+          ground_abs.push_back(static_cast<float>(std::fabs(d)));
           ++ground_n;
         }
       }
     m.cells_evaluated = total;
     m.map_coverage = total ? static_cast<double>(classified) / static_cast<double>(total) : 0.0;
+    m.elevation_coverage = total ? static_cast<double>(all_n) / static_cast<double>(total) : 0.0;
     m.map_class_accuracy = classified ? static_cast<double>(correct) / static_cast<double>(classified) : 0.0;
     m.elevation_rmse_ground_m = ground_n ? std::sqrt(ground_se / static_cast<double>(ground_n)) : 1e9;
     m.elevation_rmse_m = all_n ? std::sqrt(all_se / static_cast<double>(all_n)) : 1e9;
+    m.elevation_bias_ground_m = ground_n ? ground_sum / static_cast<double>(ground_n) : 0.0;
+    m.elevation_p50_ground_m = quantile(ground_abs, 0.5);
+    m.elevation_p95_ground_m = quantile(ground_abs, 0.95);
+    m.elevation_p95_m = quantile(all_abs, 0.95);
+    m.elevation_outliers = all_n ? static_cast<double>(outliers) / static_cast<double>(all_n) : 0.0;
     return ok_status();
   };
   auto watch = [&](double sim_s, double total_s, double rtf) {
@@ -221,10 +277,16 @@ Result<MappingMetrics> eval_mapping(const EvalMappingOptions& o, const ProgressF
   m.wall_s = run.value().wall_s;
 
   if (auto st = write_map_exports(o.out_dir, raster, datum); !st) return st.error();
+  if (error_w > 0 && !cv::imwrite((fs::path(o.out_dir) / "map_elevation_error.png").string(), error_image(error_map, error_w, error_h)))
+    return Error::make(ErrorCode::kIo, "cannot write map_elevation_error.png in " + o.out_dir);
   std::ofstream j(fs::path(o.out_dir) / "metrics.json");
   j << "{\n  \"map_class_accuracy\": " << m.map_class_accuracy << ",\n  \"map_coverage\": " << m.map_coverage
-    << ",\n  \"elevation_rmse_ground_m\": " << m.elevation_rmse_ground_m << ",\n  \"elevation_rmse_m\": " << m.elevation_rmse_m
-    << ",\n  \"georeg_error_m\": " << m.georeg_error_m << ",\n  \"scale_error\": " << m.scale_error
+    << ",\n  \"elevation_rmse_ground_m\": " << m.elevation_rmse_ground_m << ",\n  \"elevation_rmse_m\": " << m.elevation_rmse_m << ",\n  \"elevation_coverage\": " << m.elevation_coverage
+    << ",\n  \"elevation_bias_ground_m\": " << m.elevation_bias_ground_m << ",\n  \"elevation_p50_ground_m\": " << m.elevation_p50_ground_m
+    << ",\n  \"elevation_p95_ground_m\": " << m.elevation_p95_ground_m << ",\n  \"elevation_p95_m\": " << m.elevation_p95_m
+    << ",\n  \"elevation_outliers\": " << m.elevation_outliers
+    << ",\n  \"georeg_error_m\": " << m.georeg_error_m << ",\n  \"scale_error\": " << m.scale_error << ",\n  \"pose_z_rmse_m\": " << m.pose_z_rmse_m
+    << ",\n  \"pose_tilt_rmse_deg\": " << m.pose_tilt_rmse_deg << ",\n  \"pose_yaw_rmse_deg\": " << m.pose_yaw_rmse_deg
     << ",\n  \"keyframes\": " << m.keyframes << ",\n  \"cells_evaluated\": " << m.cells_evaluated << ",\n  \"tiles\": " << m.tiles
     << ",\n  \"tiles_rebuilt\": " << m.tiles_rebuilt << ",\n  \"gps_rejected\": " << m.gps_rejected
     << ",\n  \"vo_segments\": " << m.vo_segments << ",\n  \"stage_overruns\": " << m.stage_overruns
@@ -238,7 +300,7 @@ Result<MappingMetrics> eval_mapping(const EvalMappingOptions& o, const ProgressF
      << "| georeg_error_m | " << m.georeg_error_m << " | <= 0.5 |\n| scale_error | " << m.scale_error << " | <= 0.01 |\n"
      << "| keyframes | " << m.keyframes << " | |\n"
      << "| pose_graph / ortho_map step p99 (thread CPU) | " << m.pose_graph_p99_ms << " / " << m.ortho_map_p99_ms << " ms | <= 150 ms |\n"
-     << "| UAV stages' memory growth (resident) / map | " << m.resident_growth_mb << " / " << m.map_memory_mb << " MB | <= 600 MB |\n\n![class](map_class.png) ![rgb](map_rgb.png) ![elevation](map_elevation.png)\n\n"
+     << "| UAV stages' memory growth (resident) / map | " << m.resident_growth_mb << " / " << m.map_memory_mb << " MB | <= 600 MB |\n\n![class](map_class.png) ![rgb](map_rgb.png) ![elevation](map_elevation.png) ![elevation error](map_elevation_error.png)\n\n"
      << "GeoTIFFs (UTM of the datum): map_class.tif, map_elevation.tif, map_rgb.tif.\n";
   if (!j || !md) return Error::make(ErrorCode::kIo, "cannot write metrics.json / report.md in " + o.out_dir);
   return m;

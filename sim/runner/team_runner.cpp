@@ -331,14 +331,14 @@ void build_gt_tile(const World& w, std::int32_t tx, std::int32_t ty, MapTileMsg&
   }
 }
 
-void build_online_tile(const mapping::Tile& tile, MapTileMsg& m) {
+void build_online_tile(const mapping::Tile& tile, std::uint32_t min_elevation_points, MapTileMsg& m) {
   m.tx = tile.key.tx;
   m.ty = tile.key.ty;
   m.version = tile.version;
   for (std::size_t i = 0; i < kTileCellCount; ++i) {
     const mapping::Cell& c = tile.live[i];
     m.cls[i] = c.cls;
-    m.elevation[i] = c.count > 0 ? c.elevation() : std::numeric_limits<float>::quiet_NaN();
+    m.elevation[i] = c.reported_elevation(min_elevation_points);
   }
 }
 
@@ -392,7 +392,7 @@ void publish_tiles(Team& t, Ugv& u, TimeNs now) {
       m.stamp = 0;  // the world never changes
     } else {
       if (u.pending.empty()) return;
-      build_online_tile(*t.tile_ptrs.at(u.pending.front()), m);
+      build_online_tile(*t.tile_ptrs.at(u.pending.front()), static_cast<std::uint32_t>(std::max(1, t.ortho->params().min_elevation_points)), m);
       m.stamp = now;
     }
     m.published = now;
@@ -992,13 +992,13 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   SimClock clock(0);
   // Robot role instances: the real stage tables, quiet status stages (the runner reports instead).
   auto make_role = [&](const RoleDescription& role, int id, const std::string& name, std::vector<Config>& cfgs,
-                       const std::vector<std::string>& extra = {}) -> Result<std::unique_ptr<RoleInstance>> {
+                       const std::vector<std::string>& extra = {}, const char* what = "") -> Result<std::unique_ptr<RoleInstance>> {
     Config c = Config::defaults(role_schema(role));
     if (auto st = c.set("robot.id=" + std::to_string(id)); !st) return st.error();
     if (auto st = c.set("robot.name=" + name); !st) return st.error();
     if (auto st = c.set("status.log_counters=false"); !st) return st.error();
     for (const auto& kv : extra)
-      if (auto st = c.set(kv, "ground robot config override"); !st) return st.error();
+      if (auto st = c.set(kv, what); !st) return st.error();
     cfgs.push_back(std::move(c));
     return RoleInstance::create(role, cfgs.back(), clock, name);
   };
@@ -1024,7 +1024,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
       u->vo_log = CsvLog(t.out / "vo_uav.csv", "t_s,segment,tracking,x,y,z,roll_rad,pitch_rad,yaw_rad");
       u->frame_log = CsvLog(t.out / "camera_frames.csv", "t_s,frame,x_m,y_m,z_m,yaw_rad");
     }
-    auto role = make_role(uav_role(), 0, "uav", cfgs);
+    auto role = make_role(uav_role(), 0, "uav", cfgs, opt.uav_config, "quadrotor config override");
     if (!role) return role.error();
     u->role = std::move(role).value();
     auto cam_w = u->role->channels().ring_writer<CameraImageMsg, kCameraRing>("camera");
@@ -1097,7 +1097,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
       u->scan_log = CsvLog(t.out / ("lidar_" + name + ".csv"), "t_s,scan,points");
       if (opt.record == RecordLevel::kFull) u->scan_bin = std::fopen((t.out / ("lidar_" + name + ".bin")).c_str(), "wb");
     }
-    auto role = make_role(ugv_desc, i + 1, name, cfgs, ugv_extra);
+    auto role = make_role(ugv_desc, i + 1, name, cfgs, ugv_extra, "ground robot config override");
     if (!role) return role.error();
     u->role = std::move(role).value();
     u->index = i;

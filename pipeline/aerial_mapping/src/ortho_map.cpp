@@ -23,6 +23,7 @@ bool raised(std::uint8_t c) noexcept {
   return c == raw(ClassId::kTree) || c == raw(ClassId::kBuilding) || c == raw(ClassId::kVehicle);
 }
 bool same_kind(std::uint8_t c, std::uint8_t cell) noexcept { return c != 255 && raised(c) == raised(cell); }
+bool flat(std::uint8_t c) noexcept { return c != 255 && !raised(c); }
 
 double rotation_angle(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) noexcept {
   return Eigen::AngleAxisd(a.transpose() * b).angle();
@@ -145,15 +146,54 @@ void OrthoMap::add_keyframe(std::uint32_t id, const Eigen::Isometry3d& map_from_
   for (std::uint32_t k = 0; k < points.size(); ++k) order_[fill_[index_of(points[k])]++] = k;
   acc_.assign(w * h, Acc{});
   const double gate = p_.elevation_gate_m;
+  // The local ground under each cell (see OrthoMapParams::ground_check_m).
+  const bool check = p_.ground_check_m > 0;
+  if (check) {
+    constexpr float kNone = std::numeric_limits<float>::quiet_NaN();
+    ground_.assign(w * h, kNone);
+    for (std::size_t cidx = 0; cidx < w * h; ++cidx) {
+      heights_.clear();
+      for (std::uint32_t k = start_[cidx]; k < start_[cidx + 1]; ++k)
+        if (flat(points[order_[k]].cls)) heights_.push_back(points[order_[k]].z);
+      if (heights_.size() < static_cast<std::size_t>(std::max(1, p_.min_keyframe_points))) continue;
+      auto mid = heights_.begin() + static_cast<std::ptrdiff_t>(heights_.size() / 2);
+      std::nth_element(heights_.begin(), mid, heights_.end());
+      ground_[cidx] = *mid;
+    }
+    local_ground_.assign(w * h, kNone);
+    const auto r = static_cast<std::ptrdiff_t>(std::max(0, p_.ground_window_cells));
+    const auto sw = static_cast<std::ptrdiff_t>(w), sh = static_cast<std::ptrdiff_t>(h);
+    for (std::ptrdiff_t y = 0; y < sh; ++y)
+      for (std::ptrdiff_t x = 0; x < sw; ++x) {
+        const auto cidx = static_cast<std::size_t>(y * sw + x);
+        if (start_[cidx] == start_[cidx + 1]) continue;
+        heights_.clear();
+        for (std::ptrdiff_t yy = std::max<std::ptrdiff_t>(0, y - r); yy <= std::min(sh - 1, y + r); ++yy)
+          for (std::ptrdiff_t xx = std::max<std::ptrdiff_t>(0, x - r); xx <= std::min(sw - 1, x + r); ++xx) {
+            const float g = ground_[static_cast<std::size_t>(yy * sw + xx)];
+            if (!std::isnan(g)) heights_.push_back(g);
+          }
+        if (heights_.empty()) continue;
+        auto mid = heights_.begin() + static_cast<std::ptrdiff_t>(heights_.size() / 2);
+        std::nth_element(heights_.begin(), mid, heights_.end());
+        local_ground_[cidx] = *mid;
+      }
+  }
+  const auto ground_tol = static_cast<float>(p_.ground_check_m), raised_min = static_cast<float>(p_.raised_min_height_m);
   for (std::size_t cidx = 0; cidx < w * h; ++cidx) {
     const std::uint32_t b = start_[cidx], e = start_[cidx + 1];
     if (e - b < static_cast<std::uint32_t>(std::max(1, p_.min_keyframe_points))) continue;  // too few to trust
+    const float ground = check ? local_ground_[cidx] : std::numeric_limits<float>::quiet_NaN();
+    auto plausible = [&](const MapPoint& m) {
+      if (std::isnan(ground) || m.cls == 255) return true;
+      return raised(m.cls) ? m.z >= ground + raised_min : std::fabs(m.z - ground) <= ground_tol;
+    };
     // The cell's class: the labelled point nearest the image centre.
     std::uint8_t central = 255;
     float central_cos = -2.0F;
     for (std::uint32_t k = b; k < e; ++k) {
       const MapPoint& m = points[order_[k]];
-      if (m.cls != 255 && m.cos_axis > central_cos) {
+      if (m.cls != 255 && m.cos_axis > central_cos && plausible(m)) {
         central_cos = m.cos_axis;
         central = m.cls;
       }
@@ -162,11 +202,16 @@ void OrthoMap::add_keyframe(std::uint32_t id, const Eigen::Isometry3d& map_from_
     // building, vehicle; or flat) as the cell's, only they give its height. A roof edge projected a
     // few decimetres into the road beside it then no longer lifts the road cell, nor the road the roof.
     const bool group = p_.class_consistent_elevation && central != 255;
-    std::uint32_t same = 0;
-    if (group)
-      for (std::uint32_t k = b; k < e; ++k) same += same_kind(points[order_[k]].cls, central) ? 1U : 0U;
+    std::uint32_t same = 0, kept = 0;
+    for (std::uint32_t k = b; k < e; ++k) {
+      const MapPoint& m = points[order_[k]];
+      if (!plausible(m)) continue;
+      ++kept;
+      same += group && same_kind(m.cls, central) ? 1U : 0U;
+    }
+    if (kept < static_cast<std::uint32_t>(std::max(1, p_.min_keyframe_points))) continue;
     const bool use_group = group && same >= static_cast<std::uint32_t>(std::max(1, p_.min_keyframe_points));
-    auto counts = [&](const MapPoint& m) { return !use_group || same_kind(m.cls, central); };
+    auto counts = [&](const MapPoint& m) { return plausible(m) && (!use_group || same_kind(m.cls, central)); };
     // Robust height: the median, then the mean of the points within the gate of it (a wrong stereo
     // match lands metres away and must not drag the cell).
     heights_.clear();
@@ -225,7 +270,7 @@ std::size_t OrthoMap::memory_bytes() const noexcept {
   n += window_.capacity() * sizeof(Patch);
   for (const Patch& p : window_) n += p.cells.capacity() * sizeof(PatchCell) + p.tiles.capacity() * sizeof(std::uint64_t);
   n += (acc_.capacity() * sizeof(Acc)) + (start_.capacity() + fill_.capacity() + order_.capacity()) * sizeof(std::uint32_t) +
-       heights_.capacity() * sizeof(float);
+       (heights_.capacity() + ground_.capacity() + local_ground_.capacity()) * sizeof(float);
   return n;
 }
 
@@ -322,7 +367,7 @@ MapRaster OrthoMap::raster(const GridGeometry& grid) const {
       if (c == nullptr || c->count == 0) continue;
       const auto i = static_cast<std::size_t>(row) * static_cast<std::size_t>(grid.width) + static_cast<std::size_t>(col);
       r.cls[i] = c->cls;
-      r.elevation[i] = c->elevation();
+      r.elevation[i] = c->reported_elevation(static_cast<std::uint32_t>(std::max(1, p_.min_elevation_points)));
       r.rgb[3 * i] = c->r;
       r.rgb[3 * i + 1] = c->g;
       r.rgb[3 * i + 2] = c->b;

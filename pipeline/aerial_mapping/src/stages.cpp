@@ -235,6 +235,9 @@ Status OrthoMapStage::init(StageContext& ctx) {
   sp.speckle_window = static_cast<int>(v.integer("speckle_window"));
   sp.speckle_range = static_cast<int>(v.integer("speckle_range"));
   sp.border_dilate_px = static_cast<int>(v.integer("border_dilate_px"));
+  sp.lr_max_diff = static_cast<int>(v.integer("lr_max_diff"));
+  sp.edge_margin_px = static_cast<int>(v.integer("edge_margin_px"));
+  sp.edge_jump_px = static_cast<int>(v.integer("edge_jump_px"));
   sp.min_depth_m = v.real("min_depth_m");
   sp.max_depth_m = v.real("max_depth_m");
   sp.min_baseline_m = v.real("min_baseline_m");
@@ -248,6 +251,10 @@ Status OrthoMapStage::init(StageContext& ctx) {
   mp.min_points = static_cast<int>(v.integer("min_points"));
   mp.class_consistent_elevation = v.boolean("class_consistent_elevation");
   mp.min_keyframe_points = static_cast<int>(v.integer("min_keyframe_points"));
+  mp.ground_check_m = v.real("ground_check_m");
+  mp.ground_window_cells = static_cast<int>(v.integer("ground_window_cells"));
+  mp.raised_min_height_m = v.real("raised_min_height_m");
+  mp.min_elevation_points = static_cast<int>(v.integer("min_elevation_points"));
   mp.window_keyframes = static_cast<int>(v.integer("window_keyframes"));
   mp.rebuild_translation_m = v.real("rebuild_translation_m");
   mp.rebuild_rotation_rad = v.real("rebuild_rotation_rad");

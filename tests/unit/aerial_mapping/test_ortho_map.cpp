@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "airground/aerial_mapping/ortho_map.hpp"
+#include "airground/core/classes.hpp"
 
 namespace ag::mapping {
 namespace {
@@ -100,6 +101,82 @@ TEST(OrthoMap, ClassNeedsMinPointsBeforeItIsSet) {
   map.add_keyframe(1, nadir_at(0, 0, 40), square(0, 0, 1, 0.0, 2));
   map.add_keyframe(2, nadir_at(0, 0, 40), square(0, 0, 1, 0.0, 2));  // 48 now
   EXPECT_EQ(map.cell_at(0.1, 0.1)->cls, 2);
+}
+
+// One keyframe over a 6 m square of grass at z = 1 beside a 4 m tree crown at z = 9: block matching
+// spread the crown's height over a 1 m strip of grass-labelled pixels beside it, and gave the crown's
+// rim the ground's height. The ground check drops both kinds of wrong point; without it they win their cells.
+std::vector<MapPoint> grass_beside_a_crown() {
+  auto pts = square(0, 0, 3, 1.0, raw(ClassId::kGrass));
+  for (MapPoint& m : pts)
+    if (m.x > 2.0F) m.z = 9.0F;  // grass pixels with the crown's disparity (x in 2..3)
+  auto crown = square(5, 0, 2, 9.0, raw(ClassId::kTree));
+  for (MapPoint& m : crown)
+    if (m.x < 3.5F) m.z = 1.0F;  // the crown's rim with the ground's disparity (x in 3..3.5)
+  pts.insert(pts.end(), crown.begin(), crown.end());
+  return pts;
+}
+
+TEST(OrthoMap, GroundCheckDropsFlatPointsAboveTheGroundAndRaisedPointsOnIt) {
+  OrthoMap map;
+  map.add_keyframe(0, nadir_at(0, 0, 40), grass_beside_a_crown());
+  const Cell* spill = map.cell_at(2.25, 0.25);  // grass cell that got the crown's height
+  const Cell* rim = map.cell_at(3.25, 0.25);    // crown cell that got the ground's height
+  const Cell* crown = map.cell_at(5.25, 0.25);
+  const Cell* grass = map.cell_at(0.25, 0.25);
+  EXPECT_TRUE(spill == nullptr || spill->count == 0) << "the spilled points are all dropped";
+  EXPECT_TRUE(rim == nullptr || rim->count == 0);
+  ASSERT_NE(crown, nullptr);
+  EXPECT_NEAR(crown->elevation(), 9.0, 1e-4);
+  EXPECT_EQ(crown->cls, raw(ClassId::kTree));
+  ASSERT_NE(grass, nullptr);
+  EXPECT_NEAR(grass->elevation(), 1.0, 1e-4);
+  // Without the check the wrong heights stand.
+  OrthoMapParams p;
+  p.ground_check_m = 0;
+  OrthoMap plain(p);
+  plain.add_keyframe(0, nadir_at(0, 0, 40), grass_beside_a_crown());
+  EXPECT_NEAR(plain.cell_at(2.25, 0.25)->elevation(), 9.0, 1e-4);
+  EXPECT_NEAR(plain.cell_at(3.25, 0.25)->elevation(), 1.0, 1e-4);
+}
+
+TEST(OrthoMap, GroundCheckFollowsASlope) {
+  // Grass on a 20 % slope: 1 m rise per 5 m, 0.7 m across the 3.5 m window. Nothing is dropped.
+  auto pts = square(0, 0, 4, 0.0, raw(ClassId::kGrass));
+  for (MapPoint& m : pts) m.z = 0.2F * m.x;
+  OrthoMap map;
+  map.add_keyframe(0, nadir_at(0, 0, 40), pts);
+  std::uint64_t n = 0;
+  for (double x = -3.75; x < 4; x += 0.5)
+    for (double y = -3.75; y < 4; y += 0.5) {
+      const Cell* c = map.cell_at(x, y);
+      ASSERT_NE(c, nullptr);
+      n += c->count;
+      EXPECT_NEAR(c->elevation(), 0.2 * x, 0.05);
+    }
+  EXPECT_EQ(n, pts.size());
+}
+
+TEST(OrthoMap, ElevationNeedsMinElevationPoints) {
+  OrthoMapParams p;
+  p.min_elevation_points = 40;
+  OrthoMap map(p);
+  map.add_keyframe(0, nadir_at(0, 0, 40), square(0, 0, 1, 2.0, 2));  // 16 points per cell
+  const Cell* c = map.cell_at(0.1, 0.1);
+  ASSERT_NE(c, nullptr);
+  EXPECT_EQ(c->cls, 2) << "class and colour are still shown";
+  EXPECT_TRUE(std::isnan(c->reported_elevation(40)));
+  MapRaster r = map.raster();
+  std::size_t finite = 0;
+  for (float e : r.elevation) finite += std::isfinite(e) ? 1U : 0U;
+  EXPECT_EQ(finite, 0U);
+  map.add_keyframe(1, nadir_at(0, 0, 40), square(0, 0, 1, 2.0, 2));
+  map.add_keyframe(2, nadir_at(0, 0, 40), square(0, 0, 1, 2.0, 2));  // 48 now
+  EXPECT_NEAR(map.cell_at(0.1, 0.1)->reported_elevation(40), 2.0, 1e-4);
+  r = map.raster();
+  finite = 0;
+  for (float e : r.elevation) finite += std::isfinite(e) ? 1U : 0U;
+  EXPECT_EQ(finite, 16U);  // the 2 m square: 4 x 4 cells
 }
 
 // Keyframes along a line across four tiles (32 m each); then one keyframe's pose is corrected.

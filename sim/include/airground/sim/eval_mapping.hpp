@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "airground/platform/result.hpp"
 #include "airground/sim/runner.hpp"
@@ -24,6 +25,7 @@ struct EvalMappingOptions {
   double gps_outlier_at_s{-1};    // >= 0: one GPS fix this long after the start is off by gps_outlier_m
   double gps_outlier_m{50};
   bool random_faults{true};       // the models' own random tracking losses and GPS dropouts
+  std::vector<std::string> set{};  // "section.key=value" on the quadrotor's role config
   bool quiet{false};
 };
 
@@ -32,7 +34,14 @@ struct MappingMetrics {
   double map_coverage{0};           // classified cells / cells of the surveyed area
   double elevation_rmse_ground_m{0};  // cells wholly on flat ground (road, dirt, grass, water)
   double elevation_rmse_m{0};       // every mapped cell, against the world's surface range in the cell
+  double elevation_coverage{0};     // cells with an elevation (enough support) / cells of the surveyed area
+  double elevation_bias_ground_m{0};    // mean signed error (map - world) on flat ground: pose/scale bias
+  double elevation_p50_ground_m{0}, elevation_p95_ground_m{0};  // |error| quantiles on flat ground
+  double elevation_p95_m{0};        // |error| 95% quantile over every mapped cell
+  double elevation_outliers{0};     // fraction of mapped cells more than 2 m off the world's surface range
   double georeg_error_m{0};         // RMS horizontal error of the keyframes' optimised positions
+  double pose_z_rmse_m{0};          // RMS height error of the keyframes' optimised positions
+  double pose_tilt_rmse_deg{0}, pose_yaw_rmse_deg{0};  // RMS attitude errors of the keyframes (tilt of the body z axis, heading)
   double scale_error{0};            // |estimated x true odometry scale - 1| at the end
   std::uint64_t keyframes{0};
   std::uint64_t cells_evaluated{0};

@@ -12,6 +12,7 @@
 
 #include <Eigen/Geometry>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <span>
 #include <unordered_map>
@@ -30,6 +31,18 @@ struct OrthoMapParams {
   int min_points{4};                 // [points] a cell needs this many before it takes a class
   bool class_consistent_elevation{true};  // a cell's height from the points of its own kind (raised or flat) when enough
   int min_keyframe_points{3};        // [points] one keyframe's points in a cell below this are dropped (no robust median)
+  // Semantic plausibility per keyframe: the local ground is the median height of the flat-class points
+  // (road, dirt, grass, water) of the cells within ground_window_cells; a flat-class point further than
+  // ground_check_m from it, or a raised-class point (tree, building, vehicle) less than
+  // raised_min_height_m above it, is a wrong match (block matching spreads a roof or a crown over the
+  // ground beside it, and the ground over the crown's rim) and is dropped. 0 = off.
+  double ground_check_m{1.0};        // [m]
+  int ground_window_cells{3};        // [cells] half-width of the window (3: 7 x 7 cells, 3.5 m at 0.5 m)
+  double raised_min_height_m{0.3};   // [m]
+  // A cell reports an elevation once its leading hypothesis has this many points (a typical cell seen
+  // from 40 m gathers hundreds; the few points that reach a narrow gap between crowns, or the far side of
+  // a wall, are mostly wrong matches). Fewer: elevation unknown (NaN), class and colour still shown.
+  int min_elevation_points{16};      // [points]
   int window_keyframes{256};         // keyframes kept re-binnable (>= the pose graph's free window)
   double rebuild_translation_m{0.2}; // [m] a keyframe moved further than this is re-binned
   double rebuild_rotation_rad{0.005};  // [rad] ... or turned by more than this
@@ -51,6 +64,10 @@ struct Cell {
   std::uint8_t cls{255};    // class id, 255 unknown
   [[nodiscard]] float elevation() const noexcept { return count ? elevation_sum / static_cast<float>(count) : 0.0F; }
   [[nodiscard]] float rival() const noexcept { return rival_count ? rival_sum / static_cast<float>(rival_count) : 0.0F; }
+  // What the map reports: the leading hypothesis once it has min_points points, else NaN (unknown).
+  [[nodiscard]] float reported_elevation(std::uint32_t min_points) const noexcept {
+    return count > 0 && count >= min_points ? elevation() : std::numeric_limits<float>::quiet_NaN();
+  }
 };
 
 struct TileKey {
@@ -154,6 +171,7 @@ class OrthoMap {
   std::vector<Acc> acc_;
   std::vector<std::uint32_t> start_, fill_, order_;
   std::vector<float> heights_;
+  std::vector<float> ground_, local_ground_;  // per scratch cell: flat-class median height, and the window's median of those
 };
 
 }  // namespace ag::mapping
