@@ -55,6 +55,8 @@ LinkHub::LinkHub(int nodes, double loss_probability, std::uint64_t seed, std::si
   for (int i = 0; i < nodes; ++i) ends_.push_back(std::make_unique<End>(*this, i));
 }
 
+LinkHub::~LinkHub() = default;
+
 DatagramLink& LinkHub::endpoint(int node) noexcept { return *ends_[static_cast<std::size_t>(node)]; }
 
 void LinkHub::set_contact(int a, int b, bool connected) noexcept {

@@ -46,8 +46,11 @@ struct Member {
 
 class Team {
  public:
-  Team(int n, double loss, std::uint64_t seed, GossipParams base = {}, StoreLimits limits = {}, std::string journal_dir = {})
-      : hub_(n, loss, seed, base.mtu_bytes), base_(base), limits_(limits), dir_(std::move(journal_dir)) {
+  // Small stores (test teams run 11 robots in one process).
+  static constexpr StoreLimits kTestLimits{2048, 4u << 20, 65536};
+  Team(int n, double loss, std::uint64_t seed, GossipParams base = {}, StoreLimits limits = kTestLimits,
+       std::string journal_dir = {})
+      : hub_(n, loss, seed, base.mtu_bytes, 1024), base_(base), limits_(limits), dir_(std::move(journal_dir)) {
     for (int i = 0; i < n; ++i) {
       members_.emplace_back();
       start(i);

@@ -20,6 +20,9 @@ struct HubStats {
 class LinkHub {
  public:
   LinkHub(int nodes, double loss_probability, std::uint64_t seed, std::size_t mtu = 1200, std::size_t inbox = 4096);
+  ~LinkHub();
+  LinkHub(const LinkHub&) = delete;
+  LinkHub& operator=(const LinkHub&) = delete;
   // Every pair starts connected. Symmetric.
   void set_contact(int a, int b, bool connected) noexcept;
   void set_all_contacts(bool connected) noexcept;
