@@ -38,6 +38,7 @@ GossipNode::GossipNode(const GossipParams& p, const TeamKey& key, RecordStore& s
   body_out_.resize(p_.mtu_bytes - kSealOverhead);
   tx_.resize(p_.mtu_bytes);
   scratch_.resize(cap);
+  have_per_datagram_ = (body_out_.size() - 11) / kHaveEntryBytes;
   changes_.resize(cap);
   next_seq_ = std::max(store_.summary(p_.self).max_seq + 1, static_cast<std::uint64_t>(epoch_) << 32);
 }
@@ -114,6 +115,7 @@ GossipNode::Peer* GossipNode::peer_for(RobotId id, TimeNs now, const LinkAddress
       pe.qn = 0;
       pe.have_due.reset();
     }
+    pe.mismatch.fill(0);
     pe.id = id;
     pe.active = false;
     i = static_cast<int>(best);
@@ -209,8 +211,18 @@ void GossipNode::on_digest(TimeNs, Peer& peer, std::span<const std::uint8_t> bod
   for (int o = lo; o <= hi; ++o) {
     const OriginSummary& mine = store_.summary(static_cast<RobotId>(o));
     const OriginSummary& t = theirs[static_cast<std::size_t>(o)];
-    if (mine == t) continue;
-    if (t.count > 0) peer.have_due.set(static_cast<std::size_t>(o));
+    std::uint8_t& streak = peer.mismatch[static_cast<std::size_t>(o)];
+    if (mine == t) {
+      streak = 0;
+      continue;
+    }
+    if (streak < 255) ++streak;
+    // They hold something of this origin that we may lack: ask them to push it with our have-list. A
+    // list of one datagram goes at once; a longer one (the quadrotor's tiles) only when they hold keys
+    // we lack or the difference survives a first round, since the common case, one side simply ahead,
+    // needs no list: the side ahead pushes everything above the other's highest seq.
+    if (t.count > 0 && (mine.count <= have_per_datagram_ || t.count > mine.count || streak >= 2))
+      peer.have_due.set(static_cast<std::size_t>(o));
     if (mine.count > 0) differ.set(static_cast<std::size_t>(o));
   }
   if (differ.none()) return;
@@ -460,7 +472,7 @@ bool GossipNode::send_have(TimeNs now, Peer& peer, RobotId origin, DatagramLink&
     if (m.key.origin == origin) scratch_[k++] = (static_cast<std::uint64_t>(m.key.topic) << 32) | s;
   }
   std::sort(scratch_.begin(), scratch_.begin() + static_cast<std::ptrdiff_t>(k));
-  const std::size_t per = (body_out_.size() - 11) / kHaveEntryBytes;
+  const std::size_t per = have_per_datagram_;
   std::size_t i = 0;
   std::uint32_t lo = 0;
   do {

@@ -5,8 +5,11 @@
 // from its own summary for an origin
 //   - pushes at once every record of that origin with a seq above the peer's highest (it surely lacks
 //     them; all of them if the peer holds nothing of that origin), and
-//   - if the peer holds anything of that origin, answers with its HAVE list for it (topic, seq pairs,
-//     split into self-contained topic ranges), so that the peer pushes back what this node lacks.
+//   - if the peer holds anything of that origin, answers with its HAVE
+//     list for it (topic, seq pairs, split into self-contained topic ranges), so that the peer pushes
+//     back what this node lacks. A list longer than one datagram is sent only when the peer holds more
+//     keys or the difference outlives the first push (a second differing digest in a row): when one
+//     side is simply ahead, the quadrotor's long tile list does not travel at all.
 // Pushes go into a per-peer queue, served most important (priority) and newest (stamp) first within a
 // token-bucket budget per link; records larger than a datagram travel as 64-byte-aligned fragments,
 // reassembled by (origin, topic, seq) whoever sends them. Nothing waits for an answer: a lost datagram
@@ -119,6 +122,7 @@ class GossipNode {
     std::size_t qn{0};
     std::vector<std::uint32_t> queued_pos;  // per store slot: index in queue + 1, 0 = not queued
     std::bitset<256> have_due;
+    std::array<std::uint8_t, 256> mismatch{};  // consecutive digests of this peer that differed, per origin
   };
   struct Reassembly {
     bool active{false};
@@ -159,6 +163,7 @@ class GossipNode {
   std::array<std::int16_t, 256> peer_index_{};
   std::vector<Reassembly> reasm_;
   std::vector<std::uint8_t> rx_, body_in_, body_out_, tx_;
+  std::size_t have_per_datagram_{0};
   std::vector<std::uint64_t> scratch_;  // have-list building: (topic << 32 | slot) sorted
   std::vector<RecordStore::Slot> changes_;
   std::size_t change_head_{0}, change_count_{0};

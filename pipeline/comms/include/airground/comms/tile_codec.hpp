@@ -1,7 +1,10 @@
-// Map tiles as gossip payloads: classes and byte-shuffled elevations compressed with zstd.
-//   format u8 (1) | tx i32 | ty i32 | version u64 | stamp i64 | zstd frame of
-//   [cls: kTileCellCount bytes][elevation: kTileCellCount float32, byte plane 0 of every cell, then 1, 2, 3]
-// Shuffling puts the slowly varying exponent bytes together, which zstd then squeezes well; lossless.
+// Map tiles as gossip payloads: classes and 1-cm elevations, delta-coded and compressed with zstd.
+//   format u8 (2) | tx i32 | ty i32 | version u64 | stamp i64 | base f32 [m] | zstd frame of
+//   [cls: kTileCellCount bytes][elevation low bytes][elevation high bytes]
+// Elevation travels as q = round((e - base) / 1 cm) in 0..65534 (65535 = unknown/NaN), base the tile's
+// lowest known cell, so a tile may span 655 m of height; each q is sent as its difference to the cell
+// before it in row-major order, split into byte planes. Classes are exact; elevations within 5 mm (the
+// map itself is good to decimetres).
 #pragma once
 
 #include <cstddef>
@@ -16,8 +19,10 @@ typedef struct ZSTD_DCtx_s ZSTD_DCtx;
 
 namespace ag::comms {
 
-inline constexpr std::size_t kTileRawBytes = kTileCellCount * (1 + sizeof(float));
-inline constexpr std::size_t kTileHeaderBytes = 1 + 4 + 4 + 8 + 8;
+inline constexpr std::size_t kTileRawBytes = kTileCellCount * (1 + sizeof(float));  // a tile in memory
+inline constexpr std::size_t kTileCodedBytes = kTileCellCount * 3;                    // what zstd sees
+inline constexpr std::size_t kTileHeaderBytes = 1 + 4 + 4 + 8 + 8 + 4;
+inline constexpr double kTileElevationStepM = 0.01;
 
 class TileCodec {
  public:
