@@ -109,4 +109,26 @@ void LinkHub::put(int from, int to, std::span<const std::uint8_t> bytes) noexcep
   stats_.bytes_delivered += bytes.size();
 }
 
+bool LossyLink::lose() noexcept {
+  rng_ = rng_ * 6364136223846793005ULL + 1442695040888963407ULL;
+  return static_cast<double>(mix64(rng_) >> 11) * 0x1.0p-53 < loss_;
+}
+
+SendStatus LossyLink::send(TimeNs now, const LinkAddress& to, std::span<const std::uint8_t> bytes) noexcept {
+  if (cut_) {
+    ++dropped_;
+    return SendStatus::kSent;  // lost in the air: the sender cannot tell
+  }
+  return inner_.send(now, to, bytes);
+}
+
+std::size_t LossyLink::receive(TimeNs now, LinkAddress& from, std::span<std::uint8_t> buf, bool& truncated) noexcept {
+  for (;;) {
+    const std::size_t n = inner_.receive(now, from, buf, truncated);
+    if (n == 0) return 0;
+    if (!cut_ && !lose()) return n;  // each receiver loses its own copies (a broadcast is not all-or-nothing)
+    ++dropped_;
+  }
+}
+
 }  // namespace ag::comms

@@ -55,4 +55,26 @@ class LinkHub {
   HubStats stats_;
 };
 
+// Fault injection in user space around any link (tc netem is not everywhere): drops each datagram
+// received with a probability, and a cut link passes nothing either way.
+class LossyLink final : public DatagramLink {
+ public:
+  LossyLink(DatagramLink& inner, double loss_probability, std::uint64_t seed) noexcept
+      : inner_(inner), loss_(loss_probability), rng_(seed * 0x9E3779B97F4A7C15ULL + 7) {}
+  SendStatus send(TimeNs now, const LinkAddress& to, std::span<const std::uint8_t> bytes) noexcept override;
+  std::size_t receive(TimeNs now, LinkAddress& from, std::span<std::uint8_t> buf, bool& truncated) noexcept override;
+  [[nodiscard]] std::size_t mtu() const noexcept override { return inner_.mtu(); }
+  void set_cut(bool cut) noexcept { cut_ = cut; }
+  void set_loss(double p) noexcept { loss_ = p; }
+  [[nodiscard]] std::uint64_t dropped() const noexcept { return dropped_; }
+
+ private:
+  bool lose() noexcept;
+  DatagramLink& inner_;
+  double loss_;
+  std::uint64_t rng_;
+  bool cut_{false};
+  std::uint64_t dropped_{0};
+};
+
 }  // namespace ag::comms
