@@ -88,6 +88,10 @@ bool GossipNode::pending_change(RecordStore::Slot& slot) const noexcept {
   return true;
 }
 
+void GossipNode::announce_all() noexcept {
+  for (RecordStore::Slot s = 0; s < store_.size(); ++s) note_change(s);
+}
+
 void GossipNode::pop_change() noexcept {
   if (change_count_ == 0) return;
   change_head_ = (change_head_ + 1) % changes_.size();

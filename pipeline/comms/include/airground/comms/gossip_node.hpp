@@ -90,6 +90,9 @@ class GossipNode {
   // counted and the oldest are lost from this list (never from the store).
   [[nodiscard]] bool pending_change(RecordStore::Slot& slot) const noexcept;
   void pop_change() noexcept;
+  // Lists every record in the store as changed (after a restart, so the robot's stages get what the
+  // journal restored).
+  void announce_all() noexcept;
 
   [[nodiscard]] const GossipStats& stats() const noexcept { return stats_; }
   [[nodiscard]] const PeerStats& peer_stats(RobotId r) const noexcept { return peer_stats_[r]; }
