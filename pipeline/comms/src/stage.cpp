@@ -1,6 +1,8 @@
 // The comms stage: channels in, GossipNode over the configured link, channels and stats out.
 #include "airground/comms/stage.hpp"
 
+#include <sys/stat.h>
+
 #include <cmath>
 #include <cstring>
 #include <ctime>
@@ -142,6 +144,10 @@ Status CommsStage::init(StageContext& ctx) {
     auto k = TeamKey::load_file(v.text("key_file"));
     if (!k) return Error::make(k.error().code, where + "key_file: " + k.error().message);
     key = k.value();
+    struct stat st{};
+    if (::stat(v.text("key_file").c_str(), &st) == 0 && (st.st_mode & S_IROTH) != 0)
+      AG_LOG_WARN("comms", "team key %s is readable by every user: chmod o-r it (anyone holding it can speak for the team)",
+                  v.text("key_file").c_str());
   }
   GossipParams gp;
   gp.self = self_;

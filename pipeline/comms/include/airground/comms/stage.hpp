@@ -31,7 +31,7 @@ DatagramLink* find_inproc_link(std::string_view instance);
 inline constexpr ParamSpec kCommsStageParams[] = {
     ParamSpec::text("transport", "none", "udp|inproc|none",
                     "udp: the IP mesh; inproc: a link the simulator registered; none: store and journal only"),
-    ParamSpec::text("key_file", "/etc/airground/team.key", "", "the team key: 64 hex digits (e.g. from 'head -c32 /dev/urandom | xxd -p -c64')"),
+    ParamSpec::text("key_file", "/etc/airground/team.key", "", "the team key: 64 hex digits (e.g. od -An -tx1 -v -N32 /dev/urandom | tr -d ' \\n')"),
     ParamSpec::text("journal", "", "", "the store's journal file; empty = memory only (a restart forgets)"),
     ParamSpec::boolean("epoch_from_clock", true, "boot epoch >= wall-clock seconds (a robot that lost its disk still writes newer records); off for repeatable simulations"),
     ParamSpec::text("bind", "0.0.0.0", "", "udp: IPv4 address to bind"),
