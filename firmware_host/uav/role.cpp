@@ -21,7 +21,7 @@ constexpr StageSpec kUavStages[] = {
      "odometry + GPS pose graph (Ceres), keyframes every 2 m, keyframe poses after each solve"},
     {"ortho_map", &OrthoMapStage::make, 5.0, 150'000, 20, -1, OrthoMapStage::kParams,
      "dense stereo between keyframes, binned into the 0.5 m ortho-map tiles"},
-    {"comms", &comms::CommsStage::make, 20.0, 10'000, 25, -1, comms::CommsStage::kParams,
+    {"comms", &comms::CommsStage::make, 20.0, 5'000, 25, -1, comms::CommsStage::kParams,
      "gossip: the team's latest records (poses, map tiles, claims, failures) over the radio mesh"},
 };
 static_assert(role_table_ok(kUavStages));

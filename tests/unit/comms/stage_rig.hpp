@@ -3,6 +3,7 @@
 #pragma once
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <fstream>
 #include <memory>
@@ -44,6 +45,7 @@ inline constexpr RoleDescription kRigRole{"rig", "comms stage rig", kRigStages, 
 
 inline std::string write_key_file(const std::string& path) {
   std::ofstream(path) << "00112233445566778899aabbccddeeff00112233445566778899aabbccddeeff\n";
+  ::chmod(path.c_str(), 0600);
   return path;
 }
 
