@@ -168,6 +168,8 @@ void GossipNode::receive(TimeNs now, const LinkAddress& from, std::span<const st
   std::size_t len = 0;
   DropReason why = DropReason::kMalformed;
   if (!codec_.open(datagram, p_.self, guard_, h, body_in_, len, why)) {
+    // Our id on an authentic datagram: our own broadcast coming back, unless we never sent it.
+    if (why == DropReason::kOwnEcho && (h.epoch != epoch_ || h.counter >= counter_)) why = DropReason::kIdClash;
     drop(why);
     return;
   }

@@ -351,7 +351,8 @@ void CommsStage::publish_stats(TimeNs now) noexcept {
   // One warning the first time each reason shows up; the counts are in comms_stats.
   for (std::size_t i = 0; i < g.drops.size(); ++i) {
     if (g.drops[i] != 0 && logged_drops_[i] == 0 && static_cast<DropReason>(i) != DropReason::kOwnEcho)
-      AG_LOG_WARN("comms", "dropped a datagram: %s (counted in comms_stats, logged once)", drop_reason_name(static_cast<DropReason>(i)));
+      AG_LOG_WARN("comms", "dropped a datagram: %s (counted in comms_stats, logged once)%s", drop_reason_name(static_cast<DropReason>(i)),
+                  static_cast<DropReason>(i) == DropReason::kIdClash ? ": another robot uses this robot.id; give each robot its own" : "");
     logged_drops_[i] = g.drops[i];
   }
 }

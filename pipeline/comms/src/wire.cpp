@@ -44,6 +44,7 @@ const char* drop_reason_name(DropReason r) noexcept {
     case DropReason::kRecordTooLarge: return "record_too_large";
     case DropReason::kStoreFull: return "store_full";
     case DropReason::kReassemblyEvicted: return "reassembly_evicted";
+    case DropReason::kIdClash: return "id_clash";
     case DropReason::kCount: break;
   }
   return "?";
@@ -156,10 +157,6 @@ bool DatagramCodec::open(std::span<const std::uint8_t> in, RobotId self, ReplayG
     why = DropReason::kBadSender;
     return false;
   }
-  if (h.sender == self) {
-    why = DropReason::kOwnEcho;
-    return false;
-  }
   if (h.dest != kNoRobot && h.dest != self) {
     why = DropReason::kNotForUs;
     return false;
@@ -171,6 +168,10 @@ bool DatagramCodec::open(std::span<const std::uint8_t> in, RobotId self, ReplayG
                                                 in.size() - kHeaderBytes, in.data(), kHeaderBytes, nonce,
                                                 key_.data()) != 0) {
     why = DropReason::kForged;
+    return false;
+  }
+  if (h.sender == self) {
+    why = DropReason::kOwnEcho;
     return false;
   }
   if (!guard.accept(h.sender, h.epoch, h.counter)) {

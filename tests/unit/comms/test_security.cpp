@@ -5,6 +5,7 @@
 #include <random>
 
 #include "airground/comms/bytes.hpp"
+#include "airground/comms/link_hub.hpp"
 #include "team_rig.hpp"
 
 namespace ag::comms {
@@ -210,11 +211,36 @@ TEST(Security, AuthenticButMalformedBodiesAreDroppedWithoutTouchingTheStore) {
 
 TEST(Security, OwnEchoesAndOtherRobotsUnicastsAreSetAside) {
   Victim v(1);
-  v.feed(seal(test::test_key(), hdr(1, 1, 1), record_body(1, 1, 48, 0, 48)));     // sent by "us"
+  v.feed(seal(test::test_key(), hdr(1, 1, 1), record_body(1, 1, 48, 0, 48)));     // "us", but we never sent it
   v.feed(seal(test::test_key(), hdr(2, 1, 0, 7), record_body(0, 1, 48, 0, 48)));  // to robot 7
-  EXPECT_EQ(v.drops(DropReason::kOwnEcho), 1U);
+  EXPECT_EQ(v.drops(DropReason::kIdClash), 1U) << "an authentic datagram with our id that is not our echo";
+  EXPECT_EQ(v.drops(DropReason::kOwnEcho), 0U);
   EXPECT_EQ(v.drops(DropReason::kNotForUs), 1U);
   EXPECT_EQ(v.store.size(), 0U);
+}
+
+TEST(Security, TwoRobotsWithTheSameIdAreToldApartFromAnEcho) {
+  LinkHub hub(3, 0.0, 1);
+  RecordStore s0(test::Team::kTestLimits), s1(test::Team::kTestLimits), s2(test::Team::kTestLimits);
+  GossipParams p;
+  p.self = 4;
+  GossipNode a(p, test::test_key(), s0, 7, nullptr), b(p, test::test_key(), s1, 9, nullptr);  // both robot 4
+  p.self = 5;
+  GossipNode c(p, test::test_key(), s2, 1, nullptr);
+  a.publish(make_topic(TopicKind::kPose, 0), 5, 1, test::bytes_of("a"));
+  // Robot a also hears its own broadcasts (as on a UDP broadcast link): those are echoes, not clashes.
+  Tap echo(&hub.endpoint(0));
+  for (int k = 0; k < 30; ++k) {
+    const TimeNs now = kNsPerS + k * 100 * kNsPerMs;
+    a.tick(now, echo);
+    for (const auto& d : echo.sent) a.receive(now, LinkAddress{0, false}, d);
+    echo.sent.clear();
+    b.tick(now, hub.endpoint(1));
+    c.tick(now, hub.endpoint(2));
+  }
+  EXPECT_GT(a.stats().drop(DropReason::kOwnEcho), 0U);
+  EXPECT_GT(a.stats().drop(DropReason::kIdClash) + b.stats().drop(DropReason::kIdClash), 0U);
+  EXPECT_EQ(c.stats().drop(DropReason::kIdClash), 0U);
 }
 
 TEST(Security, TeamKeyParsingNamesTheProblem) {

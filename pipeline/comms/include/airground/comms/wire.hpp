@@ -62,6 +62,7 @@ enum class DropReason : std::uint8_t {
   kRecordTooLarge,
   kStoreFull,
   kReassemblyEvicted,  // a partly received record pushed out of the reassembly pool
+  kIdClash,       // an authentic datagram with our id that we did not send: two robots share robot.id
   kCount
 };
 const char* drop_reason_name(DropReason r) noexcept;
@@ -92,7 +93,8 @@ class DatagramCodec {
   std::size_t seal(const DatagramHeader& h, std::span<const std::uint8_t> body, std::span<std::uint8_t> out) const noexcept;
   // Checks, authenticates and decrypts `in` into body_out (>= in.size() bytes). On success returns true
   // with h and body_len set; else false with `why`. The replay guard is consulted only for authentic
-  // datagrams, so forged ones cannot move its windows.
+  // datagrams, so forged ones cannot move its windows. Our own id is checked after authentication
+  // (kOwnEcho, h filled in), so the caller can tell its echo from another robot using the same id.
   bool open(std::span<const std::uint8_t> in, RobotId self, ReplayGuard& guard, DatagramHeader& h,
             std::span<std::uint8_t> body_out, std::size_t& body_len, DropReason& why) const noexcept;
 
