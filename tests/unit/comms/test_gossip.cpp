@@ -178,7 +178,9 @@ TEST(Gossip, BudgetCapsTheBytesAPeerLinkCarries) {
 // back from its journal, the rest from its peers; nothing is lost, nothing duplicated.
 TEST(Gossip, RestartMidExchangeRecoversFromDiskAndPeers) {
   test::TempDir dir;
-  Team team(4, 0.2, 11, GossipParams{}, Team::kTestLimits, dir.path.string());
+  GossipParams slow;
+  slow.budget_bytes_per_s = 40'000;  // a 30 kB tile takes most of a second
+  Team team(4, 0.2, 11, slow, Team::kTestLimits, dir.path.string());
   std::mt19937_64 rng(8);
   std::map<std::pair<int, Topic>, std::vector<std::uint8_t>> truth;  // latest payload per key
   auto pub = [&](int who, Topic t, std::size_t n) {
@@ -193,7 +195,15 @@ TEST(Gossip, RestartMidExchangeRecoversFromDiskAndPeers) {
   }
   pub(0, tile_topic(3, 3), 30'000);  // ~27 fragments
   pub(1, tile_topic(4, 4), 30'000);
-  for (int k = 0; k < 2; ++k) team.step(100 * kNsPerMs);  // mid-transfer
+  // Step until the tiles are on their way to robot 2 (its peers' queues to it hold them), then once more
+  // so that some of their fragments have arrived: it dies in the middle of that exchange.
+  for (int k = 0; k < 40 && team.node(0).queued_to(2) + team.node(1).queued_to(2) == 0; ++k) team.step(100 * kNsPerMs);
+  team.step(100 * kNsPerMs);
+  ASSERT_GT(team.node(0).queued_to(2) + team.node(1).queued_to(2) + team.node(3).queued_to(2), 0U)
+      << "killed while records to it were still queued";
+  const bool tiles_complete_at_kill = team.store(2).find(RecordKey{0, tile_topic(3, 3)}) != RecordStore::kNoSlot &&
+                                      team.store(2).find(RecordKey{1, tile_topic(4, 4)}) != RecordStore::kNoSlot;
+  EXPECT_FALSE(tiles_complete_at_kill) << "killed before both big tiles had arrived";
   const std::uint64_t own_max_seq = team.store(2).summary(2).max_seq;
   const std::size_t before = team.store(2).size();
   team.kill(2);
