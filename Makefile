@@ -5,7 +5,7 @@ JOBS ?= $(shell nproc)
 export CMAKE_BUILD_PARALLEL_LEVEL := $(JOBS)
 export CTEST_PARALLEL_LEVEL := $(JOBS)
 
-.PHONY: deps build cross tsan asan test test-native test-cross test-tsan test-asan bench package demo clean help
+.PHONY: deps build cross tsan asan test test-native test-cross test-tsan test-asan bench package demo clean help fuzz
 
 help:
 	@echo "make deps     install missing Debian packages (apt-get; root or sudo) and the arm64 sysroot"
@@ -14,6 +14,7 @@ help:
 	@echo "make bench    ring throughput/latency vs moodycamel, scheduler wake-up lateness"
 	@echo "make package  .deb per role for amd64 and arm64 in build/*/packages"
 	@echo "make demo     the default simulated mission (1 quadrotor, 3 ground robots) and its report in build/demo"
+	@echo "make fuzz     build the libFuzzer targets with clang and run each FUZZ_SECONDS (default 60)"
 
 deps:
 	@tools/install-deps.sh
@@ -62,6 +63,14 @@ DEMO_DURATION ?= 120
 demo: build
 	build/native/sim/airground-sim run --world default --ugvs 3 --seed 1 --duration $(DEMO_DURATION) --out $(DEMO_OUT)
 	@echo "make demo: report in $(DEMO_OUT)/report.md (trajectories.png, summary.yaml, recordings)"
+
+# libFuzzer targets (Debian's clang): build them apart from the main tree and run each FUZZ_SECONDS.
+FUZZ_SECONDS ?= 60
+fuzz: deps
+	cmake -S tests/fuzz -B build/fuzz -G Ninja -DCMAKE_CXX_COMPILER=clang++ -DCMAKE_BUILD_TYPE=RelWithDebInfo
+	cmake --build build/fuzz
+	mkdir -p build/fuzz/corpus/comms_datagram
+	build/fuzz/fuzz_comms_datagram -max_total_time=$(FUZZ_SECONDS) -print_final_stats=1 build/fuzz/corpus/comms_datagram tests/fuzz/comms/seeds
 
 clean:
 	rm -rf build

@@ -1,6 +1,8 @@
 // The base role table: every stage once, with rate, budget, priority and CPU; checked at compile time.
 #include "roles.hpp"
 
+#include "airground/comms/stage.hpp"
+
 #include "airground/platform/status_stage.hpp"
 
 namespace ag {
@@ -9,6 +11,8 @@ namespace {
 // name, factory, rate [Hz], budget [µs], SCHED_FIFO priority, CPU (-1 any), parameters, what it does
 constexpr StageSpec kBaseStages[] = {
     {"status", &StatusStage::make, 1.0, 2'000, 10, -1, StatusStage::kParams, "scheduler counters, once a second"},
+    {"comms", &comms::CommsStage::make, 20.0, 5'000, 25, -1, comms::CommsStage::kParams,
+     "gossip: the team's latest records (poses, map tiles, claims, failures) over the radio mesh"},
 };
 static_assert(role_table_ok(kBaseStages));
 }  // namespace

@@ -3,6 +3,8 @@
 // the drivers' priority: a pose-graph solve or a stereo pair takes tens of milliseconds.
 #include "roles.hpp"
 
+#include "airground/comms/stage.hpp"
+
 #include "airground/aerial_mapping/stages.hpp"
 #include "airground/platform/status_stage.hpp"
 
@@ -19,6 +21,8 @@ constexpr StageSpec kUavStages[] = {
      "odometry + GPS pose graph (Ceres), keyframes every 2 m, keyframe poses after each solve"},
     {"ortho_map", &OrthoMapStage::make, 5.0, 150'000, 20, -1, OrthoMapStage::kParams,
      "dense stereo between keyframes, binned into the 0.5 m ortho-map tiles"},
+    {"comms", &comms::CommsStage::make, 20.0, 5'000, 25, -1, comms::CommsStage::kParams,
+     "gossip: the team's latest records (poses, map tiles, claims, failures) over the radio mesh"},
 };
 static_assert(role_table_ok(kUavStages));
 

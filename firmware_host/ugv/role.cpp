@@ -1,6 +1,8 @@
 // The ugv role table: every stage once, with rate, budget, priority and CPU; checked at compile time.
 #include "roles.hpp"
 
+#include "airground/comms/stage.hpp"
+
 #include "airground/localization/stage.hpp"
 #include "airground/platform/status_stage.hpp"
 
@@ -16,6 +18,8 @@ constexpr StageSpec kUgvStages[] = {
     {"status", &StatusStage::make, 1.0, 2'000, 10, -1, StatusStage::kParams, "scheduler counters, once a second"},
     {"localization", &LocalizationStage::make, 10.0, 70'000, 40, -1, LocalizationStage::kParams,
      "LiDAR scans matched against the aerial map (particle filter), fused with wheel odometry: the robot's pose"},
+    {"comms", &comms::CommsStage::make, 20.0, 5'000, 25, -1, comms::CommsStage::kParams,
+     "gossip: the team's latest records (poses, map tiles, claims, failures) over the radio mesh"},
 };
 static_assert(role_table_ok(kUgvStages));
 }  // namespace

@@ -1,0 +1,86 @@
+// Messages between the comms stage and the other stages of a robot (plain fixed-size structs, units in
+// comments, sample and publish stamps in ns).
+#pragma once
+
+#include <array>
+#include <cstdint>
+
+#include "airground/comms/topics.hpp"
+#include "airground/comms/wire.hpp"
+#include "airground/core/geometry.hpp"
+#include "airground/platform/time.hpp"
+
+namespace ag::comms {
+
+inline constexpr std::size_t kGossipPayloadMax = 1024;  // [B] records through the generic channels
+inline constexpr std::size_t kGossipRing = 64;
+inline constexpr std::size_t kTeamMax = 32;
+
+// Channel "gossip_out" (ring, any stage -> comms): a record of this robot to share with the team
+// (regions of interest, claims, failures, status; map tiles and poses have their own inputs).
+struct GossipPublishMsg {
+  TimeNs stamp{0};
+  TimeNs published{0};
+  Topic topic{0};
+  std::uint8_t priority{0};  // 0 = the kind's default
+  std::uint32_t size{0};     // [B] valid bytes of payload
+  std::array<std::uint8_t, kGossipPayloadMax> payload{};
+};
+
+// Channel "gossip_in" (ring, comms -> mission etc.): a newer record of another robot, any kind but poses
+// and map tiles (which arrive on "team_poses" and "map_tiles").
+struct GossipRecordMsg {
+  TimeNs stamp{0};          // [ns] origin's stamp
+  TimeNs published{0};
+  RecordKey key;
+  std::uint64_t seq{0};
+  std::uint8_t priority{0};
+  std::uint32_t size{0};    // [B] (records above kGossipPayloadMax are not delivered here; counted)
+  std::array<std::uint8_t, kGossipPayloadMax> payload{};
+};
+
+// The pose topic's payload: x, y, yaw (f64, m, m, rad, map frame), status u8, then sqrt of the x, y
+// and yaw variances (f32, m, m, rad), little-endian: 37 bytes.
+inline constexpr std::size_t kPosePayloadBytes = 8 * 3 + 1 + 4 * 3;
+
+struct TeamPose {
+  RobotId robot{kNoRobot};
+  std::uint8_t status{0};     // LocalizationStatus of the origin
+  TimeNs stamp{0};            // [ns] origin's clock
+  Pose2 pose;                 // [m, rad] map frame
+  float sigma_x_m{0}, sigma_y_m{0}, sigma_yaw_rad{0};
+};
+
+// Channel "team_poses" (latest value): the newest pose of every other robot heard of.
+struct TeamPosesMsg {
+  TimeNs stamp{0};
+  TimeNs published{0};
+  std::uint32_t count{0};
+  std::array<TeamPose, kTeamMax> robots{};
+};
+
+struct CommsPeerRow {
+  RobotId robot{kNoRobot};
+  std::uint64_t datagrams_in{0}, bytes_in{0}, records_in{0};
+  std::uint64_t datagrams_out{0}, bytes_out{0}, records_out{0};
+  std::uint64_t duplicates_in{0};
+  TimeNs last_heard{0};       // [ns] this robot's clock
+};
+
+// Channel "comms_stats" (latest value, every step): the store, the traffic per peer, drops by reason.
+struct CommsStatsMsg {
+  TimeNs stamp{0};
+  TimeNs published{0};
+  std::uint32_t records{0};           // records in the store
+  std::uint64_t payload_bytes{0};     // [B] their payloads
+  std::uint64_t datagrams_in{0}, bytes_in{0}, datagrams_out{0}, bytes_out{0};
+  std::uint64_t records_in{0}, records_out{0}, own_records{0};
+  std::uint64_t journal_appends{0}, journal_errors{0};
+  std::uint64_t link_send_failures{0}, budget_waits{0};
+  std::uint64_t tiles_out{0}, tiles_in{0}, tiles_bad{0};  // map tiles published, delivered, undecodable
+  std::array<std::uint64_t, static_cast<std::size_t>(DropReason::kCount)> drops{};
+  std::uint32_t peers{0};
+  std::array<CommsPeerRow, kTeamMax> peer{};
+};
+
+}  // namespace ag::comms
