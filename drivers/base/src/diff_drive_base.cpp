@@ -223,7 +223,7 @@ void DiffDriveBase::step(TimeNs now) noexcept {
     AG_LOG_WARN("base", "no fresh wheel command for %.0f ms: wheels stopped", p_.command_timeout_s * 1e3);
   }
   was_fresh_ = fresh;
-  if (st_.state == BaseState::kRunning && fresh) send_velocity(now, cmd_l_, cmd_r_);
+  if (st_.state == BaseState::kRunning && fresh && !inhibit_) send_velocity(now, cmd_l_, cmd_r_);
   else send_velocity(now, 0.0, 0.0);
 }
 

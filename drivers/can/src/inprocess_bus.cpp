@@ -1,6 +1,10 @@
 // In-process CAN link.
 #include "airground/drivers/can/inprocess_bus.hpp"
 
+#include <map>
+#include <mutex>
+#include <string>
+
 namespace ag::can {
 
 CanResult InProcessCanLink::Endpoint::send(const CanFrame& f) noexcept {
@@ -31,6 +35,32 @@ CanResult InProcessCanLink::Endpoint::receive(CanFrame& out) noexcept {
   --q.size;
   ++c_.rx;
   return CanResult::kOk;
+}
+
+namespace {
+std::mutex& links_mutex() {
+  static std::mutex m;
+  return m;
+}
+std::map<std::string, InProcessCanLink*, std::less<>>& links() {
+  static std::map<std::string, InProcessCanLink*, std::less<>> l;
+  return l;
+}
+}  // namespace
+
+void register_inprocess_link(std::string_view robot, InProcessCanLink* link) {
+  std::lock_guard<std::mutex> g(links_mutex());
+  links()[std::string(robot)] = link;
+}
+void unregister_inprocess_link(std::string_view robot) {
+  std::lock_guard<std::mutex> g(links_mutex());
+  const auto it = links().find(robot);
+  if (it != links().end()) links().erase(it);
+}
+InProcessCanLink* find_inprocess_link(std::string_view robot) {
+  std::lock_guard<std::mutex> g(links_mutex());
+  const auto it = links().find(robot);
+  return it == links().end() ? nullptr : it->second;
 }
 
 }  // namespace ag::can

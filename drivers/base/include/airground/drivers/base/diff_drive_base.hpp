@@ -88,6 +88,9 @@ class DiffDriveBase {
   void command(double left_mps, double right_mps, TimeNs now) noexcept;
   // Reads every received frame, checks the controllers, sends both wheels' velocities.
   void step(TimeNs now) noexcept;
+  // While inhibited (e-stop), every step sends zero velocity whatever the command.
+  void set_inhibit(bool inhibit) noexcept { inhibit_ = inhibit; }
+  [[nodiscard]] bool inhibited() const noexcept { return inhibit_; }
   // Folds encoder estimates into the odometry without commanding anything (replay of a recorded run).
   void receive_only(TimeNs now) noexcept { drain(now); }
 
@@ -128,6 +131,7 @@ class DiffDriveBase {
   TimeNs arm_time_{0};
   TimeNs cmd_time_{-1};
   bool was_fresh_{false};
+  bool inhibit_{false};
   double cmd_l_{0}, cmd_r_{0};
   bool odom_started_{false};
   WheelOdometryMsg odom_{};

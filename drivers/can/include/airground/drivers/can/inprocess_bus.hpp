@@ -5,6 +5,7 @@
 
 #include <array>
 #include <cstddef>
+#include <string_view>
 
 #include "airground/drivers/can/can_bus.hpp"
 #include "airground/platform/clock.hpp"
@@ -47,5 +48,10 @@ class InProcessCanLink {
   const Clock& clock_;
   std::array<Queue, 2> q_{};  // q_[s]: frames waiting for side s
 };
+
+// Links the simulator provides for a robot's base stage (can_backend: inprocess), by robot name.
+void register_inprocess_link(std::string_view robot, InProcessCanLink* link);
+void unregister_inprocess_link(std::string_view robot);
+[[nodiscard]] InProcessCanLink* find_inprocess_link(std::string_view robot);
 
 }  // namespace ag::can
