@@ -565,8 +565,9 @@ void Roadmap::rebuild() noexcept {
 
 std::size_t Roadmap::update(std::size_t max_tiles) noexcept {
   if (n_dirty_ == 0) return 0;
-  // Most of the map changed (the first load): one full build is cheaper than tile by tile.
-  if (max_tiles >= n_dirty_ && n_dirty_ * 4 > tile_dirty_.size()) {
+  // Most of the map changed (the first load) and the caller wants it all now: one full build is cheaper
+  // than tile by tile. A caller with a budget (the stage) passes a count and gets bounded steps.
+  if (max_tiles == SIZE_MAX && n_dirty_ * 4 > tile_dirty_.size()) {
     const std::size_t n = n_dirty_;
     rebuild();
     return n;

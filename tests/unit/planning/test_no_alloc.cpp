@@ -2,7 +2,7 @@
 // constructed (operator new counted by tests/common/counting_new.hpp).
 #include <gtest/gtest.h>
 
-#include "planning_world.hpp"
+#include "stage_rig.hpp"
 
 #include "../../common/counting_new.hpp"
 
@@ -42,6 +42,36 @@ TEST(PlanningNoAllocation, TilesUpdatesRebuildAndQueries) {
   }
   EXPECT_EQ(ok, 10);
   EXPECT_EQ(rm->stats().tile_updates, 2U);
+}
+
+TEST(PlanningNoAllocation, ThePlannerAndDriveStagesStep) {
+  auto w = loc::test::make_world(4, 4, 6);
+  test::Rig rig(w);
+  const GridReference ref = test::reference_of(w);
+  const auto pairs = test::reachable_pairs(w, ref, 1, 5, 50.0);
+  ASSERT_EQ(pairs.size(), 1U);
+  rig.pose = Pose2{pairs[0].first.x, pairs[0].first.y, 0.0};
+  std::vector<std::vector<std::uint8_t>> tiles;
+  for (int ty = 0; ty < w.tiles_y(); ++ty)
+    for (int tx = 0; tx < w.tiles_x(); ++tx) tiles.push_back(w.tile(tx, ty));
+  auto changed = tiles[5];
+  for (std::size_t i = 0; i < 300; ++i) changed[i] = raw(ClassId::kBuilding);
+  {
+    test_alloc::AllocationWindow window;
+    for (int ty = 0; ty < w.tiles_y(); ++ty)
+      for (int tx = 0; tx < w.tiles_x(); ++tx) rig.push_tile(tx, ty, 1, tiles[static_cast<std::size_t>(ty * w.tiles_x() + tx)]);
+    do rig.step_planner();
+    while (rig.planner->roadmap().pending_tiles() > 0);
+    rig.goal(pairs[0].second.x, pairs[0].second.y, 1);
+    for (int k = 0; k < 400; ++k) {
+      if (k == 100) rig.push_tile(1, 1, 2, changed);
+      rig.tick(k);
+    }
+    EXPECT_EQ(window.allocations(), 0U) << "allocations in PlannerStage::step() / DriveStage::step()";
+  }
+  EXPECT_GT(rig.planner->counters().plans, 2U);
+  EXPECT_EQ(rig.planner->published().status, RouteStatus::kOk);
+  EXPECT_GT(rig.planner->roadmap().stats().tile_updates, 16U);
 }
 
 }  // namespace

@@ -125,7 +125,8 @@ class Roadmap {
   // size, or at the stored version. The roadmap around it is stale until update() or rebuild().
   bool set_tile(std::int32_t tx, std::int32_t ty, std::uint64_t version, std::span<const std::uint8_t> cls) noexcept;
   // Brings the roadmap up to date around up to max_tiles changed tiles (oldest first), each touching
-  // only the region it can influence; returns the tiles done.
+  // only the region it can influence; returns the tiles done. With the default (all) and more than a
+  // quarter of the tiles changed, one rebuild() instead.
   std::size_t update(std::size_t max_tiles = SIZE_MAX) noexcept;
   // Everything from the classes (clears the changed set).
   void rebuild() noexcept;
