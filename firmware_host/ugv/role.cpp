@@ -2,12 +2,15 @@
 #include "roles.hpp"
 
 #include "airground/localization/stage.hpp"
+#include "airground/planning/stages.hpp"
 #include "airground/platform/status_stage.hpp"
 
 namespace ag {
 
 namespace {
 using loc::LocalizationStage;
+using plan::DriveStage;
+using plan::PlannerStage;
 
 // Budgets are for the ground robot's Ryzen 5 3600. The localizer matches one scan per update (at most
 // 10 Hz) with up to pf_max_particles particles: ~20 ms at 2,000 (make bench); the first updates, at 4,000 while it converges, take longest.
@@ -16,6 +19,11 @@ constexpr StageSpec kUgvStages[] = {
     {"status", &StatusStage::make, 1.0, 2'000, 10, -1, StatusStage::kParams, "scheduler counters, once a second"},
     {"localization", &LocalizationStage::make, 10.0, 70'000, 40, -1, LocalizationStage::kParams,
      "LiDAR scans matched against the aerial map (particle filter), fused with wheel odometry: the robot's pose"},
+    // The planner folds in a few changed tiles per step (~1-10 ms each) and answers a query in < 1 ms (bench_planning).
+    {"planner", &PlannerStage::make, 5.0, 40'000, 30, -1, PlannerStage::kParams,
+     "semantic roadmap over the aerial map: a route from the robot's pose to the goal on 'planned_path'"},
+    {"drive", &DriveStage::make, 20.0, 1'000, 50, -1, DriveStage::kParams,
+     "path follower with acceleration limits: wheel speeds on 'wheel_command'"},
 };
 static_assert(role_table_ok(kUgvStages));
 }  // namespace

@@ -99,10 +99,10 @@ Roadmap::Roadmap(const RoadmapParams& params, const ClassTable& classes, const M
         disk_dx_.push_back(static_cast<std::int16_t>(dx));
         disk_dy_.push_back(static_cast<std::int16_t>(dy));
       }
-  cand_.assign(2 * n, 0);
+  cand_.assign(n, 0);
   bucket_count_.assign(static_cast<std::size_t>(4 * (cap_cells_ + 2) + 2), 0);
   const std::int32_t m = cap_cells_ + 1;
-  col_g_.assign(static_cast<std::size_t>(h_) * static_cast<std::size_t>(w_ + 2 * m + 2), 0.0F);
+  col_g_.assign(static_cast<std::size_t>(h_) * static_cast<std::size_t>(w_ + 2 * m + 2), 0);
   env_v_.assign(static_cast<std::size_t>(w_ + 2 * m + 2), 0);
   env_z_.assign(static_cast<std::size_t>(w_ + 2 * m + 3), 0.0F);
   g_.assign(cap + 2, 0.0F);
@@ -120,7 +120,7 @@ Roadmap::Roadmap(const RoadmapParams& params, const ClassTable& classes, const M
 std::size_t Roadmap::memory_bytes() const noexcept {
   return sizeof(*this) + cls_.size() * 6 + edt_.size() * sizeof(float) + cover_.size() * 2 + tile_version_.size() * 13 +
          nodes_.size() * sizeof(Node) + vis_.size() + (free_slots_.size() + new_nodes_.size() + cand_nodes_.size()) * 4 +
-         cand_.size() * 4 + col_g_.size() * 4 + (g_.size() + parent_.size() + stamp_.size()) * 4 + heap_.size() * 8 +
+         cand_.size() * 4 + col_g_.size() + (g_.size() + parent_.size() + stamp_.size()) * 4 + heap_.size() * 8 +
          pairs_.size() * 8;
 }
 
@@ -213,29 +213,29 @@ void Roadmap::recompute_clearance(Rect out) noexcept {
   const std::int32_t m = cap_cells_ + 1;
   const std::int32_t ix0 = out.x0 - m, ix1 = out.x1 + m, iw = ix1 - ix0;
   const std::int32_t iy0 = out.y0 - m, iy1 = out.y1 + m;
-  const auto far = static_cast<float>(m + 1);
+  const std::int32_t far = m + 1;
   auto blocked = [&](std::int32_t x, std::int32_t y) { return !inside(x, y) || closed_[idx(x, y)] == 0; };
   // column pass: g[(y - out.y0) * iw + (x - ix0)] = vertical distance to a blocked cell, capped at far
   for (std::int32_t x = ix0; x < ix1; ++x) {
-    float last = -kFar;  // row of the last blocked cell seen going up
+    std::int32_t last = iy0 - far;  // row of the last blocked cell seen going up
     for (std::int32_t y = iy0; y < out.y1; ++y) {
-      if (blocked(x, y)) last = static_cast<float>(y);
+      if (blocked(x, y)) last = y;
       if (y >= out.y0) col_g_[static_cast<std::size_t>(y - out.y0) * static_cast<std::size_t>(iw) + static_cast<std::size_t>(x - ix0)] =
-          std::min(far, static_cast<float>(y) - last);
+          static_cast<std::uint8_t>(std::min(far, y - last));
     }
-    last = kFar;
+    last = iy1 + far;
     for (std::int32_t y = iy1 - 1; y >= out.y0; --y) {
-      if (blocked(x, y)) last = static_cast<float>(y);
+      if (blocked(x, y)) last = y;
       if (y < out.y1) {
-        float& g = col_g_[static_cast<std::size_t>(y - out.y0) * static_cast<std::size_t>(iw) + static_cast<std::size_t>(x - ix0)];
-        g = std::min(g, std::min(far, last - static_cast<float>(y)));
+        std::uint8_t& g = col_g_[static_cast<std::size_t>(y - out.y0) * static_cast<std::size_t>(iw) + static_cast<std::size_t>(x - ix0)];
+        g = static_cast<std::uint8_t>(std::min<std::int32_t>(g, std::min(far, last - y)));
       }
     }
   }
   // row pass
   for (std::int32_t y = out.y0; y < out.y1; ++y) {
-    const float* g = &col_g_[static_cast<std::size_t>(y - out.y0) * static_cast<std::size_t>(iw)];
-    auto f = [&](std::int32_t q) { return g[q] * g[q]; };
+    const std::uint8_t* g = &col_g_[static_cast<std::size_t>(y - out.y0) * static_cast<std::size_t>(iw)];
+    auto f = [&](std::int32_t q) { return static_cast<float>(g[q] * g[q]); };
     std::int32_t k = 0;
     env_v_[0] = 0;
     env_z_[0] = -kFar;
@@ -419,26 +419,29 @@ void Roadmap::seed_nodes(Rect region) noexcept {
   region = clamp(region);
   const std::size_t nb = bucket_count_.size();
   std::fill(bucket_count_.begin(), bucket_count_.end(), 0U);
-  std::uint32_t* keys = cand_.data();
-  const std::size_t half = cand_.size() / 2;
-  std::uint32_t* sorted = cand_.data() + half;
-  std::size_t n = 0;
+  std::uint32_t* sorted = cand_.data();
   auto key_of = [&](std::size_t i) { return std::min(nb - 1, static_cast<std::size_t>(edt_[i] * 4.0F)); };
+  // Two passes over the region (count, then place): descending clearance, cell order within a key.
+  std::size_t n = 0;
   for (std::int32_t y = region.y0; y < region.y1; ++y)
     for (std::int32_t x = region.x0; x < region.x1; ++x) {
       const std::size_t i = idx(x, y);
       if (free_[i] == 0 || cover_[i] != 0) continue;
-      keys[n++] = static_cast<std::uint32_t>(i);
       ++bucket_count_[key_of(i)];
+      ++n;
     }
-  // descending by key, stable in cell order
   std::uint32_t pos = 0;
   for (std::size_t b = nb; b-- > 0;) {
     const std::uint32_t cnt = bucket_count_[b];
     bucket_count_[b] = pos;
     pos += cnt;
   }
-  for (std::size_t k = 0; k < n; ++k) sorted[bucket_count_[key_of(keys[k])]++] = keys[k];
+  for (std::int32_t y = region.y0; y < region.y1; ++y)
+    for (std::int32_t x = region.x0; x < region.x1; ++x) {
+      const std::size_t i = idx(x, y);
+      if (free_[i] == 0 || cover_[i] != 0) continue;
+      sorted[bucket_count_[key_of(i)]++] = static_cast<std::uint32_t>(i);
+    }
   for (std::size_t k = 0; k < n; ++k) {
     const std::uint32_t i = sorted[k];
     if (cover_[i] != 0) continue;

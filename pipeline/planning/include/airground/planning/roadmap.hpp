@@ -220,7 +220,7 @@ class Roadmap {
   std::vector<std::int16_t> disk_dx_, disk_dy_;  // window offsets within R, by distance
   // scratch
   std::vector<std::uint32_t> cand_, bucket_count_;
-  std::vector<float> col_g_;
+  std::vector<std::uint8_t> col_g_;  // column distances [cells], capped at the clearance cap + 1
   std::vector<std::int32_t> env_v_;
   std::vector<float> env_z_;
   // search
