@@ -118,7 +118,7 @@ constexpr const char* kEvalPlanningHelp =
     "Writes DIR/metrics.json: path_length_ratio_mean, path_length_ratio_max (route length / grid optimum),\n"
     "min_clearance_ratio_mean (route's smallest clearance / min_clearance_m, >= 1 keeps it), reached,\n"
     "collisions, failures (not planned, through a blocked cell, too close, or not reached), build and\n"
-    "query times, and every pair's figures.\n"
+    "query times (thread CPU time), and every pair's figures.\n"
     "Defaults: --world default --seed 1 --pairs 20 --out eval-planning.\n\n"
     "Options:\n"
     "  --min-distance M         pairs at least M metres apart (40)\n"
