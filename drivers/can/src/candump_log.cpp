@@ -31,8 +31,9 @@ Result<CandumpRecord> parse_candump_line(std::string_view line) {
   if (dot == std::string_view::npos || dot == 0 || ts.size() - dot - 1 != 6) return bad("timestamp must be seconds.microseconds (6 digits)");
   std::int64_t sec = 0, usec = 0;
   for (std::size_t i = 0; i < dot; ++i) {
-    if (ts[i] < '0' || ts[i] > '9' || sec > 1'000'000'000'000LL) return bad("timestamp seconds are not a number");
+    if (ts[i] < '0' || ts[i] > '9') return bad("timestamp seconds are not a number");
     sec = sec * 10 + (ts[i] - '0');
+    if (sec > 9'000'000'000LL) return bad("timestamp beyond the year 2255 (int64 nanoseconds)");
   }
   for (std::size_t i = dot + 1; i < ts.size(); ++i) {
     if (ts[i] < '0' || ts[i] > '9') return bad("timestamp microseconds are not a number");

@@ -518,7 +518,6 @@ void Roadmap::connect_new_nodes() noexcept {
       }
     }
   };
-  const std::size_t first_bridge = n_new_;
   for (std::size_t k = 0; k < n_new_; ++k) try_connect(new_nodes_[k], true);
   // Bridges: overlapping but not seeing each other, and not already joined through a common neighbour.
   for (std::size_t k = 0; k < n_pairs; ++k) {
@@ -543,7 +542,6 @@ void Roadmap::connect_new_nodes() noexcept {
     if (nn < 0) break;
     for (std::size_t j = before; j < n_new_; ++j) try_connect(new_nodes_[j], false);
   }
-  (void)first_bridge;
   n_new_ = 0;
 }
 
@@ -663,6 +661,9 @@ void Roadmap::plan(Point2 start, Point2 goal, PlannedPath& out, double snap_radi
   const bool g_snapped = static_cast<std::int32_t>(std::floor(gx0)) != gc || static_cast<std::int32_t>(std::floor(gy0)) != gr;
   const double sx = s_snapped ? sc + 0.5 : sx0, sy = s_snapped ? sr + 0.5 : sy0;
   const double gx = g_snapped ? gc + 0.5 : gx0, gy = g_snapped ? gr + 0.5 : gy0;
+  // The graph runs between the cell centres of the (snapped) ends: a node that sees a cell sees its
+  // centre; the exact ends join the path through their own cell (or the snap segment).
+  const double scx = sc + 0.5, scy = sr + 0.5, gcx = gc + 0.5, gcy = gr + 0.5;
 
   auto push = [&](double cx, double cy) {
     if (out.count >= kMaxPathPoints) return false;
@@ -738,7 +739,7 @@ void Roadmap::plan(Point2 start, Point2 goal, PlannedPath& out, double snap_radi
     heap_key_[i] = lk;
   };
   auto h = [&](std::uint32_t n) {
-    return static_cast<float>(p_.lambda * res * std::hypot(nodes_[n].cx + 0.5 - gx, nodes_[n].cy + 0.5 - gy));
+    return static_cast<float>(p_.lambda * res * std::hypot(nodes_[n].cx + 0.5 - gcx, nodes_[n].cy + 0.5 - gcy));
   };
   auto seg_cost = [&](double ax, double ay, double bx, double by, bool* okp) {
     float m = 0;
@@ -750,19 +751,16 @@ void Roadmap::plan(Point2 start, Point2 goal, PlannedPath& out, double snap_radi
   };
 
   set_g(v_start, 0.0F, v_start);
-  const std::uint32_t ns = visible_nodes(sx, sy, cand_nodes_.data(), cap);
+  const std::uint32_t ns = visible_nodes(scx, scy, cand_nodes_.data(), cap);
   for (std::uint32_t k = 0; k < ns; ++k) {
     const std::uint32_t n = cand_nodes_[k];
     bool ok = false;
-    const double c = seg_cost(sx, sy, nodes_[n].cx + 0.5, nodes_[n].cy + 0.5, &ok);
+    const double c = seg_cost(scx, scy, nodes_[n].cx + 0.5, nodes_[n].cy + 0.5, &ok);
     if (!ok) continue;
     set_g(n, static_cast<float>(c), v_start);
     heap_push(n, static_cast<float>(c) + h(n));
   }
-  // Goal candidates: marked by a second stamp array slot (reuse parent_ of v_goal as count).
-  const std::uint32_t ng = visible_nodes(gx, gy, cand_nodes_.data(), cap);
-  // cand_nodes_[0..ng) are the nodes that see the goal; test membership through node_sees().
-  (void)ng;
+  // Goal candidates: the nodes whose visibility covers the goal's cell (tested as they are expanded).
   const auto gcell_c = static_cast<std::int32_t>(std::floor(gx)), gcell_r = static_cast<std::int32_t>(std::floor(gy));
   bool reached = false;
   while (heap_n > 0) {
@@ -778,7 +776,7 @@ void Roadmap::plan(Point2 start, Point2 goal, PlannedPath& out, double snap_radi
     const Node& nu = nodes_[u];
     if (node_sees(u, gcell_c, gcell_r)) {
       bool ok = false;
-      const double c = seg_cost(nu.cx + 0.5, nu.cy + 0.5, gx, gy, &ok);
+      const double c = seg_cost(nu.cx + 0.5, nu.cy + 0.5, gcx, gcy, &ok);
       const float ng2 = g_[u] + static_cast<float>(c);
       if (ok && (!seen(v_goal) || ng2 < g_[v_goal])) {
         set_g(v_goal, ng2, u);
@@ -808,10 +806,10 @@ void Roadmap::plan(Point2 start, Point2 goal, PlannedPath& out, double snap_radi
     cand_nodes_[chain++] = n;
   }
   push(sx0, sy0);
-  if (s_snapped) push(sx, sy);
+  push(scx, scy);
   for (std::uint32_t k = chain; k-- > 0;) push(nodes_[cand_nodes_[k]].cx + 0.5, nodes_[cand_nodes_[k]].cy + 0.5);
-  push(gx, gy);
-  if (g_snapped) push(gx0, gy0);
+  push(gcx, gcy);
+  push(gx0, gy0);
   shortcut(out);
   // Smallest clearance over the planned stretch (the snap segments excluded).
   double mcl = 1e30;
