@@ -2,6 +2,7 @@
 // constructed (operator new counted by tests/common/counting_new.hpp).
 #include <gtest/gtest.h>
 
+#include "airground/planning/local_tracker.hpp"
 #include "stage_rig.hpp"
 
 #include "../../common/counting_new.hpp"
@@ -42,6 +43,35 @@ TEST(PlanningNoAllocation, TilesUpdatesRebuildAndQueries) {
   }
   EXPECT_EQ(ok, 10);
   EXPECT_EQ(rm->stats().tile_updates, 2U);
+}
+
+TEST(PlanningNoAllocation, TheLocalTrackerUpdatesAndPicksGoals) {
+  // A ring of ground returns and a box ahead, made before the window.
+  std::vector<ScanReturn> pts;
+  for (int b = 0; b < 16; ++b)
+    for (int a = 0; a < 360; ++a) {
+      const double el = (-22.5 + 1.2 * b) * kPi / 180.0, az = a * kPi / 180.0, t = 0.6 / std::sin(-el);
+      ScanReturn s;
+      s.x = static_cast<float>(t * std::cos(el) * std::cos(az));
+      s.y = static_cast<float>(t * std::cos(el) * std::sin(az));
+      s.z = -0.6F;
+      s.range = static_cast<float>(t);
+      if (a < 5 && t > 3.0) s.z = 0.0F;  // returns 0.6 m above the ground straight ahead
+      pts.push_back(s);
+    }
+  LocalTracker t{LocalTrackerParams{}};
+  const Point2 path[] = {{0, 0}, {20, 0}};
+  int valid = 0;
+  {
+    test_alloc::AllocationWindow window;
+    for (int k = 0; k < 20; ++k) {
+      t.set_path(path);
+      EXPECT_TRUE(t.update(pts, Pose3{0, 0, 0.6, 0, 0, 0}, Pose2{0.1 * k, 0, 0}, 1.0));
+      valid += t.local_goal(Pose2{0.1 * k, 0, 0}, k * kNsPerS / 10).valid ? 1 : 0;
+    }
+    EXPECT_EQ(window.allocations(), 0U) << "allocations in LocalTracker";
+  }
+  EXPECT_GT(valid, 10);
 }
 
 TEST(PlanningNoAllocation, ThePlannerAndDriveStagesStep) {
