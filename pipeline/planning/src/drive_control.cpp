@@ -36,6 +36,7 @@ void PathFollower::set_path(const Point2* pts, std::uint32_t n) noexcept {
   n_ = std::min<std::uint32_t>(n, static_cast<std::uint32_t>(kMaxPathPoints));
   for (std::uint32_t i = 0; i < n_; ++i) pts_[i] = pts[i];
   seg_ = 0;
+  relocate_ = true;
   state_ = n_ >= 2 ? FollowState::kFollowing : FollowState::kIdle;
 }
 
@@ -70,7 +71,11 @@ TwistCommand PathFollower::step(const Pose2& pose, double dt) noexcept {
   };
   double t = 0;
   double best = project(seg_, t);
-  for (std::uint32_t s = seg_ + 1; s + 1 < n_ && s < seg_ + 8; ++s) {
+  // After a new path, the nearest segment of the whole path (the robot may be anywhere along it); then
+  // a few ahead only, so a path that passes by itself is not cut short.
+  const std::uint32_t window = relocate_ ? n_ : 8;
+  relocate_ = false;
+  for (std::uint32_t s = seg_ + 1; s + 1 < n_ && s < seg_ + window; ++s) {
     double ts = 0;
     const double d = project(s, ts);
     if (d < best) {

@@ -218,6 +218,7 @@ void LocalTracker::set_path(std::span<const Point2> path) noexcept {
   n_path_ = static_cast<std::uint32_t>(std::min(path.size(), path_.size()));
   std::copy(path.begin(), path.begin() + n_path_, path_.begin());
   wp_ = 0;
+  have_prev_ = false;
   state_ = n_path_ >= 2 ? TrackState::kTracking : TrackState::kIdle;
 }
 
@@ -227,6 +228,11 @@ bool LocalTracker::pick_goal(const Point2& target, double radius_m, LocalGoal& o
   const int rad = std::max(1, static_cast<int>(std::ceil(radius_m / p_.cell_m)));
   int ri = 0, rj = 0;
   (void)cell_of(cx_, cy_, ri, rj);
+  // Enough clearance is enough: beyond min + 0.9 m a cell is not better, so the goal stays near the
+  // target; among equals, the one nearest the previous goal (no flipping between the sides of an
+  // obstacle), else nearest the target.
+  const double enough = p_.min_clearance_m + 0.9;
+  const Point2 ref = have_prev_ ? prev_goal_ : target;
   double best = -1, best_d = 1e30;
   int bi = -1, bj = -1;
   for (int dj = -rad; dj <= rad; ++dj)
@@ -236,18 +242,21 @@ bool LocalTracker::pick_goal(const Point2& target, double radius_m, LocalGoal& o
       if (grid_[idx(i, j)] != kFree) continue;
       const double cl = static_cast<double>(clear_[idx(i, j)]);
       if (cl < p_.min_clearance_m) continue;
-      const double dd = di * di + dj * dj;
-      if (cl < best - 1e-6 || (std::fabs(cl - best) <= 1e-6 && dd >= best_d)) continue;
-      // The way there crosses no obstacle cell.
+      const double score = std::min(cl, enough);
+      const double gx = cx_ + (i + 0.5 - 0.5 * n_) * p_.cell_m, gy = cy_ + (j + 0.5 - 0.5 * n_) * p_.cell_m;
+      const double dd = std::hypot(gx - ref.x, gy - ref.y);
+      if (score < best - 1e-6 || (std::fabs(score - best) <= 1e-6 && dd >= best_d)) continue;
+      // The way there keeps the clearance too (but for the first half metre: the robot is where it is).
       bool clear_line = true;
       const int steps = std::max(std::abs(i - ri), std::abs(j - rj));
+      const int skip = static_cast<int>(0.5 / p_.cell_m);
       for (int s = 1; s <= steps && clear_line; ++s) {
         const int x = ri + static_cast<int>(std::lround(static_cast<double>((i - ri) * s) / steps));
         const int y = rj + static_cast<int>(std::lround(static_cast<double>((j - rj) * s) / steps));
-        if (grid_[idx(x, y)] == kObstacle) clear_line = false;
+        if (grid_[idx(x, y)] == kObstacle || (s > skip && static_cast<double>(clear_[idx(x, y)]) < p_.min_clearance_m - p_.cell_m)) clear_line = false;
       }
       if (!clear_line) continue;
-      best = cl;
+      best = score;
       best_d = dd;
       bi = i;
       bj = j;
@@ -255,7 +264,7 @@ bool LocalTracker::pick_goal(const Point2& target, double radius_m, LocalGoal& o
   if (bi < 0) return false;
   out.valid = true;
   out.goal = Point2{cx_ + (bi + 0.5 - 0.5 * n_) * p_.cell_m, cy_ + (bj + 0.5 - 0.5 * n_) * p_.cell_m};
-  out.clearance_m = best;
+  out.clearance_m = static_cast<double>(clear_[idx(bi, bj)]);
   return true;
 }
 
@@ -297,12 +306,15 @@ LocalGoal LocalTracker::local_goal(const Pose2& robot, TimeNs now) noexcept {
     // Cells nearer the target than half the way there: a goal that makes progress.
     if (pick_goal(ahead(dist), std::min(p_.goal_search_m, 0.5 * dist), out)) {
       state_ = TrackState::kTracking;
+      prev_goal_ = out.goal;
+      have_prev_ = true;
       return out;
     }
   // Forward is blocked: back up to the last waypoint; if that is blocked too, or takes too long, fail.
   if (state_ != TrackState::kBackingUp) {
     state_ = TrackState::kBackingUp;
     backup_since_ = now;
+    have_prev_ = false;
   }
   const double back = std::hypot(path_[wp_].x - robot.x, path_[wp_].y - robot.y);
   if (now - backup_since_ <= from_seconds(p_.backup_timeout_s) && back > 0.3 && pick_goal(path_[wp_], std::min(p_.goal_search_m, 0.5 * back), out))

@@ -118,6 +118,10 @@ Status DriveStage::init(StageContext& ctx) {
   path_ = std::make_unique<PlannedPathMsg>();
   pts_ = std::make_unique<std::array<Point2, kMaxPathPoints>>();
   pose_timeout_ = from_seconds(v.real("pose_timeout_s"));
+  local_timeout_ = from_seconds(v.real("local_goal_timeout_s"));
+  auto lg = ctx.channels.latest_reader<LocalGoalMsg>("local_goal");
+  if (!lg) return lg.error();
+  local_in_ = lg.value();
   auto p = ctx.channels.latest_reader<PlannedPathMsg>("planned_path");
   if (!p) return p.error();
   path_in_ = p.value();
@@ -137,20 +141,31 @@ void DriveStage::step(TimeNs now) noexcept {
     *path_ = path_in_.read();
     if (path_->seq != path_seq_) {
       path_seq_ = path_->seq;
+      blocked_ = false;
       if (path_->status == RouteStatus::kOk && path_->count >= 2) {
-        const std::uint32_t n = std::min<std::uint32_t>(path_->count, static_cast<std::uint32_t>(kMaxPathPoints));
-        for (std::uint32_t i = 0; i < n; ++i) (*pts_)[i] = Point2{path_->points[i].x, path_->points[i].y};
-        follow_->set_path(pts_->data(), n);
+        n_pts_ = std::min<std::uint32_t>(path_->count, static_cast<std::uint32_t>(kMaxPathPoints));
+        for (std::uint32_t i = 0; i < n_pts_; ++i) (*pts_)[i] = Point2{path_->points[i].x, path_->points[i].y};
+        follow_->set_path(pts_->data(), n_pts_);
         have_path_ = true;
       } else {
         follow_->clear();
         have_path_ = false;
+        n_pts_ = 0;
       }
     }
   }
   if (loc_.fresh()) pose_ = loc_.read();
+  if (local_in_.fresh()) local_ = local_in_.read();
   const bool pose_ok = pose_.status == LocalizationStatus::kTracking && now - pose_.stamp <= pose_timeout_;
-  const TwistCommand tw = (have_path_ && pose_ok) ? follow_->step(pose_.pose, dt) : follow_->stop(dt);
+  const bool local_ok = local_.stamp > 0 && now - local_.stamp <= local_timeout_ && (local_.path_seq == path_seq_ || local_.reflex_stop);
+  TwistCommand tw;
+  if (local_ok && local_.reflex_stop) {
+    if (cmd_.v_mps != 0.0 || cmd_.w_radps != 0.0) ++reflex_stops_;
+    tw = follow_->halt();
+  } else {
+    if (local_ok && local_.state == static_cast<std::uint8_t>(TrackState::kFailed)) blocked_ = true;  // until a new route
+    tw = (have_path_ && pose_ok && !blocked_) ? follow_->step(pose_.pose, dt) : follow_->stop(dt);
+  }
   const DriveParams& dp = follow_->params();
   const WheelSpeeds ws = wheels_from_twist(tw.v_mps, tw.w_radps, dp.track_m, dp.max_wheel_speed_mps);
   cmd_.stamp = now;
@@ -161,6 +176,83 @@ void DriveStage::step(TimeNs now) noexcept {
   cmd_.w_radps = tw.w_radps;
   cmd_.follow_state = static_cast<std::uint8_t>(follow_->state());
   out_.publish(cmd_);
+}
+
+Status TrackerStage::init(StageContext& ctx) {
+  const SectionView v = ctx.params();
+  LocalTrackerParams p;
+  p.obstacle_min_m = v.real("obstacle_min_m");
+  p.overhang_m = v.real("overhang_m");
+  p.min_clearance_m = v.real("min_clearance_m");
+  p.goal_distance_m = v.real("goal_distance_m");
+  p.reflex_height_m = v.real("reflex_height_m");
+  p.reflex_distance_m = v.real("reflex_distance_m");
+  p.reflex_half_width_m = v.real("reflex_half_width_m");
+  p.backup_timeout_s = v.real("backup_timeout_s");
+  if (p.overhang_m <= p.obstacle_min_m)
+    return Error::make(ErrorCode::kConfig, "config error: " + std::string(ctx.stage_name) + ".overhang_m must be above obstacle_min_m");
+  tracker_ = std::make_unique<LocalTracker>(p);
+  path_ = std::make_unique<PlannedPathMsg>();
+  pts_ = std::make_unique<std::array<Point2, kMaxPathPoints>>();
+  auto sc = ctx.channels.ring_reader<LidarScanMsg, kLidarRing>("lidar_scan");
+  if (!sc) return sc.error();
+  scans_ = sc.value();
+  auto loc = ctx.channels.latest_reader<LocalizationMsg>("localization");
+  if (!loc) return loc.error();
+  loc_ = loc.value();
+  auto pin = ctx.channels.latest_reader<PlannedPathMsg>("planned_path");
+  if (!pin) return pin.error();
+  path_in_ = pin.value();
+  auto cin = ctx.channels.latest_reader<WheelCommandMsg>("wheel_command");
+  if (!cin) return cin.error();
+  cmd_in_ = cin.value();
+  auto out = ctx.channels.latest_writer<LocalGoalMsg>("local_goal");
+  if (!out) return out.error();
+  out_ = out.value();
+  return ok_status();
+}
+
+void TrackerStage::step(TimeNs now) noexcept {
+  if (path_in_.fresh()) {
+    *path_ = path_in_.read();
+    if (path_->seq != path_seq_) {
+      path_seq_ = path_->seq;
+      const std::uint32_t n = path_->status == RouteStatus::kOk ? std::min<std::uint32_t>(path_->count, static_cast<std::uint32_t>(kMaxPathPoints)) : 0U;
+      for (std::uint32_t i = 0; i < n; ++i) (*pts_)[i] = Point2{path_->points[i].x, path_->points[i].y};
+      tracker_->set_path(std::span<const Point2>(pts_->data(), n));
+    }
+  }
+  if (loc_.fresh()) pose_ = loc_.read();
+  if (cmd_in_.fresh()) cmd_ = cmd_in_.read();
+  // The newest scan only: an older one describes where the robot was.
+  LidarScanMsg* newest = nullptr;
+  while (scans_.size() > 1) scans_.pop();
+  newest = scans_.front();
+  if (newest == nullptr) return;
+  ++scans_in_;
+  if (newest->count > newest->points.size()) {
+    ++scans_malformed_;
+    scans_.pop();
+    return;
+  }
+  if (pose_.status == LocalizationStatus::kTracking) {
+    (void)tracker_->update(std::span<const ScanReturn>(newest->points.data(), newest->count), newest->sensor_in_body, pose_.pose, cmd_.v_mps);
+    const LocalGoal g = tracker_->local_goal(pose_.pose, now);
+    msg_.valid = g.valid;
+    msg_.goal = RoutePoint{g.goal.x, g.goal.y};
+    msg_.clearance_m = g.clearance_m;
+    msg_.reflex_stop = g.reflex_stop;
+  } else {
+    msg_.valid = false;
+    msg_.reflex_stop = false;
+  }
+  msg_.stamp = newest->stamp;
+  msg_.published = now;
+  msg_.state = static_cast<std::uint8_t>(tracker_->state());
+  msg_.path_seq = path_seq_;
+  msg_.failures = tracker_->failures();
+  out_.publish(msg_);
+  scans_.pop();
 }
 
 }  // namespace ag::plan

@@ -41,6 +41,19 @@ struct PlannedPathMsg {
   double min_clearance_m{0};
 };
 
+// Channel "local_goal" (latest value): the local tracker's view of the way ahead, once per scan.
+struct LocalGoalMsg {
+  TimeNs stamp{0};               // [ns] of the scan
+  TimeNs published{0};
+  bool valid{false};             // goal is a point to drive to
+  RoutePoint goal;               // [m] map frame
+  double clearance_m{0};
+  std::uint8_t state{0};         // plan::TrackState (3: blocked, the path is cancelled)
+  bool reflex_stop{false};       // a return above the reflex height right ahead: stop now
+  std::uint32_t path_seq{0};     // the planned_path it tracks
+  std::uint64_t failures{0};
+};
+
 // Channel "wheel_command" (latest value): the drive controller's wheel speeds for the base.
 struct WheelCommandMsg {
   TimeNs stamp{0};

@@ -63,6 +63,11 @@ class PathFollower {
   TwistCommand step(const Pose2& pose, double dt) noexcept;
   // Slows to a stop within the deceleration limits (e-stop handling is the base's: this is a soft stop).
   TwistCommand stop(double dt) noexcept;
+  // Zero at once (the reflex stop): no ramp.
+  TwistCommand halt() noexcept {
+    out_ = TwistCommand{};
+    return out_;
+  }
   [[nodiscard]] FollowState state() const noexcept { return state_; }
   [[nodiscard]] double remaining_m() const noexcept { return remaining_; }
   [[nodiscard]] const TwistCommand& last() const noexcept { return out_; }
@@ -73,6 +78,7 @@ class PathFollower {
   DriveParams p_;
   std::array<Point2, kMaxPathPoints> pts_{};
   std::uint32_t n_{0}, seg_{0};
+  bool relocate_{false};
   FollowState state_{FollowState::kIdle};
   TwistCommand out_{};
   double remaining_{0};

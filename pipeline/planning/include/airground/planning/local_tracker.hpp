@@ -100,6 +100,8 @@ class LocalTracker {
   std::uint32_t n_path_{0}, wp_{0};
   TrackState state_{TrackState::kIdle};
   TimeNs backup_since_{0};
+  Point2 prev_goal_{};
+  bool have_prev_{false};
   std::uint64_t failures_{0};
 };
 

@@ -2,7 +2,10 @@
 //   planner: map_tiles -> roadmap (a few tiles per step, each only around itself); goal + localization ->
 //            route on "planned_path" when the goal is new, the map changed, or replan_period_s passed.
 //   drive:   planned_path + localization -> path follower -> "wheel_command" every step; it stops
-//            (within its deceleration limits) without a tracking pose, a route or a goal.
+//            (within its deceleration limits) without a tracking pose, a route or a goal, at once
+//            on the tracker's reflex, and until a new route when the tracker cancels the route.
+//   tracker: lidar_scan + localization + planned_path -> local tracker -> "local_goal" (the local
+//            goal, its state, the reflex). The drive stage does not yet steer to the local goal.
 // Everything is allocated in init(); step() never allocates and never blocks.
 #pragma once
 
@@ -13,6 +16,7 @@
 #include "airground/core/drive_messages.hpp"
 #include "airground/core/messages.hpp"
 #include "airground/planning/drive_control.hpp"
+#include "airground/planning/local_tracker.hpp"
 #include "airground/planning/roadmap.hpp"
 #include "airground/platform/stage.hpp"
 
@@ -76,6 +80,7 @@ class PlannerStage final : public Stage {
 
 inline constexpr ParamSpec kDriveOwnParams[] = {
     ParamSpec::real("pose_timeout_s", 0.5, 0.05, 10.0, "s", "a localization older than this stops the robot"),
+    ParamSpec::real("local_goal_timeout_s", 0.3, 0.05, 5.0, "s", "a local goal older than this is ignored"),
 };
 inline constexpr auto kDriveParamArray = detail::concat(kDriveOwnParams, kDriveParamSpecs);
 
@@ -87,6 +92,7 @@ class DriveStage final : public Stage {
   void step(TimeNs now) noexcept override;
   [[nodiscard]] const PathFollower& follower() const noexcept { return *follow_; }
   [[nodiscard]] const WheelCommandMsg& published() const noexcept { return cmd_; }
+  [[nodiscard]] std::uint64_t reflex_stops() const noexcept { return reflex_stops_; }
 
  private:
   std::unique_ptr<PathFollower> follow_;
@@ -94,12 +100,53 @@ class DriveStage final : public Stage {
   std::unique_ptr<std::array<Point2, kMaxPathPoints>> pts_;
   LatestReader<PlannedPathMsg> path_in_;
   LatestReader<LocalizationMsg> loc_;
+  LatestReader<LocalGoalMsg> local_in_;
   LatestWriter<WheelCommandMsg> out_;
   WheelCommandMsg cmd_{};
   LocalizationMsg pose_{};
+  LocalGoalMsg local_{};
+  std::uint32_t path_seq_{0}, n_pts_{0};
+  bool have_path_{false}, blocked_{false};
+  TimeNs last_{-1}, pose_timeout_{0}, local_timeout_{0};
+  std::uint64_t reflex_stops_{0};
+};
+
+inline constexpr ParamSpec kTrackerParams[] = {
+    ParamSpec::real("obstacle_min_m", 0.2, 0.05, 2.0, "m", "returns this high above the ground plane are obstacles (a 15 cm curb is not)"),
+    ParamSpec::real("overhang_m", 2.0, 0.5, 10.0, "m", "returns higher than this above the ground are not obstacles"),
+    ParamSpec::real("min_clearance_m", 0.6, 0.0, 5.0, "m", "the local goal keeps this from obstacles"),
+    ParamSpec::real("goal_distance_m", 5.0, 1.0, 15.0, "m", "the local goal is this far along the route"),
+    ParamSpec::real("reflex_height_m", 0.25, 0.05, 2.0, "m", "a return this high right ahead stops the robot"),
+    ParamSpec::real("reflex_distance_m", 0.8, 0.1, 5.0, "m", "... within this ahead (plus speed x 0.5 s)"),
+    ParamSpec::real("reflex_half_width_m", 0.35, 0.1, 2.0, "m", "... and this of the centre line"),
+    ParamSpec::real("backup_timeout_s", 8.0, 0.5, 60.0, "s", "backing up this long without a way forward cancels the route"),
+};
+
+// tracker: lidar_scan + localization + planned_path -> local tracker -> "local_goal" once per scan.
+class TrackerStage final : public Stage {
+ public:
+  static constexpr std::span<const ParamSpec> kParams{kTrackerParams};
+  static std::unique_ptr<Stage> make() { return std::make_unique<TrackerStage>(); }
+  Status init(StageContext& ctx) override;
+  void step(TimeNs now) noexcept override;
+  [[nodiscard]] const LocalTracker& tracker() const noexcept { return *tracker_; }
+  [[nodiscard]] const LocalGoalMsg& published() const noexcept { return msg_; }
+  [[nodiscard]] std::uint64_t scans() const noexcept { return scans_in_; }
+
+ private:
+  std::unique_ptr<LocalTracker> tracker_;
+  std::unique_ptr<PlannedPathMsg> path_;
+  std::unique_ptr<std::array<Point2, kMaxPathPoints>> pts_;
+  RingReader<LidarScanMsg, kLidarRing> scans_;
+  LatestReader<LocalizationMsg> loc_;
+  LatestReader<PlannedPathMsg> path_in_;
+  LatestReader<WheelCommandMsg> cmd_in_;
+  LatestWriter<LocalGoalMsg> out_;
+  LocalizationMsg pose_{};
+  WheelCommandMsg cmd_{};
+  LocalGoalMsg msg_{};
   std::uint32_t path_seq_{0};
-  bool have_path_{false};
-  TimeNs last_{-1}, pose_timeout_{0};
+  std::uint64_t scans_in_{0}, scans_malformed_{0};
 };
 
 }  // namespace ag::plan
