@@ -34,7 +34,9 @@ struct Rig {
 
   Rig() {
     static const std::vector<ParamSection> schema = role_schema(kRole);
-    auto r = RoleInstance::create(kRole, Config::defaults(schema), clock, "ugv1");
+    Config cfg = Config::defaults(schema);
+    EXPECT_TRUE(cfg.set("tracker.backup_timeout_s=3").ok());
+    auto r = RoleInstance::create(kRole, cfg, clock, "ugv1");
     EXPECT_TRUE(r.ok()) << (r.ok() ? "" : r.error().message);
     role = std::move(r).value();
     tracker = dynamic_cast<TrackerStage*>(role->stages()[0].stage.get());
@@ -82,14 +84,15 @@ TEST(TrackerDrive, ABoxTheMapMissedOnTheRouteStopsTheRobotBeforeIt) {
   Rig rig;
   const std::vector<test::Box> boxes{{10, 11, -0.8, 0.8, 1.0}};
   double closest = 1e9;
-  for (int k = 0; k < 600; ++k) {
+  for (int k = 0; k < 240; ++k) {  // 12 s: up to the box at 1.2 m/s, then standing
     rig.tick(k, boxes);
     const double dx = std::max({10.0 - rig.pose.x, 0.0, rig.pose.x - 11.0}), dy = std::max({-0.8 - rig.pose.y, 0.0, rig.pose.y - 0.8});
     closest = std::min(closest, std::hypot(dx, dy));
   }
   EXPECT_GT(closest, 0.3) << "[m] closest approach to the box";
   EXPECT_GT(rig.pose.x, 7.0) << "it drove up to it";
-  EXPECT_NEAR(rig.drive->published().v_mps, 0.0, 1e-9) << "and stands";
+  EXPECT_NEAR(rig.drive->published().v_mps, 0.0, 1e-9) << "and stands: the blocked route was cancelled";
+  EXPECT_EQ(rig.tracker->published().state, static_cast<std::uint8_t>(TrackState::kFailed));
 }
 
 TEST(TrackerDrive, AReturnRightAheadStopsTheWheelsAtOnce) {
@@ -108,7 +111,7 @@ TEST(TrackerDrive, AReturnRightAheadStopsTheWheelsAtOnce) {
 TEST(TrackerDrive, AWallAcrossTheRouteAndBehindCancelsItAndStops) {
   Rig rig;
   const std::vector<test::Box> walls{{6, 6.5, -12, 12, 1.5}, {-1.5, -1.2, -12, 12, 1.5}};
-  for (int k = 0; k < 400; ++k) rig.tick(k, walls);
+  for (int k = 0; k < 200; ++k) rig.tick(k, walls);
   EXPECT_EQ(rig.tracker->published().state, static_cast<std::uint8_t>(TrackState::kFailed));
   EXPECT_GE(rig.tracker->published().failures, 1U);
   EXPECT_NEAR(rig.drive->published().v_mps, 0.0, 1e-9);
