@@ -16,12 +16,12 @@ struct Box {
 
 // A 32-beam scan (-22.5..22.5 deg, 1 deg azimuth) from a sensor `hs` above flat ground, tilted by
 // (roll, pitch) relative to the ground: points in the sensor frame.
-inline std::vector<ScanReturn> scan(const std::vector<Box>& boxes, double hs = 0.6, double roll = 0.0, double pitch = 0.0) {
+inline std::vector<ScanReturn> scan(const std::vector<Box>& boxes, double hs = 0.6, double roll = 0.0, double pitch = 0.0, int az_step_deg = 1) {
   const Eigen::Matrix3d r = rotation_matrix(roll, pitch, 0.0);  // sensor -> level
   std::vector<ScanReturn> out;
   for (int b = 0; b < 32; ++b) {
     const double el = (-22.5 + 45.0 * b / 31.0) * kPi / 180.0;
-    for (int a = 0; a < 360; ++a) {
+    for (int a = 0; a < 360; a += az_step_deg) {
       const double az = a * kPi / 180.0;
       const Eigen::Vector3d ds(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el));
       const Eigen::Vector3d d = r * ds;  // level frame, sensor at (0, 0, hs) above the ground at z = 0
