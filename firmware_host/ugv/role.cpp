@@ -4,12 +4,15 @@
 #include "airground/comms/stage.hpp"
 
 #include "airground/localization/stage.hpp"
+#include "airground/planning/stages.hpp"
 #include "airground/platform/status_stage.hpp"
 
 namespace ag {
 
 namespace {
 using loc::LocalizationStage;
+using plan::DriveStage;
+using plan::PlannerStage;
 
 // Budgets are for the ground robot's Ryzen 5 3600. The localizer matches one scan per update (at most
 // 10 Hz) with up to pf_max_particles particles: ~20 ms at 2,000 (make bench); the first updates, at 4,000 while it converges, take longest.
@@ -20,6 +23,11 @@ constexpr StageSpec kUgvStages[] = {
      "LiDAR scans matched against the aerial map (particle filter), fused with wheel odometry: the robot's pose"},
     {"comms", &comms::CommsStage::make, 20.0, 5'000, 25, -1, comms::CommsStage::kParams,
      "gossip: the team's latest records (poses, map tiles, claims, failures) over the radio mesh"},
+    // The planner folds in a few changed tiles per step (~1-10 ms each) and answers a query in < 1 ms (bench_planning).
+    {"planner", &PlannerStage::make, 5.0, 40'000, 30, -1, PlannerStage::kParams,
+     "semantic roadmap over the aerial map: a route from the robot's pose to the goal on 'planned_path'"},
+    {"drive", &DriveStage::make, 20.0, 1'000, 50, -1, DriveStage::kParams,
+     "path follower with acceleration limits: wheel speeds on 'wheel_command'"},
 };
 static_assert(role_table_ok(kUgvStages));
 }  // namespace

@@ -1,0 +1,88 @@
+// The base stage: the ground robot's wheels. Every step it reads the e-stop line (an asserted or
+// unreadable e-stop zeroes the wheels in that same step and latches until released and re-armed on
+// "base_arm"), takes the newest "wheel_command", runs the CAN driver (watchdog: zero velocity when no
+// fresh command arrived within command_timeout_s), publishes the wheel odometry and "base_status", and
+// drives the status LED (on: running, slow blink: fault, fast blink: e-stop).
+// Backends: CAN over SocketCAN or the simulator's in-process link; e-stop and LED over libgpiod, the
+// simulator's fake lines, or none.
+#pragma once
+
+#include <array>
+#include <memory>
+#include <span>
+
+#include "airground/core/drive_messages.hpp"
+#include "airground/core/messages.hpp"
+#include "airground/drivers/base/diff_drive_base.hpp"
+#include "airground/drivers/gpio/estop.hpp"
+#include "airground/drivers/gpio/gpio_line.hpp"
+#include "airground/platform/stage.hpp"
+
+namespace ag::base {
+
+namespace detail {
+template <std::size_t... N>
+constexpr auto concat(const ParamSpec (&... parts)[N]) {
+  std::array<ParamSpec, (N + ...)> out{};
+  std::size_t k = 0;
+  ((std::copy(std::begin(parts), std::end(parts), out.begin() + static_cast<std::ptrdiff_t>(k)), k += N), ...);
+  return out;
+}
+}  // namespace detail
+
+inline constexpr ParamSpec kBaseStageOwnParams[] = {
+    ParamSpec::text("can_backend", "socketcan", "socketcan|inprocess", "CAN bus: SocketCAN (the robot) or the simulator's in-process link"),
+    ParamSpec::text("can_interface", "can0", "", "SocketCAN interface of the motor controllers"),
+    ParamSpec::text("estop_backend", "gpiod", "gpiod|fake|none", "e-stop input: libgpiod, the simulator's fake line, or none"),
+    ParamSpec::text("estop_chip", "gpiochip0", "", "GPIO chip of the e-stop input (name, path or number)"),
+    ParamSpec::integer("estop_line", 17, 0, 1023, "", "line offset of the e-stop input"),
+    ParamSpec::boolean("estop_active_low", true, "the e-stop input is active low (a pressed button pulls it to ground)"),
+    ParamSpec::boolean("start_armed", false, "drive without an operator's arm after start-up (false: wait for base_arm)"),
+    ParamSpec::text("led_backend", "gpiod", "gpiod|fake|none", "status LED output: libgpiod, the simulator's fake line, or none"),
+    ParamSpec::text("led_chip", "gpiochip0", "", "GPIO chip of the status LED"),
+    ParamSpec::integer("led_line", 27, 0, 1023, "", "line offset of the status LED"),
+    ParamSpec::text("odometry_channel", "wheel_odometry", "", "ring channel the wheel odometry is published on"),
+};
+inline constexpr auto kBaseStageParamArray = detail::concat(kBaseStageOwnParams, kBaseParamSpecs);
+
+struct BaseStageCounters {
+  std::uint64_t commands_in{0};
+  std::uint64_t commands_non_finite{0};
+  std::uint64_t arm_requests{0};
+  std::uint64_t led_errors{0};
+  std::uint64_t odometry_ring_full{0};
+};
+
+class BaseStage final : public Stage {
+ public:
+  static constexpr std::span<const ParamSpec> kParams{kBaseStageParamArray};
+  static std::unique_ptr<Stage> make() { return std::make_unique<BaseStage>(); }
+
+  Status init(StageContext& ctx) override;
+  void step(TimeNs now) noexcept override;
+  void stop() noexcept override;
+
+  [[nodiscard]] const DiffDriveBase& base() const noexcept { return *base_; }
+  [[nodiscard]] const gpio::EStopLatch& estop() const noexcept { return latch_; }
+  [[nodiscard]] const BaseStatusMsg& published() const noexcept { return status_; }
+  [[nodiscard]] const BaseStageCounters& counters() const noexcept { return c_; }
+
+ private:
+  std::unique_ptr<can::CanBus> owned_bus_;
+  can::CanBus* bus_{nullptr};
+  std::unique_ptr<DiffDriveBase> base_;
+  std::unique_ptr<gpio::DigitalLine> owned_estop_, owned_led_;
+  gpio::DigitalLine* estop_line_{nullptr};
+  gpio::DigitalLine* led_{nullptr};
+  gpio::EStopLatch latch_{false};
+  LatestReader<WheelCommandMsg> cmd_;
+  LatestReader<BaseArmMsg> arm_;
+  RingWriter<WheelOdometryMsg, kWheelOdometryRing> odom_out_;
+  LatestWriter<BaseStatusMsg> status_out_;
+  BaseStatusMsg status_{};
+  TimeNs last_cmd_stamp_{-1}, last_arm_stamp_{-1};
+  bool started_{false};
+  BaseStageCounters c_;
+};
+
+}  // namespace ag::base

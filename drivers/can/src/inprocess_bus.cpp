@@ -1,0 +1,66 @@
+// In-process CAN link.
+#include "airground/drivers/can/inprocess_bus.hpp"
+
+#include <map>
+#include <mutex>
+#include <string>
+
+namespace ag::can {
+
+CanResult InProcessCanLink::Endpoint::send(const CanFrame& f) noexcept {
+  if (!valid(f)) return CanResult::kInvalid;
+  Endpoint& other = side_ == 0 ? link_.b_ : link_.a_;
+  if (down_ || other.down_) {
+    ++c_.tx_dropped;
+    return CanResult::kDown;
+  }
+  Queue& q = link_.q_[static_cast<std::size_t>(1 - side_)];
+  if (q.size >= kCapacity) {
+    ++c_.tx_dropped;
+    return CanResult::kWouldBlock;
+  }
+  CanFrame& slot = q.frames[(q.head + q.size) % kCapacity];
+  slot = f;
+  slot.stamp = link_.clock_.now();
+  ++q.size;
+  ++c_.tx;
+  return CanResult::kOk;
+}
+
+CanResult InProcessCanLink::Endpoint::receive(CanFrame& out) noexcept {
+  Queue& q = link_.q_[static_cast<std::size_t>(side_)];
+  if (down_ || q.size == 0) return CanResult::kWouldBlock;
+  out = q.frames[q.head];
+  q.head = (q.head + 1) % kCapacity;
+  --q.size;
+  ++c_.rx;
+  return CanResult::kOk;
+}
+
+namespace {
+std::mutex& links_mutex() {
+  static std::mutex m;
+  return m;
+}
+std::map<std::string, InProcessCanLink*, std::less<>>& links() {
+  static std::map<std::string, InProcessCanLink*, std::less<>> l;
+  return l;
+}
+}  // namespace
+
+void register_inprocess_link(std::string_view robot, InProcessCanLink* link) {
+  std::lock_guard<std::mutex> g(links_mutex());
+  links()[std::string(robot)] = link;
+}
+void unregister_inprocess_link(std::string_view robot) {
+  std::lock_guard<std::mutex> g(links_mutex());
+  const auto it = links().find(robot);
+  if (it != links().end()) links().erase(it);
+}
+InProcessCanLink* find_inprocess_link(std::string_view robot) {
+  std::lock_guard<std::mutex> g(links_mutex());
+  const auto it = links().find(robot);
+  return it == links().end() ? nullptr : it->second;
+}
+
+}  // namespace ag::can

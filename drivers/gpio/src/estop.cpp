@@ -1,0 +1,73 @@
+// E-stop latch, LED patterns, fake-line registry.
+#include "airground/drivers/gpio/estop.hpp"
+
+#include <map>
+#include <mutex>
+#include <string>
+
+#include "airground/drivers/gpio/gpio_line.hpp"
+
+namespace ag::gpio {
+
+const char* to_string(EStopState s) noexcept {
+  switch (s) {
+    case EStopState::kArmed: return "armed";
+    case EStopState::kAsserted: return "asserted";
+    case EStopState::kLatched: return "latched (released, waiting for re-arm)";
+    case EStopState::kLineFault: return "line fault (treated as asserted)";
+  }
+  return "?";
+}
+
+bool EStopLatch::update(bool line_ok, bool asserted, bool rearm) noexcept {
+  if (!line_ok) {
+    if (state_ != EStopState::kLineFault) ++line_faults_;
+    state_ = EStopState::kLineFault;
+  } else if (asserted) {
+    if (state_ != EStopState::kAsserted) ++assertions_;
+    state_ = EStopState::kAsserted;
+  } else if (state_ == EStopState::kAsserted || state_ == EStopState::kLineFault) {
+    state_ = EStopState::kLatched;  // released: a re-arm must come after this
+  } else if (state_ == EStopState::kLatched && rearm) {
+    state_ = EStopState::kArmed;
+  }
+  return stopped();
+}
+
+bool led_level(LedPattern p, TimeNs now) noexcept {
+  switch (p) {
+    case LedPattern::kOff: return false;
+    case LedPattern::kOn: return true;
+    case LedPattern::kSlowBlink: return (now / (500 * kNsPerMs)) % 2 == 0;
+    case LedPattern::kFastBlink: return (now / (125 * kNsPerMs)) % 2 == 0;
+  }
+  return false;
+}
+
+namespace {
+std::mutex& registry_mutex() {
+  static std::mutex m;
+  return m;
+}
+std::map<std::string, FakeLine*, std::less<>>& registry() {
+  static std::map<std::string, FakeLine*, std::less<>> r;
+  return r;
+}
+}  // namespace
+
+void register_fake_line(std::string_view robot, std::string_view line, FakeLine* l) {
+  std::lock_guard<std::mutex> g(registry_mutex());
+  registry()[std::string(robot) + "/" + std::string(line)] = l;
+}
+void unregister_fake_lines(std::string_view robot) {
+  std::lock_guard<std::mutex> g(registry_mutex());
+  const std::string prefix = std::string(robot) + "/";
+  for (auto it = registry().begin(); it != registry().end();) it = it->first.rfind(prefix, 0) == 0 ? registry().erase(it) : std::next(it);
+}
+FakeLine* find_fake_line(std::string_view robot, std::string_view line) {
+  std::lock_guard<std::mutex> g(registry_mutex());
+  const auto it = registry().find(std::string(robot) + "/" + std::string(line));
+  return it == registry().end() ? nullptr : it->second;
+}
+
+}  // namespace ag::gpio

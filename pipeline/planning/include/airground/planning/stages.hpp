@@ -1,0 +1,152 @@
+// The ground robot's planning stages (thin wrappers):
+//   planner: map_tiles -> roadmap (a few tiles per step, each only around itself); goal + localization ->
+//            route on "planned_path" when the goal is new, the map changed, or replan_period_s passed.
+//   drive:   planned_path + localization -> path follower -> "wheel_command" every step; it stops
+//            (within its deceleration limits) without a tracking pose, a route or a goal, at once
+//            on the tracker's reflex, and until a new route when the tracker cancels the route.
+//   tracker: lidar_scan + localization + planned_path -> local tracker -> "local_goal" (the local
+//            goal, its state, the reflex). The drive stage does not yet steer to the local goal.
+// Everything is allocated in init(); step() never allocates and never blocks.
+#pragma once
+
+#include <array>
+#include <memory>
+#include <span>
+
+#include "airground/core/drive_messages.hpp"
+#include "airground/core/messages.hpp"
+#include "airground/planning/drive_control.hpp"
+#include "airground/planning/local_tracker.hpp"
+#include "airground/planning/roadmap.hpp"
+#include "airground/platform/stage.hpp"
+
+namespace ag::plan {
+
+namespace detail {
+template <std::size_t... N>
+constexpr auto concat(const ParamSpec (&... parts)[N]) {
+  std::array<ParamSpec, (N + ...)> out{};
+  std::size_t k = 0;
+  ((std::copy(std::begin(parts), std::end(parts), out.begin() + static_cast<std::ptrdiff_t>(k)), k += N), ...);
+  return out;
+}
+}  // namespace detail
+
+inline constexpr ParamSpec kPlannerOwnParams[] = {
+    ParamSpec::real("area_x0_m", -500.0, -1e6, 1e6, "m", "mission area in the map frame: west edge (the roadmap covers it)"),
+    ParamSpec::real("area_y0_m", -500.0, -1e6, 1e6, "m", "mission area: south edge"),
+    ParamSpec::real("area_x1_m", 500.0, -1e6, 1e6, "m", "mission area: east edge"),
+    ParamSpec::real("area_y1_m", 500.0, -1e6, 1e6, "m", "mission area: north edge"),
+    ParamSpec::integer("tiles_per_step", 2, 1, 256, "tiles", "changed map tiles folded into the roadmap per step"),
+    ParamSpec::real("replan_period_s", 2.0, 0.1, 60.0, "s", "re-plan from the current pose this often while a goal is active"),
+    ParamSpec::real("snap_radius_m", 2.0, 0.0, 10.0, "m", "a start or goal off the free cells snaps to one within this"),
+};
+inline constexpr auto kPlannerParamArray = detail::concat(kPlannerOwnParams, kRoadmapParamSpecs);
+
+struct PlannerCounters {
+  std::uint64_t tiles_in{0}, tiles_applied{0}, tiles_outside{0}, tiles_stale{0};
+  std::uint64_t goals{0}, goals_non_finite{0}, plans{0}, plans_failed{0};
+};
+
+class PlannerStage final : public Stage {
+ public:
+  static constexpr std::span<const ParamSpec> kParams{kPlannerParamArray};
+  static std::unique_ptr<Stage> make() { return std::make_unique<PlannerStage>(); }
+  Status init(StageContext& ctx) override;
+  void step(TimeNs now) noexcept override;
+  [[nodiscard]] const Roadmap& roadmap() const noexcept { return *map_; }
+  [[nodiscard]] const PlannedPathMsg& published() const noexcept { return *msg_; }
+  [[nodiscard]] const PlannerCounters& counters() const noexcept { return c_; }
+
+ private:
+  void plan_now(TimeNs now) noexcept;
+  std::unique_ptr<Roadmap> map_;
+  std::unique_ptr<PlannedPath> path_;
+  std::unique_ptr<PlannedPathMsg> msg_;
+  RingReader<MapTileMsg, kMapTileRing> tiles_;
+  LatestReader<LocalizationMsg> loc_;
+  LatestReader<GoalMsg> goal_in_;
+  LatestWriter<PlannedPathMsg> out_;
+  LocalizationMsg pose_{};
+  GoalMsg goal_{};
+  bool have_pose_{false}, have_goal_{false}, map_changed_{false};
+  TimeNs goal_stamp_{-1}, last_plan_{0};
+  TimeNs replan_period_{0};
+  std::size_t tiles_per_step_{2};
+  double snap_{2.0};
+  std::uint32_t seq_{0};
+  PlannerCounters c_;
+};
+
+inline constexpr ParamSpec kDriveOwnParams[] = {
+    ParamSpec::real("pose_timeout_s", 0.5, 0.05, 10.0, "s", "a localization older than this stops the robot"),
+    ParamSpec::real("local_goal_timeout_s", 0.3, 0.05, 5.0, "s", "a local goal older than this is ignored"),
+};
+inline constexpr auto kDriveParamArray = detail::concat(kDriveOwnParams, kDriveParamSpecs);
+
+class DriveStage final : public Stage {
+ public:
+  static constexpr std::span<const ParamSpec> kParams{kDriveParamArray};
+  static std::unique_ptr<Stage> make() { return std::make_unique<DriveStage>(); }
+  Status init(StageContext& ctx) override;
+  void step(TimeNs now) noexcept override;
+  [[nodiscard]] const PathFollower& follower() const noexcept { return *follow_; }
+  [[nodiscard]] const WheelCommandMsg& published() const noexcept { return cmd_; }
+  [[nodiscard]] std::uint64_t reflex_stops() const noexcept { return reflex_stops_; }
+
+ private:
+  std::unique_ptr<PathFollower> follow_;
+  std::unique_ptr<PlannedPathMsg> path_;
+  std::unique_ptr<std::array<Point2, kMaxPathPoints>> pts_;
+  LatestReader<PlannedPathMsg> path_in_;
+  LatestReader<LocalizationMsg> loc_;
+  LatestReader<LocalGoalMsg> local_in_;
+  LatestWriter<WheelCommandMsg> out_;
+  WheelCommandMsg cmd_{};
+  LocalizationMsg pose_{};
+  LocalGoalMsg local_{};
+  std::uint32_t path_seq_{0}, n_pts_{0};
+  bool have_path_{false}, blocked_{false};
+  TimeNs last_{-1}, pose_timeout_{0}, local_timeout_{0};
+  std::uint64_t reflex_stops_{0};
+};
+
+inline constexpr ParamSpec kTrackerParams[] = {
+    ParamSpec::real("obstacle_min_m", 0.2, 0.05, 2.0, "m", "returns this high above the ground plane are obstacles (a 15 cm curb is not)"),
+    ParamSpec::real("overhang_m", 2.0, 0.5, 10.0, "m", "returns higher than this above the ground are not obstacles"),
+    ParamSpec::real("min_clearance_m", 0.6, 0.0, 5.0, "m", "the local goal keeps this from obstacles"),
+    ParamSpec::real("goal_distance_m", 5.0, 1.0, 15.0, "m", "the local goal is this far along the route"),
+    ParamSpec::real("reflex_height_m", 0.25, 0.05, 2.0, "m", "a return this high right ahead stops the robot"),
+    ParamSpec::real("reflex_distance_m", 0.8, 0.1, 5.0, "m", "... within this ahead (plus speed x 0.5 s)"),
+    ParamSpec::real("reflex_half_width_m", 0.35, 0.1, 2.0, "m", "... and this of the centre line"),
+    ParamSpec::real("backup_timeout_s", 8.0, 0.5, 60.0, "s", "backing up this long without a way forward cancels the route"),
+};
+
+// tracker: lidar_scan + localization + planned_path -> local tracker -> "local_goal" once per scan.
+class TrackerStage final : public Stage {
+ public:
+  static constexpr std::span<const ParamSpec> kParams{kTrackerParams};
+  static std::unique_ptr<Stage> make() { return std::make_unique<TrackerStage>(); }
+  Status init(StageContext& ctx) override;
+  void step(TimeNs now) noexcept override;
+  [[nodiscard]] const LocalTracker& tracker() const noexcept { return *tracker_; }
+  [[nodiscard]] const LocalGoalMsg& published() const noexcept { return msg_; }
+  [[nodiscard]] std::uint64_t scans() const noexcept { return scans_in_; }
+
+ private:
+  std::unique_ptr<LocalTracker> tracker_;
+  std::unique_ptr<PlannedPathMsg> path_;
+  std::unique_ptr<std::array<Point2, kMaxPathPoints>> pts_;
+  RingReader<LidarScanMsg, kLidarRing> scans_;
+  LatestReader<LocalizationMsg> loc_;
+  LatestReader<PlannedPathMsg> path_in_;
+  LatestReader<WheelCommandMsg> cmd_in_;
+  LatestWriter<LocalGoalMsg> out_;
+  LocalizationMsg pose_{};
+  WheelCommandMsg cmd_{};
+  LocalGoalMsg msg_{};
+  std::uint32_t path_seq_{0};
+  std::uint64_t scans_in_{0}, scans_malformed_{0};
+};
+
+}  // namespace ag::plan

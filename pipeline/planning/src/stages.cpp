@@ -1,0 +1,258 @@
+// Planner and drive stages.
+#include "airground/planning/stages.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "airground/platform/log.hpp"
+
+namespace ag::plan {
+
+Status PlannerStage::init(StageContext& ctx) {
+  const SectionView v = ctx.params();
+  const double x0 = v.real("area_x0_m"), y0 = v.real("area_y0_m"), x1 = v.real("area_x1_m"), y1 = v.real("area_y1_m");
+  const std::string where = std::string(ctx.stage_name) + ".";
+  if (!(x1 > x0) || !(y1 > y0))
+    return Error::make(ErrorCode::kConfig, "config error: " + where + "area_x1_m/area_y1_m must be east/north of area_x0_m/area_y0_m");
+  const RoadmapParams p = load_roadmap_params(v, kMapResolutionM, kTileCells);
+  map_ = std::make_unique<Roadmap>(p, ClassTable::builtin(), extent_covering_area(x0, y0, x1, y1, kMapResolutionM, kTileCells));
+  path_ = std::make_unique<PlannedPath>();
+  msg_ = std::make_unique<PlannedPathMsg>();
+  tiles_per_step_ = static_cast<std::size_t>(v.integer("tiles_per_step"));
+  replan_period_ = from_seconds(v.real("replan_period_s"));
+  snap_ = v.real("snap_radius_m");
+  auto tiles = ctx.channels.ring_reader<MapTileMsg, kMapTileRing>("map_tiles");
+  if (!tiles) return tiles.error();
+  tiles_ = tiles.value();
+  auto loc = ctx.channels.latest_reader<LocalizationMsg>("localization");
+  if (!loc) return loc.error();
+  loc_ = loc.value();
+  auto goal = ctx.channels.latest_reader<GoalMsg>("goal");
+  if (!goal) return goal.error();
+  goal_in_ = goal.value();
+  auto out = ctx.channels.latest_writer<PlannedPathMsg>("planned_path");
+  if (!out) return out.error();
+  out_ = out.value();
+  return ok_status();
+}
+
+void PlannerStage::plan_now(TimeNs now) noexcept {
+  ++c_.plans;
+  last_plan_ = now;
+  map_changed_ = false;
+  map_->plan(Point2{pose_.pose.x, pose_.pose.y}, Point2{goal_.goal.x, goal_.goal.y}, *path_, snap_);
+  PlannedPathMsg& m = *msg_;
+  m.stamp = pose_.stamp;
+  m.published = now;
+  m.seq = ++seq_;
+  m.goal_id = goal_.id;
+  m.plan_status = static_cast<std::uint8_t>(path_->status);
+  if (path_->status == PlanStatus::kOk) {
+    m.status = RouteStatus::kOk;
+    m.count = std::min<std::uint32_t>(path_->count, static_cast<std::uint32_t>(kMaxRoutePoints));
+    for (std::uint32_t i = 0; i < m.count; ++i) m.points[i] = RoutePoint{path_->points[i].x, path_->points[i].y};
+    m.length_m = path_->length_m;
+    m.min_clearance_m = path_->min_clearance_m;
+  } else {
+    ++c_.plans_failed;
+    m.status = path_->status == PlanStatus::kNoRoute ? RouteStatus::kNoRoute : RouteStatus::kBadEnds;
+    m.count = 0;
+    m.length_m = 0;
+    if (c_.plans_failed == 1 || c_.plans_failed % 50 == 0)
+      AG_LOG_WARN("planner", "goal %u at (%.1f, %.1f): %s (%llu failures)", goal_.id, goal_.goal.x, goal_.goal.y, to_string(path_->status),
+                  static_cast<unsigned long long>(c_.plans_failed));
+  }
+  out_.publish(m);
+}
+
+void PlannerStage::step(TimeNs now) noexcept {
+  for (MapTileMsg* t = tiles_.front(); t != nullptr; t = tiles_.front()) {
+    ++c_.tiles_in;
+    const MapExtent& e = map_->extent();
+    if (t->tx < e.tile_x0 || t->ty < e.tile_y0 || t->tx >= e.tile_x0 + e.tiles_x || t->ty >= e.tile_y0 + e.tiles_y) {
+      if (c_.tiles_outside++ == 0)
+        AG_LOG_WARN("planner", "map tile (%d, %d) is outside the mission area (planner.area_*): dropped (counted)", static_cast<int>(t->tx),
+                    static_cast<int>(t->ty));
+    } else if (map_->set_tile(t->tx, t->ty, t->version, std::span<const std::uint8_t>(t->cls.data(), t->cls.size()))) {
+      ++c_.tiles_applied;
+    } else {
+      ++c_.tiles_stale;
+    }
+    tiles_.pop();
+  }
+  if (map_->pending_tiles() > 0 && map_->update(tiles_per_step_) > 0) map_changed_ = true;
+  if (loc_.fresh()) {
+    pose_ = loc_.read();
+    have_pose_ = pose_.status == LocalizationStatus::kTracking && std::isfinite(pose_.pose.x) && std::isfinite(pose_.pose.y);
+  }
+  if (goal_in_.fresh()) {
+    const GoalMsg& g = goal_in_.read();
+    if (g.stamp != goal_stamp_) {
+      goal_stamp_ = g.stamp;
+      ++c_.goals;
+      if (g.cancel) {
+        have_goal_ = false;
+        msg_->seq = ++seq_;
+        msg_->status = RouteStatus::kCancelled;
+        msg_->count = 0;
+        msg_->published = now;
+        out_.publish(*msg_);
+      } else if (!std::isfinite(g.goal.x) || !std::isfinite(g.goal.y)) {
+        ++c_.goals_non_finite;
+      } else {
+        goal_ = g;
+        have_goal_ = true;
+        if (have_pose_) plan_now(now);
+        else last_plan_ = 0;
+      }
+    }
+  }
+  if (have_goal_ && have_pose_ && (now - last_plan_ >= replan_period_ || (map_changed_ && now - last_plan_ >= replan_period_ / 4)))
+    plan_now(now);
+}
+
+Status DriveStage::init(StageContext& ctx) {
+  const SectionView v = ctx.params();
+  follow_ = std::make_unique<PathFollower>(load_drive_params(v));
+  path_ = std::make_unique<PlannedPathMsg>();
+  pts_ = std::make_unique<std::array<Point2, kMaxPathPoints>>();
+  pose_timeout_ = from_seconds(v.real("pose_timeout_s"));
+  local_timeout_ = from_seconds(v.real("local_goal_timeout_s"));
+  auto lg = ctx.channels.latest_reader<LocalGoalMsg>("local_goal");
+  if (!lg) return lg.error();
+  local_in_ = lg.value();
+  auto p = ctx.channels.latest_reader<PlannedPathMsg>("planned_path");
+  if (!p) return p.error();
+  path_in_ = p.value();
+  auto loc = ctx.channels.latest_reader<LocalizationMsg>("localization");
+  if (!loc) return loc.error();
+  loc_ = loc.value();
+  auto out = ctx.channels.latest_writer<WheelCommandMsg>("wheel_command");
+  if (!out) return out.error();
+  out_ = out.value();
+  return ok_status();
+}
+
+void DriveStage::step(TimeNs now) noexcept {
+  const double dt = last_ < 0 ? 0.0 : to_seconds(now - last_);
+  last_ = now;
+  if (path_in_.fresh()) {
+    *path_ = path_in_.read();
+    if (path_->seq != path_seq_) {
+      path_seq_ = path_->seq;
+      blocked_ = false;
+      if (path_->status == RouteStatus::kOk && path_->count >= 2) {
+        n_pts_ = std::min<std::uint32_t>(path_->count, static_cast<std::uint32_t>(kMaxPathPoints));
+        for (std::uint32_t i = 0; i < n_pts_; ++i) (*pts_)[i] = Point2{path_->points[i].x, path_->points[i].y};
+        follow_->set_path(pts_->data(), n_pts_);
+        have_path_ = true;
+      } else {
+        follow_->clear();
+        have_path_ = false;
+        n_pts_ = 0;
+      }
+    }
+  }
+  if (loc_.fresh()) pose_ = loc_.read();
+  if (local_in_.fresh()) local_ = local_in_.read();
+  const bool pose_ok = pose_.status == LocalizationStatus::kTracking && now - pose_.stamp <= pose_timeout_;
+  const bool local_ok = local_.stamp > 0 && now - local_.stamp <= local_timeout_ && (local_.path_seq == path_seq_ || local_.reflex_stop);
+  TwistCommand tw;
+  if (local_ok && local_.reflex_stop) {
+    if (cmd_.v_mps != 0.0 || cmd_.w_radps != 0.0) ++reflex_stops_;
+    tw = follow_->halt();
+  } else {
+    if (local_ok && local_.state == static_cast<std::uint8_t>(TrackState::kFailed)) blocked_ = true;  // until a new route
+    tw = (have_path_ && pose_ok && !blocked_) ? follow_->step(pose_.pose, dt) : follow_->stop(dt);
+  }
+  const DriveParams& dp = follow_->params();
+  const WheelSpeeds ws = wheels_from_twist(tw.v_mps, tw.w_radps, dp.track_m, dp.max_wheel_speed_mps);
+  cmd_.stamp = now;
+  cmd_.published = now;
+  cmd_.left_mps = ws.left_mps;
+  cmd_.right_mps = ws.right_mps;
+  cmd_.v_mps = tw.v_mps;
+  cmd_.w_radps = tw.w_radps;
+  cmd_.follow_state = static_cast<std::uint8_t>(follow_->state());
+  out_.publish(cmd_);
+}
+
+Status TrackerStage::init(StageContext& ctx) {
+  const SectionView v = ctx.params();
+  LocalTrackerParams p;
+  p.obstacle_min_m = v.real("obstacle_min_m");
+  p.overhang_m = v.real("overhang_m");
+  p.min_clearance_m = v.real("min_clearance_m");
+  p.goal_distance_m = v.real("goal_distance_m");
+  p.reflex_height_m = v.real("reflex_height_m");
+  p.reflex_distance_m = v.real("reflex_distance_m");
+  p.reflex_half_width_m = v.real("reflex_half_width_m");
+  p.backup_timeout_s = v.real("backup_timeout_s");
+  if (p.overhang_m <= p.obstacle_min_m)
+    return Error::make(ErrorCode::kConfig, "config error: " + std::string(ctx.stage_name) + ".overhang_m must be above obstacle_min_m");
+  tracker_ = std::make_unique<LocalTracker>(p);
+  path_ = std::make_unique<PlannedPathMsg>();
+  pts_ = std::make_unique<std::array<Point2, kMaxPathPoints>>();
+  auto sc = ctx.channels.ring_reader<LidarScanMsg, kLidarRing>("lidar_scan");
+  if (!sc) return sc.error();
+  scans_ = sc.value();
+  auto loc = ctx.channels.latest_reader<LocalizationMsg>("localization");
+  if (!loc) return loc.error();
+  loc_ = loc.value();
+  auto pin = ctx.channels.latest_reader<PlannedPathMsg>("planned_path");
+  if (!pin) return pin.error();
+  path_in_ = pin.value();
+  auto cin = ctx.channels.latest_reader<WheelCommandMsg>("wheel_command");
+  if (!cin) return cin.error();
+  cmd_in_ = cin.value();
+  auto out = ctx.channels.latest_writer<LocalGoalMsg>("local_goal");
+  if (!out) return out.error();
+  out_ = out.value();
+  return ok_status();
+}
+
+void TrackerStage::step(TimeNs now) noexcept {
+  if (path_in_.fresh()) {
+    *path_ = path_in_.read();
+    if (path_->seq != path_seq_) {
+      path_seq_ = path_->seq;
+      const std::uint32_t n = path_->status == RouteStatus::kOk ? std::min<std::uint32_t>(path_->count, static_cast<std::uint32_t>(kMaxPathPoints)) : 0U;
+      for (std::uint32_t i = 0; i < n; ++i) (*pts_)[i] = Point2{path_->points[i].x, path_->points[i].y};
+      tracker_->set_path(std::span<const Point2>(pts_->data(), n));
+    }
+  }
+  if (loc_.fresh()) pose_ = loc_.read();
+  if (cmd_in_.fresh()) cmd_ = cmd_in_.read();
+  // The newest scan only: an older one describes where the robot was.
+  LidarScanMsg* newest = nullptr;
+  while (scans_.size() > 1) scans_.pop();
+  newest = scans_.front();
+  if (newest == nullptr) return;
+  ++scans_in_;
+  if (newest->count > newest->points.size()) {
+    ++scans_malformed_;
+    scans_.pop();
+    return;
+  }
+  if (pose_.status == LocalizationStatus::kTracking) {
+    (void)tracker_->update(std::span<const ScanReturn>(newest->points.data(), newest->count), newest->sensor_in_body, pose_.pose, cmd_.v_mps);
+    const LocalGoal g = tracker_->local_goal(pose_.pose, now);
+    msg_.valid = g.valid;
+    msg_.goal = RoutePoint{g.goal.x, g.goal.y};
+    msg_.clearance_m = g.clearance_m;
+    msg_.reflex_stop = g.reflex_stop;
+  } else {
+    msg_.valid = false;
+    msg_.reflex_stop = false;
+  }
+  msg_.stamp = newest->stamp;
+  msg_.published = now;
+  msg_.state = static_cast<std::uint8_t>(tracker_->state());
+  msg_.path_seq = path_seq_;
+  msg_.failures = tracker_->failures();
+  out_.publish(msg_);
+  scans_.pop();
+}
+
+}  // namespace ag::plan

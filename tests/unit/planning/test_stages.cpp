@@ -1,0 +1,69 @@
+// The planner and drive stages on one robot (RoleInstance, real config and channels), fed a synthetic
+// world tile by tile: a goal gives a route that keeps clearance; a robot integrating the wheel
+// commands reaches the goal without entering a blocked cell; a changed tile re-plans around it;
+// cancel, bad tiles and bad goals are counted.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+
+#include "stage_rig.hpp"
+
+namespace ag::plan {
+namespace {
+using test::Rig;
+
+TEST(PlanningStages, AGoalIsPlannedAndDrivenToWithoutEnteringABlockedCell) {
+  const auto w = loc::test::make_world(5, 5, 3);
+  Rig rig(w);
+  rig.load(w);
+  EXPECT_EQ(rig.planner->counters().tiles_applied, 25U);
+  EXPECT_EQ(rig.planner->roadmap().stats().full_builds, 0U) << "the stage folds tiles in one by one";
+  const GridReference ref = test::reference_of(w);
+  const auto pairs = test::reachable_pairs(w, ref, 1, 17, 60.0);
+  ASSERT_EQ(pairs.size(), 1U);
+  rig.pose = Pose2{pairs[0].first.x, pairs[0].first.y, 0.0};
+  rig.goal(pairs[0].second.x, pairs[0].second.y, 1);
+  rig.step_planner();
+  const PlannedPathMsg& p = rig.planner->published();
+  ASSERT_EQ(p.status, RouteStatus::kOk) << static_cast<int>(p.plan_status);
+  EXPECT_GE(p.min_clearance_m, RoadmapParams{}.min_clearance_m - 1e-9);
+  int blocked = 0, k = 0;
+  double closest = 1e9;
+  for (; k < 6000 && static_cast<FollowState>(rig.drive->published().follow_state) != FollowState::kArrived; ++k) {
+    rig.tick(k);
+    if (!ref.traversable(ref.col(rig.pose.x), ref.row(rig.pose.y))) ++blocked;
+    closest = std::min(closest, ref.clearance_m(ref.col(rig.pose.x), ref.row(rig.pose.y), 3.0));
+  }
+  EXPECT_EQ(static_cast<FollowState>(rig.drive->published().follow_state), FollowState::kArrived) << "after " << k * 0.05 << " s";
+  EXPECT_LT(std::hypot(rig.pose.x - pairs[0].second.x, rig.pose.y - pairs[0].second.y), 1.0);
+  EXPECT_EQ(blocked, 0) << "ticks on a non-traversable cell";
+  EXPECT_GT(closest, 0.25) << "closest approach to an obstacle [m]";
+  EXPECT_GT(rig.planner->counters().plans, 1U) << "re-planned on the way";
+}
+
+TEST(PlanningStages, CancelBadGoalsAndTilesOutsideTheAreaAreCounted) {
+  const auto w = loc::test::make_world(3, 3, 5);
+  Rig rig(w);
+  rig.load(w);
+  rig.push_tile(40, 40, 1, w.tile(0, 0));
+  rig.goal(std::nan(""), 5.0, 1);
+  rig.step_planner();
+  EXPECT_EQ(rig.planner->counters().tiles_outside, 1U);
+  EXPECT_EQ(rig.planner->counters().goals_non_finite, 1U);
+  rig.pose = Pose2{w.road_x[0], w.road_y[0], 0};
+  rig.goal(w.road_x[0], w.road_y[0] + 30.0, 2);
+  rig.step_planner();
+  EXPECT_EQ(rig.planner->published().status, RouteStatus::kOk);
+  rig.goal(0, 0, 3, true);
+  rig.step_planner();
+  EXPECT_EQ(rig.planner->published().status, RouteStatus::kCancelled);
+  for (int k = 0; k < 40; ++k) rig.tick(k + 1);
+  EXPECT_NEAR(rig.drive->published().v_mps, 0.0, 1e-9) << "no route: stopped";
+  rig.goal(-500, 5, 4);  // outside the map
+  rig.step_planner();
+  EXPECT_EQ(rig.planner->published().status, RouteStatus::kBadEnds);
+}
+
+}  // namespace
+}  // namespace ag::plan
