@@ -1,0 +1,162 @@
+// The C++ ErfNet against the torch reference (float64, same fp16-exact random weights and BN statistics,
+// tools/erfnet_goldens.py) on every kernel path this CPU and build have: logits within 1e-3 absolute,
+// the same argmax on at least 99.9% of pixels.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include "airground/segmentation/erfnet.hpp"
+#include "fixture.hpp"
+
+namespace ag::seg {
+namespace {
+
+struct Compared {
+  double max_abs{0};
+  double argmax_agree{0};
+};
+
+Compared compare(const ErfNet& net, const test::Golden& g) {
+  Compared c;
+  const std::size_t plane = static_cast<std::size_t>(g.width) * static_cast<std::size_t>(g.height);
+  for (std::size_t i = 0; i < g.logits.size(); ++i)
+    c.max_abs = std::max(c.max_abs, static_cast<double>(std::fabs(net.logits()[i] - g.logits[i])));
+  std::size_t agree = 0;
+  for (std::size_t p = 0; p < plane; ++p) agree += net.classes()[p] == g.argmax(p) ? 1U : 0U;
+  c.argmax_agree = static_cast<double>(agree) / static_cast<double>(plane);
+  return c;
+}
+
+class Numerics : public ::testing::TestWithParam<KernelPath> {};
+
+TEST_P(Numerics, MatchesTorchOnEveryAvailablePath) {
+  const KernelPath path = GetParam();
+  if (!kernel_path_available(path)) GTEST_SKIP() << kernel_path_name(path) << " is not available here";
+  auto w = load_weights(test::weights_path());
+  ASSERT_TRUE(w.ok()) << w.error().message;
+  const test::Golden g = test::load_golden("erfnet_random_c7_64x48.golden");
+  ASSERT_EQ(g.classes, 7);
+  for (int threads : {1, 2}) {
+    auto net = ErfNet::create(w.value(), ErfNetOptions{g.width, g.height, threads, path});
+    ASSERT_TRUE(net.ok()) << net.error().message;
+    ASSERT_EQ(net.value()->path(), path);
+    net.value()->run_rgb8(g.rgb.data(), static_cast<std::size_t>(g.width) * 3);
+    const Compared c = compare(*net.value(), g);
+    std::printf("[%s, %d thread(s)] max |logit - torch| = %.2e, argmax agreement %.4f\n", std::string(kernel_path_name(path)).c_str(),
+                threads, c.max_abs, c.argmax_agree);
+    EXPECT_LE(c.max_abs, 1e-3) << kernel_path_name(path) << " " << threads;
+    EXPECT_GE(c.argmax_agree, 0.999) << kernel_path_name(path) << " " << threads;
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Paths, Numerics, ::testing::Values(KernelPath::kPortable, KernelPath::kAvx2, KernelPath::kNeon),
+                         [](const ::testing::TestParamInfo<KernelPath>& p) { return std::string(kernel_path_name(p.param)); });
+
+TEST(Numerics, AutoPicksTheFastestPathAndPlanarInputAgrees) {
+  auto w = load_weights(test::weights_path());
+  ASSERT_TRUE(w.ok()) << w.error().message;
+  const test::Golden g = test::load_golden("erfnet_random_c7_64x48.golden");
+  auto net = ErfNet::create(w.value(), ErfNetOptions{0, 0, 1, KernelPath::kAuto});  // size from the header (64x48)
+  ASSERT_TRUE(net.ok()) << net.error().message;
+  EXPECT_EQ(net.value()->path(), best_kernel_path());
+  EXPECT_EQ(net.value()->width(), 64);
+  EXPECT_EQ(net.value()->height(), 48);
+#if defined(__x86_64__)
+  if (kernel_path_available(KernelPath::kAvx2)) {
+    EXPECT_EQ(best_kernel_path(), KernelPath::kAvx2);
+  }
+#elif defined(__aarch64__)
+  EXPECT_EQ(best_kernel_path(), KernelPath::kNeon);
+#endif
+  const std::size_t plane = static_cast<std::size_t>(g.width) * static_cast<std::size_t>(g.height);
+  std::vector<float> chw(3 * plane);
+  for (std::size_t p = 0; p < plane; ++p)
+    for (std::size_t c = 0; c < 3; ++c) chw[c * plane + p] = static_cast<float>(g.rgb[p * 3 + c]) / 255.0F;
+  net.value()->run_planar(chw.data());
+  const Compared c = compare(*net.value(), g);
+  EXPECT_LE(c.max_abs, 1e-3);
+  EXPECT_GE(c.argmax_agree, 0.999);
+}
+
+TEST(Numerics, RepeatedFramesAndThreadCountsGiveIdenticalLogits) {
+  auto w = load_weights(test::weights_path());
+  ASSERT_TRUE(w.ok()) << w.error().message;
+  const test::Golden g = test::load_golden("erfnet_random_c7_64x48.golden");
+  auto one = ErfNet::create(w.value(), ErfNetOptions{g.width, g.height, 1, KernelPath::kAuto});
+  auto three = ErfNet::create(w.value(), ErfNetOptions{g.width, g.height, 3, KernelPath::kAuto});
+  ASSERT_TRUE(one.ok() && three.ok());
+  EXPECT_EQ(three.value()->threads(), 3);
+  const std::size_t n = g.logits.size();
+  // A different image first, so that stale activations would show in the second frame.
+  std::vector<std::uint8_t> other(g.rgb.rbegin(), g.rgb.rend());
+  one.value()->run_rgb8(other.data(), static_cast<std::size_t>(g.width) * 3);
+  const std::vector<float> first_other(one.value()->logits(), one.value()->logits() + n);
+  one.value()->run_rgb8(g.rgb.data(), static_cast<std::size_t>(g.width) * 3);
+  const std::vector<float> a(one.value()->logits(), one.value()->logits() + n);
+  EXPECT_NE(a, first_other);
+  three.value()->run_rgb8(g.rgb.data(), static_cast<std::size_t>(g.width) * 3);
+  const std::vector<float> b(three.value()->logits(), three.value()->logits() + n);
+  EXPECT_EQ(a, b);  // each output row is computed by one thread in a fixed order: bit-identical
+  one.value()->run_rgb8(other.data(), static_cast<std::size_t>(g.width) * 3);
+  EXPECT_EQ(std::vector<float>(one.value()->logits(), one.value()->logits() + n), first_other);
+}
+
+TEST(Numerics, HeaderNormalisationIsApplied) {
+  auto w = load_weights(test::weights_path());
+  ASSERT_TRUE(w.ok()) << w.error().message;
+  const test::Golden g = test::load_golden("erfnet_random_c7_64x48.golden");
+  // mean 0.5, std 0.5 on RGB maps v/255 to 2 v/255 - 1: the same as feeding that planar image.
+  ErfNetWeights shifted = w.value();
+  for (int c = 0; c < 3; ++c) {
+    shifted.header.mean[c] = 0.5F;
+    shifted.header.std[c] = 0.5F;
+  }
+  auto a = ErfNet::create(shifted, ErfNetOptions{g.width, g.height, 1, KernelPath::kAuto});
+  auto b = ErfNet::create(w.value(), ErfNetOptions{g.width, g.height, 1, KernelPath::kAuto});
+  ASSERT_TRUE(a.ok() && b.ok());
+  a.value()->run_rgb8(g.rgb.data(), static_cast<std::size_t>(g.width) * 3);
+  const std::size_t plane = static_cast<std::size_t>(g.width) * static_cast<std::size_t>(g.height);
+  std::vector<float> chw(3 * plane);
+  for (std::size_t p = 0; p < plane; ++p)
+    for (std::size_t c = 0; c < 3; ++c) chw[c * plane + p] = 2.0F * static_cast<float>(g.rgb[p * 3 + c]) / 255.0F - 1.0F;
+  b.value()->run_planar(chw.data());
+  double max_abs = 0;
+  for (std::size_t i = 0; i < g.logits.size(); ++i)
+    max_abs = std::max(max_abs, static_cast<double>(std::fabs(a.value()->logits()[i] - b.value()->logits()[i])));
+  EXPECT_LE(max_abs, 1e-4);
+  const Compared vs_golden = compare(*a.value(), g);
+  EXPECT_GT(vs_golden.max_abs, 1e-2);  // and it is a different input from the golden's
+}
+
+TEST(Engine, RefusesBadSizesThreadsAndPaths) {
+  auto w = load_weights(test::weights_path());
+  ASSERT_TRUE(w.ok()) << w.error().message;
+  auto odd = ErfNet::create(w.value(), ErfNetOptions{60, 48, 1, KernelPath::kAuto});
+  ASSERT_FALSE(odd.ok());
+  EXPECT_NE(odd.error().message.find("multiples of 8"), std::string::npos) << odd.error().message;
+  auto zero = ErfNet::create(w.value(), ErfNetOptions{64, 48, 0, KernelPath::kAuto});
+  ASSERT_FALSE(zero.ok());
+  EXPECT_NE(zero.error().message.find("thread"), std::string::npos);
+#if defined(__x86_64__)
+  auto neon = ErfNet::create(w.value(), ErfNetOptions{64, 48, 1, KernelPath::kNeon});
+#else
+  auto neon = ErfNet::create(w.value(), ErfNetOptions{64, 48, 1, KernelPath::kAvx2});
+#endif
+  ASSERT_FALSE(neon.ok());
+  EXPECT_NE(neon.error().message.find("not available"), std::string::npos);
+  ErfNetWeights broken = w.value();
+  broken.tensors.pop_back();
+  auto missing = ErfNet::create(broken, ErfNetOptions{64, 48, 1, KernelPath::kAuto});
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.error().message.find("decoder.output_conv.bias"), std::string::npos) << missing.error().message;
+}
+
+TEST(Engine, MacCountIsTheReferences) {
+  // tools/erfnet_reference.py: 12.99 GMAC at 640x400 with 20 classes.
+  EXPECT_NEAR(erfnet_macs(640, 400, 20) / 1e9, 12.99, 0.01);
+}
+
+}  // namespace
+}  // namespace ag::seg
