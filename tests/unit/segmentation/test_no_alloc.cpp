@@ -1,0 +1,43 @@
+// ErfNet's frames never allocate once the engine is created (operator new counted by
+// tests/common/counting_new.hpp), with one thread and with a worker pool.
+#include <gtest/gtest.h>
+
+#include <vector>
+
+#include "airground/segmentation/erfnet.hpp"
+#include "fixture.hpp"
+
+#include "../../common/counting_new.hpp"
+
+namespace ag::seg {
+namespace {
+using test_alloc::AllocationWindow;
+
+TEST(NoAllocation, TheCounterSeesAllocations) {
+  AllocationWindow w;
+  std::vector<int> v(100);
+  EXPECT_GE(w.allocations(), 1U);
+}
+
+TEST(NoAllocation, FramesOnEveryPathAndThreadCount) {
+  auto w = load_weights(test::weights_path());
+  ASSERT_TRUE(w.ok()) << w.error().message;
+  const test::Golden g = test::load_golden("erfnet_random_c7_64x48.golden");
+  std::vector<float> chw(3 * static_cast<std::size_t>(g.width) * static_cast<std::size_t>(g.height), 0.25F);
+  for (KernelPath p : {KernelPath::kPortable, best_kernel_path()}) {
+    for (int threads : {1, 2}) {
+      auto net = ErfNet::create(w.value(), ErfNetOptions{g.width, g.height, threads, p});
+      ASSERT_TRUE(net.ok()) << net.error().message;
+      net.value()->run_rgb8(g.rgb.data(), static_cast<std::size_t>(g.width) * 3);  // warm-up, outside the window
+      AllocationWindow window;
+      for (int k = 0; k < 2; ++k) {
+        net.value()->run_rgb8(g.rgb.data(), static_cast<std::size_t>(g.width) * 3);
+        net.value()->run_planar(chw.data());
+      }
+      EXPECT_EQ(window.allocations(), 0U) << kernel_path_name(p) << ", " << threads << " thread(s)";
+    }
+  }
+}
+
+}  // namespace
+}  // namespace ag::seg
