@@ -32,6 +32,7 @@
 #include "airground/sim/world_png.hpp"
 
 namespace fs = std::filesystem;
+int segment_cmd(int argc, char** argv);  // segment.cpp
 using namespace ag;
 using namespace ag::sim;
 
@@ -51,6 +52,8 @@ constexpr const char* kUsage =
     "  airground-sim eval mapping --world W --seed S --out DIR [options]   (see eval mapping --help)\n"
     "  airground-sim eval localization --world W --seed S --init-error 16 --map gt|online --out DIR [options]\n"
     "                                  (see eval localization --help)\n"
+    "  airground-sim segment --weights FILE --image IMAGE.png --out DIR [--threads N]   (ErfNet: logits.npy,\n"
+    "                        classes.png; see segment --help)\n"
     "  airground-sim config --out DIR   (every simulator model's parameters with units and ranges, as\n"
     "                                    YAML files that 'run --config-dir DIR' reads back)\n\n"
     "--world W is a world directory or 'default' (the built-in 400 m world, seed 42).\n"
@@ -586,6 +589,7 @@ int main(int argc, char** argv) {
     return false;
   }();
   try {
+    if (cmd == "segment") return segment_cmd(argc, argv);
     if (cmd == "world") {
       if (argc < 3) usage_error("world needs generate, import or show");
       const std::string sub = argv[2];
