@@ -67,6 +67,8 @@ struct ConvOp {
   int n_out{0};                  // real output channels (logits: the class count)
   int ntaps{0};
   int dy[kMaxTaps]{}, dx[kMaxTaps]{};
+  int dilation{1};               // Winograd ops: the 3-tap conv's dilation
+  int n_items{0};                // Winograd ops: work items (pairs of rows, or rows)
   std::size_t w_offset{0}, b_offset{0};  // into the packed weight buffer
 };
 
@@ -77,7 +79,8 @@ struct PoolOp {  // 2x2 max-pool of `in`, then the BN affine of those channels a
   std::size_t scale_offset{0};  // channels floats of scale, then channels floats of shift
 };
 
-enum class OpKind : std::uint8_t { kConv, kPool };
+// kWinoV / kWinoH: a 3x1 / 1x3 convolution by 1-D Winograd F(2,3) (see add_conv1d).
+enum class OpKind : std::uint8_t { kConv, kPool, kWinoV, kWinoH };
 struct Op {
   OpKind kind{OpKind::kConv};
   ConvOp conv;
@@ -104,6 +107,10 @@ struct ErfNet::Impl {
   std::vector<float> staging;  // packed weights while building
   std::vector<Op> ops;
   FloatBuf logits, scratch, best;
+  bool winograd{true};
+  FloatBuf zero_row;                // one row of zeros (all blocks): Winograd's rows above and below the map
+  FloatBuf wscratch;                // per thread: Winograd's transformed input U[4] then products M[4]
+  std::size_t wscratch_stride{0}, wscratch_m_offset{0};
   std::vector<std::uint8_t> classes_buf;
   std::size_t scratch_stride{0};
 
@@ -190,8 +197,65 @@ Bn identity_bn(int channels) {
 }
 
 // A same-resolution, stride-1 convolution (the blocks' 3x1 and 1x3 ones) from weights [o][i][kh][kw].
+// Pairs of outputs (p, p + d) along the conv's axis that Winograd computes together: p with p mod 2d < d.
+// Columns per Winograd chunk: the four products of one chunk (4 x 48 x 16 floats) stay in L1.
+constexpr int kWinoChunk = 48;
+
+// One channel block as a GCC vector (AVX on x86-64-v3, two q registers on NEON, SSE pairs otherwise): the
+// Winograd transforms are plain arithmetic on whole blocks.
+typedef float V8 __attribute__((vector_size(32), aligned(4)));  // NOLINT(modernize-use-using)
+inline V8 ld8(const float* p) noexcept { return *reinterpret_cast<const V8*>(p); }
+inline void st8(float* p, V8 v) noexcept { *reinterpret_cast<V8*>(p) = v; }
+
+int first_of_pair(int j, int d) { return (j / d) * 2 * d + j % d; }
+int pair_count(int n, int d) {
+  int j = 0;
+  while (first_of_pair(j, d) < n) ++j;
+  return j;
+}
+
 void add_conv1d(ErfNet::Impl& im, const ErfNetWeights& w, const Act& in, Act& out, const std::string& conv, const Bn& bn,
                 bool vertical, int dilation, bool residual) {
+  if (im.winograd) {
+    // 1-D Winograd F(2,3): outputs y0 = g0 d0 + g1 d1 + g2 d2 and y1 = g0 d1 + g1 d2 + g2 d3 (inputs d0..d3 at
+    // offsets -d, 0, d, 2d) from four products M_k = G_k U_k per pair instead of six:
+    //   U = (d0 - d2, d1 + d2, d2 - d1, d1 - d3),  G = (g0, (g0 + g1 + g2) / 2, (g0 - g1 + g2) / 2, g2),
+    //   y0 = M0 + M1 + M2,  y1 = M1 - M2 - M3.
+    // Each M_k is a channel-mixing product run by the same micro-kernel; bias, residual and ReLU are
+    // applied when the pair is written.
+    Op op;
+    op.kind = vertical ? OpKind::kWinoV : OpKind::kWinoH;
+    ConvOp& c = op.conv;
+    c.in = &in;
+    c.out = &out;
+    c.residual = residual;
+    c.oh = out.h;
+    c.ow = out.w;
+    c.n_out = out.channels;
+    c.n_ocp = out.channels / kGroup;
+    c.ntaps = 4;
+    c.dilation = dilation;
+    c.n_items = vertical ? pair_count(out.h, dilation) : out.h;
+    const float* wt = tensor(w, conv + ".weight");
+    const float* bs = tensor(w, conv + ".bias");
+    const int ci = in.channels;
+    im.pack(c, ci, in.cb,
+            [&](int o, int i, int k) {
+              const float* g = wt + (o * ci + i) * 3;
+              const double g0 = g[0], g1 = g[1], g2 = g[2];
+              const double gk = k == 0 ? g0 : k == 1 ? (g0 + g1 + g2) / 2 : k == 2 ? (g0 - g1 + g2) / 2 : g2;
+              return gk * bn.scale[static_cast<std::size_t>(o)];
+            },
+            [&](int o) { return static_cast<double>(bs[o]) * bn.scale[static_cast<std::size_t>(o)] + bn.shift[static_cast<std::size_t>(o)]; });
+    // Scratch per thread: U[4][cb][columns][8] and M[4][columns][16].
+    const int cols = vertical ? out.w : pair_count(out.w, dilation);
+    const std::size_t u = 4 * static_cast<std::size_t>(in.cb) * static_cast<std::size_t>(cols) * kBlock;
+    const std::size_t m = 4 * static_cast<std::size_t>(kWinoChunk) * kGroup;
+    im.wscratch_m_offset = std::max(im.wscratch_m_offset, u);
+    im.wscratch_stride = std::max(im.wscratch_stride, m);  // M's size; the total is fixed after all ops
+    im.ops.push_back(op);
+    return;
+  }
   Op op;
   ConvOp& c = op.conv;
   c.in = &in;
@@ -374,6 +438,150 @@ void conv_item(void* ctx, int item, int thread) noexcept {
   }
 }
 
+// Runs the four products M_k = G_k U_k of one 16-channel group over `cols` columns of U, into M.
+void wino_products(ErfNet::Impl& im, const ConvOp& c, int g, const float* u, std::ptrdiff_t u_cb_stride, std::ptrdiff_t u_k_stride,
+                   float* m, int cols) noexcept {
+  static constexpr float kZero[kGroup] = {};
+  const float* w = im.packed.get() + c.w_offset + static_cast<std::size_t>(g) * static_cast<std::size_t>(c.in->cb) * 4 * kBlock * kGroup;
+  for (int k = 0; k < 4; ++k) {
+    ConvRow r;
+    r.ntaps = 1;
+    r.taps[0] = u + k * u_k_stride;
+    r.tap_w[0] = w + static_cast<std::ptrdiff_t>(k) * kBlock * kGroup;
+    r.in_cb_stride = u_cb_stride;
+    r.w_icb_stride = 4 * kBlock * kGroup;
+    r.n_icb = c.in->cb;
+    r.in_xstep = kBlock;
+    r.bias = kZero;
+    r.out = m + static_cast<std::ptrdiff_t>(k) * kWinoChunk * kGroup;
+    r.out_cb_stride = kBlock;
+    r.out_xstep = kGroup;
+    r.relu = false;
+    r.nx = cols;
+    im.conv_fn(r);
+  }
+}
+
+// One output pair from the products: y0 = M0 + M1 + M2 + b at o0, y1 = M1 - M2 - M3 + b at o1; then the
+// residual and ReLU. Branch-free inner loops over the 8 lanes of a block, so the compiler vectorises them.
+template <bool Res, bool Relu, bool Second>
+inline void wino_store(const float* m, const float* bias, float* o0, float* o1, std::ptrdiff_t cb_stride) noexcept {
+  constexpr std::ptrdiff_t mk = static_cast<std::ptrdiff_t>(kWinoChunk) * kGroup;
+  const V8 zero = {};
+  for (int h = 0; h < 2; ++h) {
+    const float* q = m + h * kBlock;
+    const V8 b = ld8(bias + h * kBlock), m1 = ld8(q + mk), m2 = ld8(q + 2 * mk);
+    V8 y0 = ld8(q) + m1 + m2 + b;
+    if constexpr (Res) y0 += ld8(o0 + h * cb_stride);
+    if constexpr (Relu) y0 = y0 > zero ? y0 : zero;
+    st8(o0 + h * cb_stride, y0);
+    if constexpr (Second) {
+      V8 y1 = m1 - m2 - ld8(q + 3 * mk) + b;
+      if constexpr (Res) y1 += ld8(o1 + h * cb_stride);
+      if constexpr (Relu) y1 = y1 > zero ? y1 : zero;
+      st8(o1 + h * cb_stride, y1);
+    }
+  }
+}
+
+template <bool Res, bool Relu>
+inline void wino_store_pair(const float* m, const float* bias, float* o0, float* o1, std::ptrdiff_t cb_stride) noexcept {
+  if (o1) wino_store<Res, Relu, true>(m, bias, o0, o1, cb_stride);
+  else wino_store<Res, Relu, false>(m, bias, o0, o1, cb_stride);
+}
+
+inline void wino_store_any(const ConvOp& c, const float* m, const float* bias, float* o0, float* o1, std::ptrdiff_t cb_stride) noexcept {
+  if (c.residual) {
+    if (c.relu) wino_store_pair<true, true>(m, bias, o0, o1, cb_stride);
+    else wino_store_pair<true, false>(m, bias, o0, o1, cb_stride);
+  } else {
+    if (c.relu) wino_store_pair<false, true>(m, bias, o0, o1, cb_stride);
+    else wino_store_pair<false, false>(m, bias, o0, o1, cb_stride);
+  }
+}
+
+// Vertical (3x1) Winograd: one item is the pair of rows (y, y + d).
+void wino_v_item(void* ctx, int item, int thread) noexcept {
+  auto& im = *static_cast<ErfNet::Impl*>(ctx);
+  const ConvOp& c = im.cur->conv;
+  const Act& in = *c.in;
+  const Act& out = *c.out;
+  const int d = c.dilation, y = first_of_pair(item, d), W = in.w;
+  float* u = im.wscratch.get() + static_cast<std::size_t>(thread) * im.wscratch_stride;
+  float* m = u + im.wscratch_m_offset;
+  const std::ptrdiff_t ucb = static_cast<std::ptrdiff_t>(W) * kBlock, uk = ucb * in.cb;
+  const float* zero = im.zero_row.get();
+  auto row = [&](int r, int b) -> const float* { return r >= 0 && r < in.h ? in.at(r, b, 0) : zero; };
+  for (int b = 0; b < in.cb; ++b) {
+    const float* __restrict d0 = row(y - d, b);
+    const float* __restrict d1 = row(y, b);
+    const float* __restrict d2 = row(y + d, b);
+    const float* __restrict d3 = row(y + 2 * d, b);
+    float* __restrict u0 = u + b * ucb;
+    float* __restrict u1 = u0 + uk;
+    float* __restrict u2 = u1 + uk;
+    float* __restrict u3 = u2 + uk;
+    const int n = W * kBlock;
+    for (int k = 0; k < n; k += kBlock) {
+      const V8 a0 = ld8(d0 + k), a1 = ld8(d1 + k), a2 = ld8(d2 + k), a3 = ld8(d3 + k);
+      st8(u0 + k, a0 - a2);
+      st8(u1 + k, a1 + a2);
+      st8(u2 + k, a2 - a1);
+      st8(u3 + k, a1 - a3);
+    }
+  }
+  const bool second = y + d < out.h;
+  for (int g = 0; g < c.n_ocp; ++g) {
+    const float* bias = im.packed.get() + c.b_offset + static_cast<std::size_t>(g) * kGroup;
+    for (int x0 = 0; x0 < W; x0 += kWinoChunk) {
+      const int n = std::min(kWinoChunk, W - x0);
+      wino_products(im, c, g, u + x0 * kBlock, ucb, uk, m, n);
+      for (int x = 0; x < n; ++x)
+        wino_store_any(c, m + x * kGroup, bias, out.at(y, 2 * g, x0 + x), second ? out.at(y + d, 2 * g, x0 + x) : nullptr, out.cb_stride);
+    }
+  }
+}
+
+// Horizontal (1x3) Winograd: one item is a row; the pairs are columns (x, x + d).
+void wino_h_item(void* ctx, int y, int thread) noexcept {
+  auto& im = *static_cast<ErfNet::Impl*>(ctx);
+  const ConvOp& c = im.cur->conv;
+  const Act& in = *c.in;
+  const Act& out = *c.out;
+  const int d = c.dilation, J = pair_count(out.w, d);
+  float* u = im.wscratch.get() + static_cast<std::size_t>(thread) * im.wscratch_stride;
+  float* m = u + im.wscratch_m_offset;
+  const std::ptrdiff_t ucb = static_cast<std::ptrdiff_t>(J) * kBlock, uk = ucb * in.cb;
+  const std::ptrdiff_t dd = static_cast<std::ptrdiff_t>(d) * kBlock;
+  for (int b = 0; b < in.cb; ++b) {
+    const float* src = in.at(y, b, 0);  // zero padding of at least 2d columns on both sides
+    float* u0 = u + b * ucb;
+    int j = 0;
+    for (int x1 = 0; j < J; x1 += 2 * d) {  // runs of d consecutive first-of-pair columns
+      for (int x = x1; x < x1 + d && j < J; ++x, ++j) {
+        const float* p = src + x * kBlock;
+        float* q = u0 + j * kBlock;
+        const V8 a0 = ld8(p - dd), a1 = ld8(p), a2 = ld8(p + dd), a3 = ld8(p + 2 * dd);
+        st8(q, a0 - a2);
+        st8(q + uk, a1 + a2);
+        st8(q + 2 * uk, a2 - a1);
+        st8(q + 3 * uk, a1 - a3);
+      }
+    }
+  }
+  for (int g = 0; g < c.n_ocp; ++g) {
+    const float* bias = im.packed.get() + c.b_offset + static_cast<std::size_t>(g) * kGroup;
+    for (int j0 = 0; j0 < J; j0 += kWinoChunk) {
+      const int n = std::min(kWinoChunk, J - j0);
+      wino_products(im, c, g, u + j0 * kBlock, ucb, uk, m, n);
+      for (int j = 0; j < n; ++j) {
+        const int x = first_of_pair(j0 + j, d);
+        wino_store_any(c, m + j * kGroup, bias, out.at(y, 2 * g, x), x + d < out.w ? out.at(y, 2 * g, x + d) : nullptr, out.cb_stride);
+      }
+    }
+  }
+}
+
 void pool_item(void* ctx, int y, int /*thread*/) noexcept {
   auto& im = *static_cast<ErfNet::Impl*>(ctx);
   const PoolOp& p = im.cur->pool;
@@ -519,11 +727,14 @@ Result<std::unique_ptr<ErfNet>> ErfNet::create(const ErfNetWeights& weights, con
   }
 
   const int W = im->width, H = im->height;
-  bool ok = im->make_act(im->input, 3, H, W, 1) && im->make_act(im->x2, 16, H / 2, W / 2, 1) && im->make_act(im->t2a, 16, H / 2, W / 2, 1) &&
-            im->make_act(im->t2b, 16, H / 2, W / 2, 1) && im->make_act(im->x4, 64, H / 4, W / 4, 1) &&
-            im->make_act(im->t4a, 64, H / 4, W / 4, 1) && im->make_act(im->t4b, 64, H / 4, W / 4, 1) &&
-            im->make_act(im->x8, 128, H / 8, W / 8, 16) && im->make_act(im->t8a, 128, H / 8, W / 8, 16) &&
-            im->make_act(im->t8b, 128, H / 8, W / 8, 16);
+  // Zero columns on both sides: the 3x3 convs read 1, the 1x3 ones d, Winograd's pairs 2d.
+  im->winograd = opt.winograd;
+  const int p1 = 2, p8 = 32;
+  bool ok = im->make_act(im->input, 3, H, W, 1) && im->make_act(im->x2, 16, H / 2, W / 2, p1) && im->make_act(im->t2a, 16, H / 2, W / 2, p1) &&
+            im->make_act(im->t2b, 16, H / 2, W / 2, p1) && im->make_act(im->x4, 64, H / 4, W / 4, p1) &&
+            im->make_act(im->t4a, 64, H / 4, W / 4, p1) && im->make_act(im->t4b, 64, H / 4, W / 4, p1) &&
+            im->make_act(im->x8, 128, H / 8, W / 8, p8) && im->make_act(im->t8a, 128, H / 8, W / 8, p8) &&
+            im->make_act(im->t8b, 128, H / 8, W / 8, p8);
   if (!ok) return Error::make(ErrorCode::kUnavailable, "ErfNet: out of memory for the activations");
 
   // Encoder.
@@ -544,6 +755,11 @@ Result<std::unique_ptr<ErfNet>> ErfNet::create(const ErfNetWeights& weights, con
 
   // Every column a tap reads must lie in the image or its zero padding.
   for (const Op& op : im->ops) {
+    if (op.kind == OpKind::kWinoH) {
+      const int last = first_of_pair(pair_count(op.conv.ow, op.conv.dilation) - 1, op.conv.dilation);
+      if (op.conv.dilation > op.conv.in->pad || last + 2 * op.conv.dilation > op.conv.in->w - 1 + op.conv.in->pad)
+        return Error::make(ErrorCode::kInternal, "ErfNet: a Winograd pair reads beyond the padding");
+    }
     if (op.kind != OpKind::kConv) continue;
     const ConvOp& c = op.conv;
     for (int t = 0; t < c.ntaps; ++t) {
@@ -559,7 +775,11 @@ Result<std::unique_ptr<ErfNet>> ErfNet::create(const ErfNetWeights& weights, con
   im->scratch_stride = static_cast<std::size_t>(W / 2) * kGroup;
   im->scratch = alloc_floats(im->scratch_stride * static_cast<std::size_t>(opt.threads));
   im->best = alloc_floats(static_cast<std::size_t>(W) * static_cast<std::size_t>(opt.threads));
-  if (!im->packed || !im->logits || !im->scratch || !im->best) return Error::make(ErrorCode::kUnavailable, "ErfNet: out of memory");
+  im->zero_row = alloc_floats(static_cast<std::size_t>(W) * kBlock + 64);
+  im->wscratch_stride = ((im->wscratch_m_offset + im->wscratch_stride + 15) / 16) * 16;
+  im->wscratch = alloc_floats(std::max<std::size_t>(16, im->wscratch_stride * static_cast<std::size_t>(opt.threads)));
+  im->bytes += im->wscratch_stride * static_cast<std::size_t>(opt.threads) * sizeof(float);
+  if (!im->packed || !im->logits || !im->scratch || !im->best || !im->wscratch || !im->zero_row) return Error::make(ErrorCode::kUnavailable, "ErfNet: out of memory");
   std::memcpy(im->packed.get(), im->staging.data(), im->staging.size() * sizeof(float));
   im->bytes += (im->staging.size() + plane * static_cast<std::size_t>(im->classes) + im->scratch_stride * static_cast<std::size_t>(opt.threads) +
                 static_cast<std::size_t>(W) * static_cast<std::size_t>(opt.threads)) * sizeof(float) + plane;
@@ -573,8 +793,12 @@ namespace {
 void run_ops(ErfNet::Impl& im) noexcept {
   for (const Op& op : im.ops) {
     im.cur = &op;
-    if (op.kind == OpKind::kConv) im.pool->run(op.conv.oh * op.conv.n_ocp, conv_item, &im);
-    else im.pool->run(op.pool.out->h, pool_item, &im);
+    switch (op.kind) {
+      case OpKind::kConv: im.pool->run(op.conv.oh * op.conv.n_ocp, conv_item, &im); break;
+      case OpKind::kPool: im.pool->run(op.pool.out->h, pool_item, &im); break;
+      case OpKind::kWinoV: im.pool->run(op.conv.n_items, wino_v_item, &im); break;
+      case OpKind::kWinoH: im.pool->run(op.conv.n_items, wino_h_item, &im); break;
+    }
   }
   im.pool->run(im.height, argmax_item, &im);
 }
@@ -600,6 +824,7 @@ int ErfNet::height() const noexcept { return impl_->height; }
 int ErfNet::num_classes() const noexcept { return impl_->classes; }
 int ErfNet::threads() const noexcept { return impl_->pool->threads(); }
 KernelPath ErfNet::path() const noexcept { return impl_->path; }
+bool ErfNet::winograd() const noexcept { return impl_->winograd; }
 double ErfNet::reference_macs() const noexcept { return erfnet_macs(impl_->width, impl_->height, impl_->classes); }
 std::size_t ErfNet::memory_bytes() const noexcept { return impl_->bytes; }
 

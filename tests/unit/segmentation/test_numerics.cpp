@@ -38,16 +38,18 @@ TEST_P(Numerics, MatchesTorchOnEveryAvailablePath) {
   ASSERT_TRUE(w.ok()) << w.error().message;
   const test::Golden g = test::load_golden("erfnet_random_c7_64x48.golden");
   ASSERT_EQ(g.classes, 7);
-  for (int threads : {1, 2}) {
-    auto net = ErfNet::create(w.value(), ErfNetOptions{g.width, g.height, threads, path});
-    ASSERT_TRUE(net.ok()) << net.error().message;
-    ASSERT_EQ(net.value()->path(), path);
-    net.value()->run_rgb8(g.rgb.data(), static_cast<std::size_t>(g.width) * 3);
-    const Compared c = compare(*net.value(), g);
-    std::printf("[%s, %d thread(s)] max |logit - torch| = %.2e, argmax agreement %.4f\n", std::string(kernel_path_name(path)).c_str(),
-                threads, c.max_abs, c.argmax_agree);
-    EXPECT_LE(c.max_abs, 1e-3) << kernel_path_name(path) << " " << threads;
-    EXPECT_GE(c.argmax_agree, 0.999) << kernel_path_name(path) << " " << threads;
+  for (bool winograd : {true, false}) {
+    for (int threads : {1, 2}) {
+      auto net = ErfNet::create(w.value(), ErfNetOptions{g.width, g.height, threads, path, winograd});
+      ASSERT_TRUE(net.ok()) << net.error().message;
+      ASSERT_EQ(net.value()->path(), path);
+      net.value()->run_rgb8(g.rgb.data(), static_cast<std::size_t>(g.width) * 3);
+      const Compared c = compare(*net.value(), g);
+      std::printf("[%s, %s, %d thread(s)] max |logit - torch| = %.2e, argmax agreement %.4f\n", std::string(kernel_path_name(path)).c_str(),
+                  winograd ? "winograd" : "direct", threads, c.max_abs, c.argmax_agree);
+      EXPECT_LE(c.max_abs, 1e-3) << kernel_path_name(path) << " " << threads << " winograd " << winograd;
+      EXPECT_GE(c.argmax_agree, 0.999) << kernel_path_name(path) << " " << threads << " winograd " << winograd;
+    }
   }
 }
 
@@ -156,6 +158,35 @@ TEST(Engine, RefusesBadSizesThreadsAndPaths) {
 TEST(Engine, MacCountIsTheReferences) {
   // tools/erfnet_reference.py: 12.99 GMAC at 640x400 with 20 classes.
   EXPECT_NEAR(erfnet_macs(640, 400, 20) / 1e9, 12.99, 0.01);
+}
+
+}  // namespace
+}  // namespace ag::seg
+
+namespace ag::seg {
+namespace {
+
+TEST(Numerics, WinogradAndDirectAreDifferentComputationsOfTheSameLogits) {
+  auto w = load_weights(test::weights_path());
+  ASSERT_TRUE(w.ok()) << w.error().message;
+  const test::Golden g = test::load_golden("erfnet_random_c7_64x48.golden");
+  auto wino = ErfNet::create(w.value(), ErfNetOptions{g.width, g.height, 1, KernelPath::kAuto, true});
+  auto direct = ErfNet::create(w.value(), ErfNetOptions{g.width, g.height, 1, KernelPath::kAuto, false});
+  ASSERT_TRUE(wino.ok() && direct.ok());
+  EXPECT_TRUE(wino.value()->winograd());
+  EXPECT_FALSE(direct.value()->winograd());
+  wino.value()->run_rgb8(g.rgb.data(), static_cast<std::size_t>(g.width) * 3);
+  direct.value()->run_rgb8(g.rgb.data(), static_cast<std::size_t>(g.width) * 3);
+  double max_abs = 0;
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < g.logits.size(); ++i) {
+    const float a = wino.value()->logits()[i], b = direct.value()->logits()[i];
+    max_abs = std::max(max_abs, static_cast<double>(std::fabs(a - b)));
+    differ += a != b ? 1U : 0U;
+  }
+  std::printf("winograd vs direct: %zu of %zu logits differ in rounding, max %.2e\n", differ, g.logits.size(), max_abs);
+  EXPECT_GT(differ, 0U);  // another summation order: the Winograd path did run
+  EXPECT_LE(max_abs, 1e-4);
 }
 
 }  // namespace

@@ -26,6 +26,7 @@ struct ErfNetOptions {
   int width{0}, height{0};  // [px] input size; 0 = the weights' input size; multiples of 8
   int threads{1};           // threads that run a frame (the caller plus threads - 1 workers), 1..64
   KernelPath path{KernelPath::kAuto};
+  bool winograd{true};      // the 3x1 / 1x3 convolutions by 1-D Winograd F(2,3) (2/3 of the multiplies); false: direct
 };
 
 class ErfNet {
@@ -51,6 +52,7 @@ class ErfNet {
   [[nodiscard]] int num_classes() const noexcept;
   [[nodiscard]] int threads() const noexcept;
   [[nodiscard]] KernelPath path() const noexcept;
+  [[nodiscard]] bool winograd() const noexcept;
   // Multiply-accumulates of one frame in the reference network (what GFLOP/s figures count, x2).
   [[nodiscard]] double reference_macs() const noexcept;
   // Bytes of activations, packed weights and scratch held.
