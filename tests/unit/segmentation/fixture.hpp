@@ -18,6 +18,25 @@ namespace ag::seg::test {
 inline std::string data_path(const std::string& name) { return std::string(AG_SEG_DATA_DIR) + "/" + name; }
 inline std::string weights_path() { return data_path("erfnet_random_c7.agw"); }
 
+// The fixture weights, loaded once per test executable (loading is slow under qemu).
+inline const ErfNetWeights& fixture_weights() {
+  static const ErfNetWeights w = [] {
+    auto r = load_weights(weights_path());
+    if (!r.ok()) {
+      ADD_FAILURE() << r.error().message;
+      return ErfNetWeights{};
+    }
+    return r.value();
+  }();
+  return w;
+}
+
+// A w x h crop of the golden image (tests that compare engines with each other use small frames).
+struct Crop {
+  int width{0}, height{0};
+  std::vector<std::uint8_t> rgb;
+};
+
 inline std::vector<std::uint8_t> read_bytes(const std::string& path) {
   std::ifstream f(path, std::ios::binary);
   return {std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>()};
@@ -59,4 +78,19 @@ inline Golden load_golden(const std::string& name) {
   return g;
 }
 
+inline Crop crop(const Golden& g, int w, int h) {
+  Crop c{w, h, {}};
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < 3 * w; ++x) c.rgb.push_back(g.rgb[static_cast<std::size_t>(y * 3 * g.width + x)]);
+  return c;
+}
+
+}  // namespace ag::seg::test
+
+namespace ag::seg::test {
+// What the tests hold of the cached weights: the same spelling as a Result's value().
+struct WeightsRef {
+  const ErfNetWeights& w;
+  [[nodiscard]] const ErfNetWeights& value() const { return w; }
+};
 }  // namespace ag::seg::test

@@ -22,7 +22,7 @@ TEST(NoAllocation, TheCounterSeesAllocations) {
 TEST(NoAllocation, FramesOnEveryPathAndThreadCount) {
   auto w = load_weights(test::weights_path());
   ASSERT_TRUE(w.ok()) << w.error().message;
-  const test::Golden g = test::load_golden("erfnet_random_c7_64x48.golden");
+  const test::Crop g = test::crop(test::load_golden("erfnet_random_c7_64x48.golden"), 32, 24);
   std::vector<float> chw(3 * static_cast<std::size_t>(g.width) * static_cast<std::size_t>(g.height), 0.25F);
   for (KernelPath p : {KernelPath::kPortable, best_kernel_path()}) {
     for (int threads : {1, 2}) {
@@ -30,10 +30,8 @@ TEST(NoAllocation, FramesOnEveryPathAndThreadCount) {
       ASSERT_TRUE(net.ok()) << net.error().message;
       net.value()->run_rgb8(g.rgb.data(), static_cast<std::size_t>(g.width) * 3);  // warm-up, outside the window
       AllocationWindow window;
-      for (int k = 0; k < 2; ++k) {
-        net.value()->run_rgb8(g.rgb.data(), static_cast<std::size_t>(g.width) * 3);
-        net.value()->run_planar(chw.data());
-      }
+      net.value()->run_rgb8(g.rgb.data(), static_cast<std::size_t>(g.width) * 3);
+      net.value()->run_planar(chw.data());
       EXPECT_EQ(window.allocations(), 0U) << kernel_path_name(p) << ", " << threads << " thread(s)";
     }
   }
