@@ -104,6 +104,9 @@ constexpr const char* kEvalMappingHelp =
     "  --no-random-faults      no random tracking losses or GPS dropouts\n"
     "  --max-duration T        stop after T simulated seconds even if the survey is not done (3600)\n"
     "  --config-dir DIR        simulator model overrides (as for run)\n"
+    "  --erfnet WEIGHTS.agw    map with ErfNet's classes (the segmentation stage on keyframes) instead of the\n"
+    "                          camera's ground truth\n"
+    "  --set SECTION.KEY=VALUE quadrotor role parameter (repeatable), e.g. segmentation.threads=2\n"
     "  --quiet                 no progress line\n";
 
 constexpr const char* kEvalLocalizationHelp =
@@ -470,6 +473,17 @@ int eval_mapping_cmd(const Args& a) {
   o.max_duration_s = number(a, "max-duration", o.max_duration_s);
   o.config_dir = a.get("config-dir");
   o.quiet = a.has("quiet");
+  if (a.has("set")) {
+    for (const auto& s : a.opt.at("set")) {
+      if (s.find('=') == std::string::npos || s.find('.') == std::string::npos) usage_error("--set needs SECTION.KEY=VALUE, got '" + s + "'");
+      o.set.push_back(s);
+    }
+  }
+  if (a.has("erfnet")) {  // ErfNet labels instead of the camera's ground truth: the segmentation stage on, the mapper on its output
+    o.set.push_back("segmentation.labels=erfnet");
+    o.set.push_back("segmentation.weights=" + a.get("erfnet"));
+    o.set.push_back("ortho_map.keyframes_channel=keyframes_labelled");
+  }
   if (!(o.speed_mps > 0) || !(o.altitude_m > 0)) usage_error("--speed and --altitude must be positive");
   const bool tty = isatty(2) != 0;
   double last_print = -1;

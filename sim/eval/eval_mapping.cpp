@@ -102,6 +102,7 @@ Result<MappingMetrics> eval_mapping(const EvalMappingOptions& o, const ProgressF
   r.keep_uav_truth = true;
   r.stop_when_survey_done = true;
   r.progress = !o.quiet;
+  r.uav_config = o.set;
 
   MappingMetrics m;
   mapping::MapRaster raster;

@@ -1024,7 +1024,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
       u->vo_log = CsvLog(t.out / "vo_uav.csv", "t_s,segment,tracking,x,y,z,roll_rad,pitch_rad,yaw_rad");
       u->frame_log = CsvLog(t.out / "camera_frames.csv", "t_s,frame,x_m,y_m,z_m,yaw_rad");
     }
-    auto role = make_role(uav_role(), 0, "uav", cfgs);
+    auto role = make_role(uav_role(), 0, "uav", cfgs, opt.uav_config);
     if (!role) return role.error();
     u->role = std::move(role).value();
     auto cam_w = u->role->channels().ring_writer<CameraImageMsg, kCameraRing>("camera");

@@ -39,3 +39,33 @@ TEST(NoAllocation, FramesOnEveryPathAndThreadCount) {
 
 }  // namespace
 }  // namespace ag::seg
+
+#include "stage_rig.hpp"
+
+namespace ag::seg {
+namespace {
+
+TEST(NoAllocation, SegmentationStageStepsInBothModes) {
+  const std::string path = test::weights_path();
+  for (const char* mode : {"gt", "erfnet"}) {
+#if defined(__aarch64__)
+    if (std::string(mode) == "erfnet") continue;  // 640x400 frames: too slow under qemu (the engine is checked above)
+#endif
+    auto rig = test::StageRig::make({std::string("segmentation.labels=") + mode, "segmentation.weights=" + path, "segmentation.threads=2"});
+    ASSERT_NE(rig, nullptr);
+    auto kf = std::make_unique<KeyframeMsg>();
+    EXPECT_EQ(rig->kf_w.push(*kf), 0U);
+    rig->step(0);  // warm-up
+    EXPECT_EQ(rig->kf_w.push(*kf), 0U);
+    {
+      test_alloc::AllocationWindow window;
+      rig->stage->step(1);
+      EXPECT_EQ(window.allocations(), 0U) << mode;
+    }
+    rig->sink->step(1);
+    EXPECT_EQ(rig->sink->received, 2) << mode;
+  }
+}
+
+}  // namespace
+}  // namespace ag::seg

@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "airground/platform/result.hpp"
 #include "airground/sim/runner.hpp"
@@ -25,6 +26,7 @@ struct EvalMappingOptions {
   double gps_outlier_m{50};
   bool random_faults{true};       // the models' own random tracking losses and GPS dropouts
   bool quiet{false};
+  std::vector<std::string> set{};  // "section.key=value" on the quadrotor's role config (e.g. segmentation.labels=erfnet)
 };
 
 struct MappingMetrics {
