@@ -11,7 +11,9 @@
 #include <fstream>
 #include <string>
 #include <thread>
+#include <vector>
 
+#include "airground/core/classes.hpp"
 #include "airground/segmentation/erfnet.hpp"
 #include "airground/sim/world_png.hpp"
 
@@ -27,8 +29,8 @@ constexpr const char* kSegmentHelp =
     "Writes into DIR:\n"
     "  logits.npy          float32, classes x height x width\n"
     "  classes.png         8-bit argmax (index in logit order)\n"
-    "  classes_colour.png  the argmax in config/classes.yaml's colours (when the model has at most 7 classes,\n"
-    "                      logit i taken as class id i)\n"
+    "  classes_colour.png  the argmax in config/classes.yaml's colours (logit i is the class the weights name\n"
+    "                      i-th, or class id i when they name none)\n"
     "  --threads N   threads for the frame (default: all cores)\n"
     "  --path P      kernel path (default auto: the fastest this CPU has)\n";
 
@@ -132,9 +134,27 @@ int segment_cmd(int argc, char** argv) {
     return 1;
   }
   std::string colour;
-  if (e.num_classes() <= 7) {
-    cv::Mat c;
-    cv::cvtColor(ag::sim::class_display_image(cls), c, cv::COLOR_RGB2BGR);
+  // Logit index -> class id: by the weights' names, else the table's ids in order.
+  const auto& names = w.value().header.class_names;
+  const ag::ClassTable& table = ag::ClassTable::builtin();
+  std::vector<std::uint8_t> id_of(256, 255);
+  bool mappable = true;
+  for (int i = 0; i < e.num_classes(); ++i) {
+    if (!names.empty()) {
+      const auto id = table.by_name(names[static_cast<std::size_t>(i)]);
+      if (id) id_of[static_cast<std::size_t>(i)] = ag::raw(*id);
+      else mappable = false;
+    } else if (table.valid_id(static_cast<std::uint8_t>(i)) && i != 255) {
+      id_of[static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(i);
+    } else {
+      mappable = false;
+    }
+  }
+  if (mappable) {
+    cv::Mat ids(H, W, CV_8U), c;
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) ids.at<std::uint8_t>(y, x) = id_of[cls.at<std::uint8_t>(y, x)];
+    cv::cvtColor(ag::sim::class_display_image(ids), c, cv::COLOR_RGB2BGR);
     colour = (fs::path(out) / "classes_colour.png").string();
     if (!cv::imwrite(colour, c)) colour.clear();
   }
