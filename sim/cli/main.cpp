@@ -33,6 +33,7 @@
 #include "airground/sim/world_png.hpp"
 
 namespace fs = std::filesystem;
+int segment_cmd(int argc, char** argv);  // segment.cpp
 using namespace ag;
 using namespace ag::sim;
 
@@ -53,6 +54,8 @@ constexpr const char* kUsage =
     "  airground-sim eval localization --world W --seed S --init-error 16 --map gt|online --out DIR [options]\n"
     "                                  (see eval localization --help)\n"
     "  airground-sim eval planning --world W --seed S --pairs 20 --out DIR   (see eval planning --help)\n"
+    "  airground-sim segment --weights FILE --image IMAGE.png --out DIR [--threads N]   (ErfNet: logits.npy,\n"
+    "                        classes.png; see segment --help)\n"
     "  airground-sim config --out DIR   (every simulator model's parameters with units and ranges, as\n"
     "                                    YAML files that 'run --config-dir DIR' reads back)\n\n"
     "--world W is a world directory or 'default' (the built-in 400 m world, seed 42).\n"
@@ -103,7 +106,9 @@ constexpr const char* kEvalMappingHelp =
     "  --no-random-faults      no random tracking losses or GPS dropouts\n"
     "  --max-duration T        stop after T simulated seconds even if the survey is not done (3600)\n"
     "  --config-dir DIR        simulator model overrides (as for run)\n"
-    "  --set SECTION.KEY=VALUE any parameter of the quadrotor's role config, e.g. ortho_map.block_size=11 (repeatable)\n"
+    "  --erfnet WEIGHTS.agw    map with ErfNet's classes (the segmentation stage on keyframes) instead of the\n"
+    "                          camera's ground truth\n"
+    "  --set SECTION.KEY=VALUE quadrotor role parameter (repeatable), e.g. segmentation.threads=2\n"
     "  --quiet                 no progress line\n";
 
 constexpr const char* kEvalPlanningHelp =
@@ -493,9 +498,15 @@ int eval_mapping_cmd(const Args& a) {
   o.config_dir = a.get("config-dir");
   o.quiet = a.has("quiet");
   if (a.has("set")) {
-    for (const auto& s : a.opt.at("set"))
+    for (const auto& s : a.opt.at("set")) {
       if (s.find('=') == std::string::npos || s.find('.') == std::string::npos) usage_error("--set needs SECTION.KEY=VALUE, got '" + s + "'");
-    o.set = a.opt.at("set");
+      o.set.push_back(s);
+    }
+  }
+  if (a.has("erfnet")) {  // ErfNet labels instead of the camera's ground truth: the segmentation stage on, the mapper on its output
+    o.set.push_back("segmentation.labels=erfnet");
+    o.set.push_back("segmentation.weights=" + a.get("erfnet"));
+    o.set.push_back("ortho_map.keyframes_channel=keyframes_labelled");
   }
   if (!(o.speed_mps > 0) || !(o.altitude_m > 0)) usage_error("--speed and --altitude must be positive");
   const bool tty = isatty(2) != 0;
@@ -656,6 +667,7 @@ int main(int argc, char** argv) {
     return false;
   }();
   try {
+    if (cmd == "segment") return segment_cmd(argc, argv);
     if (cmd == "world") {
       if (argc < 3) usage_error("world needs generate, import or show");
       const std::string sub = argv[2];

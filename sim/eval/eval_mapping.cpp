@@ -125,11 +125,11 @@ Result<MappingMetrics> eval_mapping(const EvalMappingOptions& o, const ProgressF
   r.uav_speed_mps = o.speed_mps;
   r.survey_overlap = o.overlap;
   r.config_dir = models.value();
-  r.uav_config = o.set;
   r.record = RecordLevel::kNone;
   r.keep_uav_truth = true;
   r.stop_when_survey_done = true;
   r.progress = !o.quiet;
+  r.uav_config = o.set;
 
   MappingMetrics m;
   mapping::MapRaster raster;

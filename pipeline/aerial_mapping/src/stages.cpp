@@ -265,7 +265,7 @@ Status OrthoMapStage::init(StageContext& ctx) {
   clock_ = &ctx.clock;
   body_from_camera_ = nadir_body_from_camera();
 
-  auto kf = ctx.channels.ring_reader<KeyframeMsg, kKeyframeRing>("keyframes");
+  auto kf = ctx.channels.ring_reader<KeyframeMsg, kKeyframeRing>(v.text("keyframes_channel"));
   if (!kf) return kf.error();
   keyframes_ = kf.value();
   auto poses = ctx.channels.latest_reader<KeyframePosesMsg>("keyframe_poses");

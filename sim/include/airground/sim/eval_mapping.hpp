@@ -25,8 +25,8 @@ struct EvalMappingOptions {
   double gps_outlier_at_s{-1};    // >= 0: one GPS fix this long after the start is off by gps_outlier_m
   double gps_outlier_m{50};
   bool random_faults{true};       // the models' own random tracking losses and GPS dropouts
-  std::vector<std::string> set{};  // "section.key=value" on the quadrotor's role config
   bool quiet{false};
+  std::vector<std::string> set{};  // "section.key=value" on the quadrotor's role config (e.g. segmentation.labels=erfnet)
 };
 
 struct MappingMetrics {

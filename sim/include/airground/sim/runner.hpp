@@ -123,8 +123,8 @@ struct RunOptions {
                                   // never more than its ring takes: the rest follow on the next steps)
   double init_error_m{0};         // [m] the initial pose published at start is the truth moved this far (random direction by seed)
   double init_yaw_error_deg{0};   // [deg] ... and turned by this much (random sign); sigmas given = these (at least 0.5 m / 2 deg)
-  std::vector<std::string> uav_config{};  // "section.key=value" set on the quadrotor's role config
   std::vector<std::string> ugv_config{};  // "section.key=value" set on every ground robot's role config
+  std::vector<std::string> uav_config{};  // "section.key=value" set on the quadrotor's role config
 
   // --- scripted ground robots
   // Per ground robot (index 0-based), a road route to drive once (a polyline in the map frame, e.g. from
