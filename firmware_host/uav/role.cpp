@@ -20,7 +20,7 @@ constexpr StageSpec kUavStages[] = {
     {"status", &StatusStage::make, 1.0, 2'000, 10, -1, StatusStage::kParams, "scheduler counters, once a second"},
     {"pose_graph", &PoseGraphStage::make, 5.0, 150'000, 30, -1, PoseGraphStage::kParams,
      "odometry + GPS pose graph (Ceres), keyframes every 2 m, keyframe poses after each solve"},
-    {"segmentation", &seg::SegmentationStage::make, 2.5, 300'000, 25, -1, seg::SegmentationStage::kParams,
+    {"segmentation", &seg::SegmentationStage::make, 2.5, 300'000, 24, -1, seg::SegmentationStage::kParams,
      "ErfNet on each keyframe (labels = erfnet), or the camera's classes relayed (gt), onto keyframes_labelled"},
     {"ortho_map", &OrthoMapStage::make, 5.0, 150'000, 20, -1, OrthoMapStage::kParams,
      "dense stereo between keyframes, binned into the 0.5 m ortho-map tiles"},

@@ -20,9 +20,11 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// Measured on this mission (docs/benchmarks.md) with a margin; issue 4's goals are 0.5 m and 1.5 m.
-constexpr double kElevationGroundBoundM = 2.5;
-constexpr double kElevationAllBoundM = 8.0;
+// Issue 4's goals are 0.5 m (flat ground) and 1.5 m (every cell). Measured on this mission (docs/mapping.md):
+// 0.56 m and 0.92 m (before the ground check and the minimum elevation support: 1.1 m and 2.7 m). The
+// ground bound keeps a margin over the measurement until the flat-ground goal is met.
+constexpr double kElevationGroundBoundM = 0.8;
+constexpr double kElevationAllBoundM = 1.5;
 
 fs::path out_root() {
   const char* b = std::getenv("AG_BINARY_DIR");
