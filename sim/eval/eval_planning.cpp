@@ -57,27 +57,7 @@ MapRaster resample(const World& world) {
   for (std::int32_t r = 0; r < m.h; ++r)
     for (std::int32_t c = 0; c < m.w; ++c) {
       const double x = m.ox + (c + 0.5) * res, y = m.oy + (r + 0.5) * res;
-      auto c0 = static_cast<std::int32_t>(std::ceil(g.col_f(x - 0.5 * res) - 0.5));
-      auto c1 = static_cast<std::int32_t>(std::ceil(g.col_f(x + 0.5 * res) - 0.5)) - 1;
-      auto r0 = static_cast<std::int32_t>(std::ceil(g.row_f(y + 0.5 * res) - 0.5));
-      auto r1 = static_cast<std::int32_t>(std::ceil(g.row_f(y - 0.5 * res) - 0.5)) - 1;
-      if (c0 > c1 || r0 > r1) {
-        c0 = c1 = g.col(x);
-        r0 = r1 = g.row(y);
-      }
-      std::array<std::uint16_t, 256> votes{};
-      std::uint8_t best = 255;
-      std::uint16_t best_n = 0;
-      for (std::int32_t wr = r0; wr <= r1; ++wr)
-        for (std::int32_t wc = c0; wc <= c1; ++wc) {
-          if (!g.contains(wc, wr)) continue;
-          const std::uint8_t k = world.class_id.at<std::uint8_t>(wr, wc);
-          if (++votes[k] > best_n) {
-            best_n = votes[k];
-            best = k;
-          }
-        }
-      m.cls[static_cast<std::size_t>(r) * static_cast<std::size_t>(m.w) + static_cast<std::size_t>(c)] = best;
+      m.cls[static_cast<std::size_t>(r) * static_cast<std::size_t>(m.w) + static_cast<std::size_t>(c)] = summarise_cell(world, x, y, res).cls;
     }
   return m;
 }

@@ -291,7 +291,6 @@ void rejoin_route(Team& t, Ugv& u, TimeNs now) {
 // north-west; the world cell under its centre when none does, as for worlds coarser than the map) and
 // the mean surface elevation (terrain + height) of those cells. Cells outside the world are unknown.
 void build_gt_tile(const World& w, std::int32_t tx, std::int32_t ty, MapTileMsg& m) {
-  const GridGeometry& g = w.grid();
   const double res = kMapResolutionM;
   m.tx = tx;
   m.ty = ty;
@@ -301,32 +300,9 @@ void build_gt_tile(const World& w, std::int32_t tx, std::int32_t ty, MapTileMsg&
       const auto i = static_cast<std::size_t>(r) * kTileCells + static_cast<std::size_t>(c);
       const double x = (static_cast<double>(tx) * kTileCells + c + 0.5) * res;
       const double y = (static_cast<double>(ty) * kTileCells + r + 0.5) * res;
-      auto c0 = static_cast<std::int32_t>(std::ceil(g.col_f(x - 0.5 * res) - 0.5));
-      auto c1 = static_cast<std::int32_t>(std::ceil(g.col_f(x + 0.5 * res) - 0.5)) - 1;
-      auto r0 = static_cast<std::int32_t>(std::ceil(g.row_f(y + 0.5 * res) - 0.5));
-      auto r1 = static_cast<std::int32_t>(std::ceil(g.row_f(y - 0.5 * res) - 0.5)) - 1;
-      if (c0 > c1 || r0 > r1) {
-        c0 = c1 = g.col(x);
-        r0 = r1 = g.row(y);
-      }
-      std::array<std::uint16_t, 256> votes{};
-      std::uint8_t best = 255;
-      std::uint16_t best_n = 0;
-      double sum = 0;
-      int n = 0;
-      for (std::int32_t wr = r0; wr <= r1; ++wr)
-        for (std::int32_t wc = c0; wc <= c1; ++wc) {
-          if (!g.contains(wc, wr)) continue;
-          const std::uint8_t k = w.class_id.at<std::uint8_t>(wr, wc);
-          if (++votes[k] > best_n) {
-            best_n = votes[k];
-            best = k;
-          }
-          sum += static_cast<double>(w.surface_at(wc, wr));
-          ++n;
-        }
-      m.cls[i] = n > 0 ? best : std::uint8_t{255};
-      m.elevation[i] = n > 0 ? static_cast<float>(sum / n) : std::numeric_limits<float>::quiet_NaN();
+      const WorldCellSummary cell = summarise_cell(w, x, y, res);
+      m.cls[i] = cell.cls;
+      m.elevation[i] = static_cast<float>(cell.surface);
     }
   }
 }

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <optional>
 #include <sstream>
 #include <vector>
@@ -333,6 +334,35 @@ Result<cv::Mat> read_float_layer(const std::string& path, const WorldHeader& h, 
 }
 
 }  // namespace
+
+WorldCellSummary summarise_cell(const World& w, double x, double y, double res) noexcept {
+  const GridGeometry& g = w.grid();
+  auto c0 = static_cast<std::int32_t>(std::ceil(g.col_f(x - 0.5 * res) - 0.5));
+  auto c1 = static_cast<std::int32_t>(std::ceil(g.col_f(x + 0.5 * res) - 0.5)) - 1;
+  auto r0 = static_cast<std::int32_t>(std::ceil(g.row_f(y + 0.5 * res) - 0.5));
+  auto r1 = static_cast<std::int32_t>(std::ceil(g.row_f(y - 0.5 * res) - 0.5)) - 1;
+  if (c0 > c1 || r0 > r1) {
+    c0 = c1 = g.col(x);
+    r0 = r1 = g.row(y);
+  }
+  std::array<std::uint16_t, 256> votes{};
+  std::uint16_t best_n = 0;
+  WorldCellSummary s;
+  double sum = 0;
+  for (std::int32_t wr = r0; wr <= r1; ++wr)
+    for (std::int32_t wc = c0; wc <= c1; ++wc) {
+      if (!g.contains(wc, wr)) continue;
+      const std::uint8_t k = w.class_id.at<std::uint8_t>(wr, wc);
+      if (++votes[k] > best_n) {
+        best_n = votes[k];
+        s.cls = k;
+      }
+      sum += static_cast<double>(w.surface_at(wc, wr));
+      ++s.count;
+    }
+  s.surface = s.count > 0 ? sum / s.count : std::numeric_limits<double>::quiet_NaN();
+  return s;
+}
 
 Status World::validate(const ClassTable& classes) const {
   const auto bad = [](const std::string& what) { return Error::make(ErrorCode::kMalformed, "world: " + what); };

@@ -64,4 +64,14 @@ Status save_world(const World& w, const std::string& dir);
 // Every file is checked; a missing, truncated or inconsistent file is an error naming it.
 Result<World> load_world(const std::string& dir);
 
+// The world under one square map cell of edge `res` centred on (x, y): the majority class of the world
+// cells whose centres fall inside it (the single cell under the centre when the map cell is finer than
+// the world's), and the mean surface height over them. `count` = 0 (class 255, surface NaN) off the world.
+struct WorldCellSummary {
+  std::uint8_t cls{255};
+  double surface{0};
+  int count{0};
+};
+WorldCellSummary summarise_cell(const World& w, double x, double y, double res) noexcept;
+
 }  // namespace ag::sim
