@@ -21,6 +21,8 @@
 #include <unordered_set>
 
 #include "airground/aerial_mapping/stages.hpp"
+#include "airground/comms/stage.hpp"
+#include "airground/core/drive_messages.hpp"
 #include "airground/core/messages.hpp"
 #include "airground/platform/clock.hpp"
 #include "airground/platform/executor.hpp"
@@ -33,6 +35,7 @@
 #include "airground/sim/lidar.hpp"
 #include "airground/sim/quadrotor.hpp"
 #include "airground/sim/radio.hpp"
+#include "airground/sim/radio_link.hpp"
 #include "airground/sim/raycast.hpp"
 #include "airground/sim/rng.hpp"
 #include "airground/sim/scripted_driver.hpp"
@@ -155,6 +158,12 @@ struct Ugv {
   std::array<std::pair<TimeNs, Pose2>, kHistory> history{};
   std::size_t history_n{0};
   SimProbeStage* probe{nullptr};
+  bool killed{false};
+  TimeNs killed_at{-1};
+  std::uint64_t wheel_commands{0};
+  LatestWriter<GoalMsg> goal_out{};
+  bool goal_pending{false};
+  GoalMsg goal{};
   // The robot's own localization against the truth (the probe samples it).
   std::uint64_t loc_samples{0}, loc_tracking{0};
   std::vector<float> loc_errors{};           // [m] tracking samples
@@ -209,7 +218,14 @@ struct Team {
   std::unique_ptr<CameraRenderer> camera;
   std::unique_ptr<LidarSimulator> lidar;
   std::unique_ptr<RoadRouter> router;
-  std::unique_ptr<RadioModel> radio;
+  std::unique_ptr<RadioModel> radio;   // the heartbeat radio (without gossip)
+  std::unique_ptr<RadioNet> net;       // gossip: the radio every comms stage talks over
+  RadioModel* air{nullptr};            // whichever of the two is on
+  int base_node{0};
+  bool base_killed{false};
+  double wheel_radius_m{0.098};
+  std::vector<RoleInstance*> ugv_roles;  // for RunOptions::observe
+  TimeNs next_observe{0};
   std::unique_ptr<Uav> uav;
   std::vector<std::unique_ptr<Ugv>> ugvs;
   std::unique_ptr<RoleInstance> base;
@@ -430,6 +446,9 @@ class SimProbeStage final : public Stage {
     auto loc = ctx.channels.latest_reader<LocalizationMsg>("localization");
     if (!loc) return loc.error();
     loc_ = loc.value();
+    auto cmd = ctx.channels.latest_reader<WheelCommandMsg>("wheel_command");
+    if (!cmd) return cmd.error();
+    cmd_ = cmd.value();
     if (p.boolean("scans")) {
       auto r = ctx.channels.ring_reader<LidarScanMsg, kLidarRing>("lidar_scan");
       if (!r) return r.error();
@@ -479,6 +498,10 @@ class SimProbeStage final : public Stage {
       const InitialPoseMsg& m = init_.read();
       if (tap.initial_pose) tap.initial_pose(i, m);
     }
+    if (cmd_.fresh()) {
+      command_ = cmd_.read();
+      new_command_ = true;
+    }
     if (loc_.fresh()) received_ = true;
     const LocalizationMsg& loc = loc_.read();
     if (now >= next_sample_) {
@@ -512,12 +535,20 @@ class SimProbeStage final : public Stage {
       s.released = ugv->released;
       s.held = ugv->held;
       s.route_done = ugv->route_done;
+      s.killed = ugv->killed;
       s.role = ugv->role.get();
       team->opt.sample(s);
     }
   }
 
   [[nodiscard]] bool received() const noexcept { return received_; }
+  // The drive stage's newest wheel command, once per new value (drive_by_stages).
+  bool take_command(WheelCommandMsg& out) noexcept {
+    if (!new_command_) return false;
+    new_command_ = false;
+    out = command_;
+    return true;
+  }
 
   Team* team{nullptr};
   Ugv* ugv{nullptr};
@@ -528,6 +559,9 @@ class SimProbeStage final : public Stage {
   RingReader<WheelOdometryMsg, kWheelOdometryRing> odom_{};
   RingReader<MapTileMsg, kMapTileRing> tiles_{};
   LatestReader<InitialPoseMsg> init_{};
+  LatestReader<WheelCommandMsg> cmd_{};
+  WheelCommandMsg command_{};
+  bool new_command_{false};
   bool read_scans_{false}, read_odom_{false}, read_tiles_{false}, read_init_{false};
   bool received_{false};
   TimeNs next_sample_{0}, next_user_sample_{0};
@@ -576,6 +610,25 @@ void SimWorldStage::step(TimeNs now) noexcept {
 
   // The quadrotor's map as the ground robots' source: which tiles changed (as of the last step).
   if (t.ortho != nullptr) scan_online_map(t);
+  if (t.opt.observe && now >= t.next_observe) {
+    t.next_observe += t.sample_period;
+    t.opt.observe(now, t.uav ? t.uav->role.get() : nullptr, t.ugv_roles, t.base.get());
+  }
+  for (const RunOptions::Kill& k : t.opt.kills) {
+    if (now < from_seconds(k.at_s)) continue;
+    if (k.ugv < 0) {
+      if (!t.base_killed) AG_LOG_WARN("sim", "base station powered off at %.1f s", to_seconds(now));
+      t.base_killed = true;
+    } else if (!t.ugvs[static_cast<std::size_t>(k.ugv)]->killed) {
+      Ugv& u = *t.ugvs[static_cast<std::size_t>(k.ugv)];
+      u.killed = true;
+      u.killed_at = now;
+      AG_LOG_WARN("sim", "%s powered off at %.1f s at (%.1f, %.1f)", u.name.c_str(), to_seconds(now), u.vehicle.pose().x, u.vehicle.pose().y);
+    }
+  }
+  // A powered-off node is moved far out of everyone's range: nothing it sends arrives, nothing reaches it.
+  constexpr double kFarAway = 1e9;
+  if (t.air && t.base_killed) t.air->set_position(t.base_node, -kFarAway, -kFarAway);
 
   // Ground robots: scripted pursuit from ground truth, exact arcs, wheel odometry.
   for (auto& up : t.ugvs) {
@@ -585,6 +638,12 @@ void SimWorldStage::step(TimeNs now) noexcept {
       u.init_pose.published = now;
       u.init_out.publish(u.init_pose);
       u.init_published = true;
+    }
+    if (u.goal_pending) {  // a test's goal for a table without a mission stage
+      u.goal.stamp = now;
+      u.goal.published = now;
+      u.goal_out.publish(u.goal);
+      u.goal_pending = false;
     }
     if (!u.released && now >= u.next_wait_check) {
       u.next_wait_check += kNsPerS;
@@ -612,13 +671,28 @@ void SimWorldStage::step(TimeNs now) noexcept {
       if (u.on_route) ++u.goals_reached;
       new_leg(t, u, now);
     }
-    double v = 0, w = 0;
-    if (u.released && !u.held) u.pursuit.command(u.vehicle.pose(), v, w);
-    u.vehicle.command_twist(v, w);
+    if (t.opt.drive_by_stages) {
+      // The robot's own drive stage: its newest wheel command (the vehicle's command timeout stops it
+      // when the stage falls silent, like the base's watchdog).
+      WheelCommandMsg cmd;
+      if (u.probe != nullptr && u.probe->take_command(cmd)) {
+        ++u.wheel_commands;
+        if (u.killed || u.held) u.vehicle.command_wheels(0, 0);
+        else u.vehicle.command_wheels(cmd.left_mps / t.wheel_radius_m, cmd.right_mps / t.wheel_radius_m);
+      } else if (u.killed || u.held) {
+        u.vehicle.command_wheels(0, 0);
+      }
+    } else {
+      double v = 0, w = 0;
+      if (u.released && !u.held && !u.killed) u.pursuit.command(u.vehicle.pose(), v, w);
+      u.vehicle.command_twist(v, w);
+    }
     if (dt > 0 && u.vehicle.step(dt, *t.world)) {  // a collision: the vehicle stopped; replan from here
       AG_LOG_WARN("sim", "%s: collision at (%.2f, %.2f) yaw %.2f; replanning", u.name.c_str(), u.vehicle.pose().x,
                   u.vehicle.pose().y, u.vehicle.pose().yaw);
-      if (u.scripted) {
+      if (t.opt.drive_by_stages) {
+        // nothing to do: the robot's own stages see it stop and go on
+      } else if (u.scripted) {
         if (!u.route_done) rejoin_route(t, u, now);
       } else {
         new_leg(t, u, now);
@@ -641,14 +715,14 @@ void SimWorldStage::step(TimeNs now) noexcept {
       if (u.odom_out.push(m) > 0) ++u.channel_drops;
       ++u.odom_published;
     }
-    if (t.opt.ugv_map != UgvMapSource::kNone) publish_tiles(t, u, now);
+    if (t.opt.ugv_map != UgvMapSource::kNone && !t.opt.gossip) publish_tiles(t, u, now);
     if (log_now) {
       const Pose3 p = u.vehicle.pose3();
       if (u.truth_log) std::fprintf(u.truth_log.get(), "%.3f,%.3f,%.3f,%.3f,%.4f,%.4f,%.4f\n", to_seconds(now), p.x, p.y, p.z, p.roll, p.pitch, p.yaw);
       if (u.odom_log) std::fprintf(u.odom_log.get(), "%.3f,%.3f,%.3f,%.4f,%.4f,%.4f\n", to_seconds(now), od.pose.x, od.pose.y, od.pose.yaw, od.wheel_left_rad_s, od.wheel_right_rad_s);
       u.trail.emplace_back(p.x, p.y);
     }
-    if (t.radio) t.radio->set_position(u.node, u.vehicle.pose().x, u.vehicle.pose().y);
+    if (t.air) t.air->set_position(u.node, u.killed ? kFarAway : u.vehicle.pose().x, u.killed ? kFarAway : u.vehicle.pose().y);
   }
 
   // Quadrotor: survey flight, GPS, visual odometry.
@@ -692,7 +766,7 @@ void SimWorldStage::step(TimeNs now) noexcept {
       if (a.truth_log) std::fprintf(a.truth_log.get(), "%.3f,%.3f,%.3f,%.3f,%.4f,%.4f,%.4f\n", to_seconds(now), p.x, p.y, p.z, p.roll, p.pitch, p.yaw);
       a.trail.emplace_back(p.x, p.y);
     }
-    if (t.radio) t.radio->set_position(0, p.x, p.y);
+    if (t.air) t.air->set_position(0, p.x, p.y);
   }
 
   // Sensors due now, rendered in parallel: camera rows in bands, one job per LiDAR scan.
@@ -777,7 +851,9 @@ void SimWorldStage::step(TimeNs now) noexcept {
     }
   }
 
-  // Radio: every robot broadcasts a small status datagram; count what arrives where.
+  // Radio: with gossip, what the comms stages sent reaches the receivers' inboxes; without, every robot
+  // broadcasts a small status datagram and the runner counts what arrives where.
+  if (t.net) t.net->pump(now);
   if (t.radio) {
     if (now >= t.next_heartbeat) {
       t.next_heartbeat += t.heartbeat_period;
@@ -902,6 +978,13 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   for (const UgvHold& h : opt.ugv_holds)
     if (h.ugv < 0 || h.ugv >= opt.ugvs || !(h.duration_s >= 0))
       return Error::make(ErrorCode::kInvalidArgument, "a hold names no ground robot or has a negative duration");
+  if (opt.gossip && opt.ugv_map != UgvMapSource::kNone)
+    return Error::make(ErrorCode::kInvalidArgument, "with gossip the ground robots get the map over the radio: ugv_map must be none");
+  if (opt.ugv_goals.size() > static_cast<std::size_t>(opt.ugvs)) return Error::make(ErrorCode::kInvalidArgument, "more goals than ground robots");
+  for (const RunOptions::Kill& k : opt.kills)
+    if (k.ugv < -1 || k.ugv >= opt.ugvs || !(k.at_s >= 0))
+      return Error::make(ErrorCode::kInvalidArgument, "a kill names no ground robot (or -1, the base station) or has a negative time");
+  if (!(opt.comm_range_m >= 0)) return Error::make(ErrorCode::kInvalidArgument, "the comm range must be >= 0 m");
   auto world = resolve_world(opt.world);
   if (!world) return world.error();
 
@@ -959,10 +1042,48 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   }
   t.router = std::make_unique<RoadRouter>(w, 1.0, dd_cfg.value().footprint_radius_m + 0.2);
   const int nodes = (opt.uav ? 1 : 0) + opt.ugvs + 1;  // node 0 = quadrotor (or unused), then ground robots, then base
-  t.radio = std::make_unique<RadioModel>(radio_cfg.value(), opt.seed ^ std::uint64_t{0x7261646F}, std::max(nodes, 2) + (opt.uav ? 0 : 1));
+  RadioConfig rcfg = radio_cfg.value();
+  if (opt.comm_range_m > 0) rcfg.range_m = opt.comm_range_m;
+  const int radio_nodes = std::max(nodes, 2) + (opt.uav ? 0 : 1);
+  if (opt.gossip) {
+    t.net = std::make_unique<RadioNet>(rcfg, opt.seed ^ std::uint64_t{0x7261646F}, radio_nodes);
+    t.air = &t.net->radio();
+  } else {
+    t.radio = std::make_unique<RadioModel>(rcfg, opt.seed ^ std::uint64_t{0x7261646F}, radio_nodes);
+    t.air = t.radio.get();
+  }
+  t.wheel_radius_m = dd_cfg.value().wheel_radius_m;
   const Pose2 staging = w.header.staging;
   const int base_node = 1 + opt.ugvs;
-  t.radio->set_position(base_node, staging.x, staging.y);
+  t.base_node = base_node;
+  t.air->set_position(base_node, staging.x, staging.y);
+  // Gossip: every role's comms stage over its radio endpoint, under a team key written for this run.
+  std::vector<std::string> comms_common;
+  struct LinkRegistration {  // unregisters the names when the run ends (the radio goes with the Team)
+    std::vector<std::string> names;
+    ~LinkRegistration() {
+      for (const auto& n : names) comms::register_inproc_link(n, nullptr);
+    }
+  } links;
+  if (opt.gossip) {
+    const fs::path key = t.out / "team.key";
+    {
+      std::ofstream k(key);
+      Rng rng(derive_seed(opt.seed, std::uint64_t{0x6B6579}));
+      static constexpr char kHex[] = "0123456789abcdef";
+      for (int i = 0; i < 64; ++i) k << kHex[rng.below(16)];
+      k << "\n";
+      if (!k) return Error::make(ErrorCode::kIo, "cannot write the team key " + key.string());
+    }
+    comms_common = {"comms.transport=inproc", "comms.key_file=" + key.string(), "comms.epoch_from_clock=false"};
+    auto reg = [&](const std::string& name, int node) {
+      comms::register_inproc_link(name, &t.net->endpoint(node));
+      links.names.push_back(name);
+    };
+    if (opt.uav) reg("uav", 0);
+    for (int i = 0; i < opt.ugvs; ++i) reg("ugv" + std::to_string(i + 1), (opt.uav ? 1 : 0) + i);
+    reg("base", base_node);
+  }
 
   const bool rec = opt.record != RecordLevel::kNone;
   SimClock clock(0);
@@ -1000,7 +1121,10 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
       u->vo_log = CsvLog(t.out / "vo_uav.csv", "t_s,segment,tracking,x,y,z,roll_rad,pitch_rad,yaw_rad");
       u->frame_log = CsvLog(t.out / "camera_frames.csv", "t_s,frame,x_m,y_m,z_m,yaw_rad");
     }
-    auto role = make_role(uav_role(), 0, "uav", cfgs, opt.uav_config, "quadrotor config override");
+    std::vector<std::string> uav_extra = comms_common;
+    if (opt.gossip) uav_extra.emplace_back("comms.send_map_tiles=true");
+    uav_extra.insert(uav_extra.end(), opt.uav_config.begin(), opt.uav_config.end());
+    auto role = make_role(uav_role(), 0, "uav", cfgs, uav_extra, "quadrotor config override");
     if (!role) return role.error();
     u->role = std::move(role).value();
     auto cam_w = u->role->channels().ring_writer<CameraImageMsg, kCameraRing>("camera");
@@ -1034,7 +1158,24 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
                                      SimProbeStage::kParams, "simulator: reads the robot's channels for tests and evaluations"});
     ugv_desc.stages = t.ugv_stages;
   }
-  std::vector<std::string> ugv_extra = opt.ugv_config;
+  std::vector<std::string> ugv_extra = comms_common;
+  if (opt.gossip) {
+    ugv_extra.emplace_back("comms.send_pose=true");
+    ugv_extra.emplace_back("comms.deliver_map_tiles=true");
+  }
+  if (opt.drive_by_stages || opt.gossip) {  // the planner's roadmap covers the world
+    const GridGeometry& g = w.grid();
+    char buf[160];
+    std::snprintf(buf, sizeof buf, "%.3f", g.origin_x);
+    ugv_extra.emplace_back(std::string("planner.area_x0_m=") + buf);
+    std::snprintf(buf, sizeof buf, "%.3f", g.origin_y - g.size_y());
+    ugv_extra.emplace_back(std::string("planner.area_y0_m=") + buf);
+    std::snprintf(buf, sizeof buf, "%.3f", g.origin_x + g.size_x());
+    ugv_extra.emplace_back(std::string("planner.area_x1_m=") + buf);
+    std::snprintf(buf, sizeof buf, "%.3f", g.origin_y);
+    ugv_extra.emplace_back(std::string("planner.area_y1_m=") + buf);
+  }
+  ugv_extra.insert(ugv_extra.end(), opt.ugv_config.begin(), opt.ugv_config.end());
   if (opt.ugv_tap.scan) ugv_extra.emplace_back("sim_probe.scans=true");
   if (opt.ugv_tap.odometry) ugv_extra.emplace_back("sim_probe.odometry=true");
   if (opt.ugv_tap.tile) ugv_extra.emplace_back("sim_probe.tiles=true");
@@ -1080,15 +1221,25 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     ChannelRegistry& ch = u->role->channels();
     auto scan_w = ch.ring_writer<LidarScanMsg, kLidarRing>("lidar_scan");
     auto odom_w = ch.ring_writer<WheelOdometryMsg, kWheelOdometryRing>("wheel_odometry");
-    auto tile_w = ch.ring_writer<MapTileMsg, kMapTileRing>("map_tiles");
     auto init_w = ch.latest_writer<InitialPoseMsg>("initial_pose");
     if (!scan_w) return scan_w.error();
     if (!odom_w) return odom_w.error();
-    if (!tile_w) return tile_w.error();
     if (!init_w) return init_w.error();
+    if (!opt.gossip) {  // with gossip the robot's comms stage writes its map_tiles
+      auto tile_w = ch.ring_writer<MapTileMsg, kMapTileRing>("map_tiles");
+      if (!tile_w) return tile_w.error();
+      u->tiles_out = tile_w.value();
+    }
+    if (static_cast<std::size_t>(i) < opt.ugv_goals.size() && opt.ugv_goals[static_cast<std::size_t>(i)].allFinite()) {
+      auto goal_w = ch.latest_writer<GoalMsg>("goal");
+      if (!goal_w) return goal_w.error();
+      u->goal_out = goal_w.value();
+      u->goal.id = 1;
+      u->goal.goal = RoutePoint{opt.ugv_goals[static_cast<std::size_t>(i)].x(), opt.ugv_goals[static_cast<std::size_t>(i)].y()};
+      u->goal_pending = true;
+    }
     u->scan_out = scan_w.value();
     u->odom_out = odom_w.value();
-    u->tiles_out = tile_w.value();
     u->init_out = init_w.value();
     u->scan_msg = std::make_unique<LidarScanMsg>();
     {  // the initial guess: the true start moved init_error_m in a direction and turned by ±init_yaw_error_deg
@@ -1113,10 +1264,13 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
       u->probe->team = &t;
       u->probe->ugv = u.get();
     }
+    t.ugv_roles.push_back(u->role.get());
     t.ugvs.push_back(std::move(u));
   }
   {
-    auto role = make_role(base_role(), 250, "base", cfgs);
+    std::vector<std::string> base_extra = comms_common;
+    if (opt.gossip) base_extra.emplace_back("comms.deliver_map_tiles=true");
+    auto role = make_role(base_role(), 250, "base", cfgs, base_extra, "base station config");
     if (!role) return role.error();
     t.base = std::move(role).value();
   }
@@ -1143,12 +1297,17 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   const TimeNs end = from_seconds(opt.duration_s);
   TimeNs chunk = std::max<TimeNs>(kNsPerS / 10, end / 100);
   if (opt.stop_when_survey_done || opt.stop_when_routes_done) chunk = std::min<TimeNs>(chunk, 2 * kNsPerS);
+  if (opt.stop_when) chunk = std::min<TimeNs>(chunk, kNsPerS);
   const auto wall0 = std::chrono::steady_clock::now();
   TimeNs ended = end;
   for (TimeNs tt = 0; tt < end;) {
     tt = std::min(end, tt + chunk);
     exec.run_until(tt);
     if (opt.stop_when_survey_done && t.uav && t.uav->vehicle.finished()) {
+      ended = tt;
+      break;
+    }
+    if (opt.stop_when && opt.stop_when(tt)) {
       ended = tt;
       break;
     }
@@ -1184,7 +1343,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     s.uav_distance_m = t.uav->vehicle.distance_flown();
     s.uav_waypoints_reached = t.uav->vehicle.waypoints_reached();
   }
-  const LinkStats tot = t.radio->total();
+  const LinkStats tot = t.air->total();
   s.radio_sent = tot.sent;
   s.radio_delivered = tot.delivered;
   s.radio_dropped_range = tot.dropped_range;
@@ -1213,6 +1372,8 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     r.initial_pose_published = u.init_published;
     r.released_s = u.released ? to_seconds(u.released_at) : -1.0;
     r.route_done = u.route_done;
+    r.killed_s = u.killed ? to_seconds(u.killed_at) : -1.0;
+    r.wheel_commands = u.wheel_commands;
     if (u.probe != nullptr && u.probe->received()) {
       static constexpr const char* kNames[] = {"no map", "initialising", "tracking", "lost"};
       r.loc_status = kNames[static_cast<int>(u.loc_last) & 3];

@@ -8,6 +8,8 @@
 #include <set>
 #include <vector>
 
+#include <unistd.h>
+
 #include "airground/aerial_mapping/stages.hpp"
 #include "airground/core/messages.hpp"
 #include "airground/platform/role_instance.hpp"
@@ -46,7 +48,8 @@ std::vector<Eigen::Vector2d> out_and_back(const World& w) {
 class UgvFeeds : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ = (fs::path(::testing::TempDir()) / "ugv_feeds_world").string();
+    // Per process: ctest runs each test of this suite in its own process, possibly at the same time.
+    dir_ = (fs::path(::testing::TempDir()) / ("ugv_feeds_world_" + std::to_string(::getpid()))).string();
     GeneratorOptions g;
     g.seed = 5;
     g.size_m = 300;
@@ -59,6 +62,8 @@ class UgvFeeds : public ::testing::Test {
   static void TearDownTestSuite() {
     delete world_;
     world_ = nullptr;
+    std::error_code ec;
+    fs::remove_all(dir_, ec);
   }
   static RunOptions options(const std::string& out) {
     RunOptions o;

@@ -76,6 +76,7 @@ struct UgvSample {
   bool released{false};            // driving has begun (false while it waits for the online map)
   bool held{false};                // standing still by a UgvHold now
   bool route_done{false};          // its scripted route (RunOptions::ugv_routes) is finished
+  bool killed{false};              // powered off (RunOptions::kills)
   RoleInstance* role{nullptr};     // the robot's role instance (channels are sealed: read stages, not channels)
 };
 
@@ -141,6 +142,31 @@ struct RunOptions {
   // its route (0 = not waited for): it then drives where the quadrotor has been, as a mission would send it.
   double ugv_wait_map_route_fraction{0};
 
+  // --- missions: the team as it runs in the field
+  // Every robot's comms stage talks gossip over the simulated radio (sim::RadioNet, comms.transport =
+  // inproc, a team key in out_dir): the quadrotor shares its map tiles, the ground robots get them (and
+  // each other's poses, claims, failures) only through it, the base station listens. ugv_map must be kNone.
+  bool gossip{false};
+  double comm_range_m{0};          // [m] the radio's range (0 = radio.yaml's / the model's default)
+  // The ground robots move by their own drive stage's "wheel_command" (planner -> drive -> wheels), not
+  // the simulator's scripted pursuit; the planner's area is set to the world's extent.
+  bool drive_by_stages{false};
+  // Per ground robot (0-based): a goal the runner writes once on its "goal" channel at the start, for
+  // tables without a mission stage (tests of planner -> drive). NaN = none.
+  std::vector<Eigen::Vector2d> ugv_goals{};
+  // Power a robot off at at_s: it stops moving and its radio falls silent (nothing it sends reaches
+  // anyone, nothing reaches it). ugv = -1 is the base station.
+  struct Kill {
+    int ugv{0};
+    double at_s{0};
+  };
+  std::vector<Kill> kills{};
+  // Checked every simulated second; true ends the run (duration_s caps it).
+  std::function<bool(TimeNs now)> stop_when{};
+  // Called at sample_hz at the start of a physics step (what the roles did up to the step before): a
+  // read-only look at every role, e.g. for mission logs. ugvs[i] is nullptr never; base may be nullptr.
+  std::function<void(TimeNs now, RoleInstance* uav, const std::vector<RoleInstance*>& ugvs, RoleInstance* base)> observe{};
+
   // --- evaluation
   double sample_hz{10};
   std::function<void(const UgvSample&)> sample{};  // per ground robot at sample_hz (from t = 0)
@@ -164,6 +190,8 @@ struct RobotSummary {
   bool initial_pose_published{false};
   double released_s{0};                 // [s] when it began to drive (waiting for the online map before)
   bool route_done{false};               // its scripted route was driven to the end
+  double killed_s{-1};                  // [s] when it was powered off (RunOptions::kills), -1 never
+  std::uint64_t wheel_commands{0};      // drive_by_stages: new "wheel_command" values applied to the wheels
   // Its own localization ("localization" channel) against the truth, sampled at sample_hz once it drives.
   std::string loc_status{"none"};       // at the end: none (never published), no map, initialising, tracking, lost
   double loc_tracking_fraction{0};      // samples with status tracking / samples while driving
