@@ -13,6 +13,7 @@ namespace {
 using loc::LocalizationStage;
 using plan::DriveStage;
 using plan::PlannerStage;
+using plan::TrackerStage;
 
 // Budgets are for the ground robot's Ryzen 5 3600. The localizer matches one scan per update (at most
 // 10 Hz) with up to pf_max_particles particles: ~20 ms at 2,000 (make bench); the first updates, at 4,000 while it converges, take longest.
@@ -28,6 +29,9 @@ constexpr StageSpec kUgvStages[] = {
      "semantic roadmap over the aerial map: a route from the robot's pose to the goal on 'planned_path'"},
     {"drive", &DriveStage::make, 20.0, 1'000, 50, -1, DriveStage::kParams,
      "path follower with acceleration limits: wheel speeds on 'wheel_command'"},
+    // One LiDAR revolution into the local grid and the local goal: ~1-3 ms at 1024 columns.
+    {"tracker", &TrackerStage::make, 10.0, 15'000, 45, -1, TrackerStage::kParams,
+     "local waypoint tracker: obstacles the LiDAR sees, the local goal along the route, the reflex stop"},
 };
 static_assert(role_table_ok(kUgvStages));
 }  // namespace

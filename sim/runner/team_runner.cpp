@@ -715,7 +715,7 @@ void SimWorldStage::step(TimeNs now) noexcept {
       if (u.odom_out.push(m) > 0) ++u.channel_drops;
       ++u.odom_published;
     }
-    if (t.opt.ugv_map != UgvMapSource::kNone && !t.opt.gossip) publish_tiles(t, u, now);
+    if (t.opt.ugv_map != UgvMapSource::kNone) publish_tiles(t, u, now);
     if (log_now) {
       const Pose3 p = u.vehicle.pose3();
       if (u.truth_log) std::fprintf(u.truth_log.get(), "%.3f,%.3f,%.3f,%.3f,%.4f,%.4f,%.4f\n", to_seconds(now), p.x, p.y, p.z, p.roll, p.pitch, p.yaw);
@@ -978,8 +978,8 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   for (const UgvHold& h : opt.ugv_holds)
     if (h.ugv < 0 || h.ugv >= opt.ugvs || !(h.duration_s >= 0))
       return Error::make(ErrorCode::kInvalidArgument, "a hold names no ground robot or has a negative duration");
-  if (opt.gossip && opt.ugv_map != UgvMapSource::kNone)
-    return Error::make(ErrorCode::kInvalidArgument, "with gossip the ground robots get the map over the radio: ugv_map must be none");
+  if (opt.gossip && opt.ugv_map == UgvMapSource::kOnline)
+    return Error::make(ErrorCode::kInvalidArgument, "with gossip the ground robots get the quadrotor's map over the radio: ugv_map must be none (or ground truth)");
   if (opt.ugv_goals.size() > static_cast<std::size_t>(opt.ugvs)) return Error::make(ErrorCode::kInvalidArgument, "more goals than ground robots");
   for (const RunOptions::Kill& k : opt.kills)
     if (k.ugv < -1 || k.ugv >= opt.ugvs || !(k.at_s >= 0))
@@ -1075,6 +1075,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
       k << "\n";
       if (!k) return Error::make(ErrorCode::kIo, "cannot write the team key " + key.string());
     }
+    fs::permissions(key, fs::perms::owner_read | fs::perms::owner_write, fs::perm_options::replace, ec);
     comms_common = {"comms.transport=inproc", "comms.key_file=" + key.string(), "comms.epoch_from_clock=false"};
     auto reg = [&](const std::string& name, int node) {
       comms::register_inproc_link(name, &t.net->endpoint(node));
@@ -1161,7 +1162,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   std::vector<std::string> ugv_extra = comms_common;
   if (opt.gossip) {
     ugv_extra.emplace_back("comms.send_pose=true");
-    ugv_extra.emplace_back("comms.deliver_map_tiles=true");
+    if (opt.ugv_map == UgvMapSource::kNone) ugv_extra.emplace_back("comms.deliver_map_tiles=true");
   }
   if (opt.drive_by_stages || opt.gossip) {  // the planner's roadmap covers the world
     const GridGeometry& g = w.grid();
@@ -1225,7 +1226,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     if (!scan_w) return scan_w.error();
     if (!odom_w) return odom_w.error();
     if (!init_w) return init_w.error();
-    if (!opt.gossip) {  // with gossip the robot's comms stage writes its map_tiles
+    if (!opt.gossip || opt.ugv_map != UgvMapSource::kNone) {  // else the robot's comms stage writes its map_tiles
       auto tile_w = ch.ring_writer<MapTileMsg, kMapTileRing>("map_tiles");
       if (!tile_w) return tile_w.error();
       u->tiles_out = tile_w.value();

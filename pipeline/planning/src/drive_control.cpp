@@ -60,7 +60,7 @@ TwistCommand PathFollower::limit(double v, double w, double dt) noexcept {
 
 TwistCommand PathFollower::stop(double dt) noexcept { return limit(0.0, 0.0, dt); }
 
-TwistCommand PathFollower::step(const Pose2& pose, double dt) noexcept {
+TwistCommand PathFollower::step(const Pose2& pose, double dt, double speed_cap, const Point2* steer_to) noexcept {
   if (state_ == FollowState::kIdle || state_ == FollowState::kArrived || n_ < 2) return stop(dt);
   // Advance the segment to the one nearest the robot (never backwards).
   auto project = [&](std::uint32_t s, double& t) {
@@ -113,6 +113,7 @@ TwistCommand PathFollower::step(const Pose2& pose, double dt) noexcept {
       acc += l;
     }
   }
+  if (steer_to != nullptr) target = *steer_to;
   const double dx = target.x - pose.x, dy = target.y - pose.y;
   const double lx = std::cos(pose.yaw) * dx + std::sin(pose.yaw) * dy, ly = -std::sin(pose.yaw) * dx + std::cos(pose.yaw) * dy;
   const double heading_err = std::atan2(ly, lx);
@@ -124,7 +125,7 @@ TwistCommand PathFollower::step(const Pose2& pose, double dt) noexcept {
   const double l2 = lx * lx + ly * ly;
   const double curvature = l2 > 1e-9 ? 2.0 * ly / l2 : 0.0;
   // Speed: the top speed, what the curvature allows within the turn rate, and what stops at the goal.
-  double v = p_.max_speed_mps;
+  double v = std::min(p_.max_speed_mps, std::max(0.0, speed_cap));
   if (std::fabs(curvature) > 1e-9) v = std::min(v, p_.max_turn_rate_radps / std::fabs(curvature));
   v = std::min(v, std::sqrt(2.0 * p_.max_decel_mps2 * std::max(0.0, remaining_ - 0.5 * p_.goal_tolerance_m)) + 0.05);
   return limit(v, v * curvature, dt);

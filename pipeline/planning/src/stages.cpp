@@ -22,6 +22,7 @@ Status PlannerStage::init(StageContext& ctx) {
   tiles_per_step_ = static_cast<std::size_t>(v.integer("tiles_per_step"));
   replan_period_ = from_seconds(v.real("replan_period_s"));
   snap_ = v.real("snap_radius_m");
+  plan_initialising_ = v.boolean("plan_while_initialising");
   auto tiles = ctx.channels.ring_reader<MapTileMsg, kMapTileRing>("map_tiles");
   if (!tiles) return tiles.error();
   tiles_ = tiles.value();
@@ -84,7 +85,8 @@ void PlannerStage::step(TimeNs now) noexcept {
   if (map_->pending_tiles() > 0 && map_->update(tiles_per_step_) > 0) map_changed_ = true;
   if (loc_.fresh()) {
     pose_ = loc_.read();
-    have_pose_ = pose_.status == LocalizationStatus::kTracking && std::isfinite(pose_.pose.x) && std::isfinite(pose_.pose.y);
+    have_pose_ = (pose_.status == LocalizationStatus::kTracking || (plan_initialising_ && pose_.status == LocalizationStatus::kInitialising)) &&
+                 std::isfinite(pose_.pose.x) && std::isfinite(pose_.pose.y);
   }
   if (goal_in_.fresh()) {
     const GoalMsg& g = goal_in_.read();
@@ -119,6 +121,8 @@ Status DriveStage::init(StageContext& ctx) {
   pts_ = std::make_unique<std::array<Point2, kMaxPathPoints>>();
   pose_timeout_ = from_seconds(v.real("pose_timeout_s"));
   local_timeout_ = from_seconds(v.real("local_goal_timeout_s"));
+  initialising_speed_ = v.real("initialising_speed_mps");
+  steer_local_ = v.boolean("steer_to_local_goal");
   auto lg = ctx.channels.latest_reader<LocalGoalMsg>("local_goal");
   if (!lg) return lg.error();
   local_in_ = lg.value();
@@ -156,7 +160,9 @@ void DriveStage::step(TimeNs now) noexcept {
   }
   if (loc_.fresh()) pose_ = loc_.read();
   if (local_in_.fresh()) local_ = local_in_.read();
-  const bool pose_ok = pose_.status == LocalizationStatus::kTracking && now - pose_.stamp <= pose_timeout_;
+  const bool tracking = pose_.status == LocalizationStatus::kTracking;
+  const bool converging = pose_.status == LocalizationStatus::kInitialising && initialising_speed_ > 0;
+  const bool pose_ok = (tracking || converging) && now - pose_.stamp <= pose_timeout_;
   const bool local_ok = local_.stamp > 0 && now - local_.stamp <= local_timeout_ && (local_.path_seq == path_seq_ || local_.reflex_stop);
   TwistCommand tw;
   if (local_ok && local_.reflex_stop) {
@@ -164,7 +170,10 @@ void DriveStage::step(TimeNs now) noexcept {
     tw = follow_->halt();
   } else {
     if (local_ok && local_.state == static_cast<std::uint8_t>(TrackState::kFailed)) blocked_ = true;  // until a new route
-    tw = (have_path_ && pose_ok && !blocked_) ? follow_->step(pose_.pose, dt) : follow_->stop(dt);
+    const Point2 lg{local_.goal.x, local_.goal.y};
+    const bool steer = steer_local_ && local_ok && local_.valid && std::isfinite(lg.x) && std::isfinite(lg.y);
+    tw = (have_path_ && pose_ok && !blocked_) ? follow_->step(pose_.pose, dt, tracking ? 1e9 : initialising_speed_, steer ? &lg : nullptr)
+                                              : follow_->stop(dt);
   }
   const DriveParams& dp = follow_->params();
   const WheelSpeeds ws = wheels_from_twist(tw.v_mps, tw.w_radps, dp.track_m, dp.max_wheel_speed_mps);
@@ -235,7 +244,7 @@ void TrackerStage::step(TimeNs now) noexcept {
     scans_.pop();
     return;
   }
-  if (pose_.status == LocalizationStatus::kTracking) {
+  if (pose_.status == LocalizationStatus::kTracking || pose_.status == LocalizationStatus::kInitialising) {
     (void)tracker_->update(std::span<const ScanReturn>(newest->points.data(), newest->count), newest->sensor_in_body, pose_.pose, cmd_.v_mps);
     const LocalGoal g = tracker_->local_goal(pose_.pose, now);
     msg_.valid = g.valid;

@@ -145,7 +145,8 @@ struct RunOptions {
   // --- missions: the team as it runs in the field
   // Every robot's comms stage talks gossip over the simulated radio (sim::RadioNet, comms.transport =
   // inproc, a team key in out_dir): the quadrotor shares its map tiles, the ground robots get them (and
-  // each other's poses, claims, failures) only through it, the base station listens. ugv_map must be kNone.
+  // each other's poses, claims, failures) only through it, the base station listens. ugv_map must be kNone
+  // (or kGroundTruth: the runner's tiles, and gossip for everything else).
   bool gossip{false};
   double comm_range_m{0};          // [m] the radio's range (0 = radio.yaml's / the model's default)
   // The ground robots move by their own drive stage's "wheel_command" (planner -> drive -> wheels), not

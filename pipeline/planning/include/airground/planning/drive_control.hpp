@@ -59,8 +59,10 @@ class PathFollower {
   // A new path (copied, at most kMaxPathPoints); the follower starts at its first segment.
   void set_path(const Point2* pts, std::uint32_t n) noexcept;
   void clear() noexcept;
-  // One control step of dt seconds from pose: the limited twist to command.
-  TwistCommand step(const Pose2& pose, double dt) noexcept;
+  // One control step of dt seconds from pose: the limited twist to command. speed_cap lowers the top
+  // speed for this step; steer_to (the local tracker's goal, map frame) replaces the route's look-ahead
+  // point as the point to steer at, while progress, slowing down and arrival still follow the route.
+  TwistCommand step(const Pose2& pose, double dt, double speed_cap = 1e9, const Point2* steer_to = nullptr) noexcept;
   // Slows to a stop within the deceleration limits (e-stop handling is the base's: this is a soft stop).
   TwistCommand stop(double dt) noexcept;
   // Zero at once (the reflex stop): no ramp.

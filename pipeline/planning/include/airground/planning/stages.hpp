@@ -40,6 +40,8 @@ inline constexpr ParamSpec kPlannerOwnParams[] = {
     ParamSpec::integer("tiles_per_step", 2, 1, 256, "tiles", "changed map tiles folded into the roadmap per step"),
     ParamSpec::real("replan_period_s", 2.0, 0.1, 60.0, "s", "re-plan from the current pose this often while a goal is active"),
     ParamSpec::real("snap_radius_m", 2.0, 0.0, 10.0, "m", "a start or goal off the free cells snaps to one within this"),
+    ParamSpec::boolean("plan_while_initialising", true,
+                       "plan from the localizer's best estimate while it is still converging (it converges by driving)"),
 };
 inline constexpr auto kPlannerParamArray = detail::concat(kPlannerOwnParams, kRoadmapParamSpecs);
 
@@ -69,7 +71,7 @@ class PlannerStage final : public Stage {
   LatestWriter<PlannedPathMsg> out_;
   LocalizationMsg pose_{};
   GoalMsg goal_{};
-  bool have_pose_{false}, have_goal_{false}, map_changed_{false};
+  bool have_pose_{false}, have_goal_{false}, map_changed_{false}, plan_initialising_{true};
   TimeNs goal_stamp_{-1}, last_plan_{0};
   TimeNs replan_period_{0};
   std::size_t tiles_per_step_{2};
@@ -81,6 +83,9 @@ class PlannerStage final : public Stage {
 inline constexpr ParamSpec kDriveOwnParams[] = {
     ParamSpec::real("pose_timeout_s", 0.5, 0.05, 10.0, "s", "a localization older than this stops the robot"),
     ParamSpec::real("local_goal_timeout_s", 0.3, 0.05, 5.0, "s", "a local goal older than this is ignored"),
+    ParamSpec::real("initialising_speed_mps", 0.6, 0.0, 5.0, "m/s",
+                    "top speed while the localizer is still converging (it needs motion to converge); 0 = wait for tracking"),
+    ParamSpec::boolean("steer_to_local_goal", true, "steer at the local tracker's goal (clear of what the LiDAR sees) when it has one"),
 };
 inline constexpr auto kDriveParamArray = detail::concat(kDriveOwnParams, kDriveParamSpecs);
 
@@ -108,6 +113,8 @@ class DriveStage final : public Stage {
   std::uint32_t path_seq_{0}, n_pts_{0};
   bool have_path_{false}, blocked_{false};
   TimeNs last_{-1}, pose_timeout_{0}, local_timeout_{0};
+  double initialising_speed_{0.6};
+  bool steer_local_{true};
   std::uint64_t reflex_stops_{0};
 };
 
