@@ -117,7 +117,7 @@ TEST(TrackerDrive, AReturnRightAheadStopsTheWheelsAtOnce) {
 TEST(TrackerDrive, AWallAcrossTheRouteAndBehindCancelsItAndStops) {
   Rig rig;
   const std::vector<test::Box> walls{{6, 6.5, -12, 12, 1.5}, {-1.5, -1.2, -12, 12, 1.5}};
-  for (int k = 0; k < 200; ++k) rig.tick(k, walls);
+  for (int k = 0; k < 400; ++k) rig.tick(k, walls);
   EXPECT_EQ(rig.tracker->published().state, static_cast<std::uint8_t>(TrackState::kFailed));
   EXPECT_GE(rig.tracker->published().failures, 1U);
   EXPECT_NEAR(rig.drive->published().v_mps, 0.0, 1e-9);
