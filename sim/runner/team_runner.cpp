@@ -1215,7 +1215,12 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
       u->scan_log = CsvLog(t.out / ("lidar_" + name + ".csv"), "t_s,scan,points");
       if (opt.record == RecordLevel::kFull) u->scan_bin = std::fopen((t.out / ("lidar_" + name + ".bin")).c_str(), "wb");
     }
-    auto role = make_role(ugv_desc, i + 1, name, cfgs, ugv_extra, "ground robot config override");
+    std::vector<std::string> extra_i = ugv_extra;
+    if (opt.ugv_config_for) {
+      const auto more = opt.ugv_config_for(i, start);
+      extra_i.insert(extra_i.end(), more.begin(), more.end());
+    }
+    auto role = make_role(ugv_desc, i + 1, name, cfgs, extra_i, "ground robot config override");
     if (!role) return role.error();
     u->role = std::move(role).value();
     u->index = i;
@@ -1247,8 +1252,9 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
       Rng rng(derive_seed(opt.seed, std::uint64_t{0x696E6974} + static_cast<std::uint64_t>(i)));
       const double dir = rng.uniform(-kPi, kPi);
       const double sign = rng.bernoulli(0.5) ? 1.0 : -1.0;
+      const double dist = opt.init_error_uniform ? rng.uniform(0.0, opt.init_error_m) : opt.init_error_m;
       const double yaw_err = sign * opt.init_yaw_error_deg * kPi / 180.0;
-      u->init_pose.pose = Pose2{start.x + opt.init_error_m * std::cos(dir), start.y + opt.init_error_m * std::sin(dir), wrap_angle(start.yaw + yaw_err)};
+      u->init_pose.pose = Pose2{start.x + dist * std::cos(dir), start.y + dist * std::sin(dir), wrap_angle(start.yaw + yaw_err)};
       u->init_pose.sigma_xy_m = std::max(opt.init_error_m, 0.5);
       u->init_pose.sigma_yaw_rad = std::max(opt.init_yaw_error_deg, 2.0) * kPi / 180.0;
     }
@@ -1271,6 +1277,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   {
     std::vector<std::string> base_extra = comms_common;
     if (opt.gossip) base_extra.emplace_back("comms.deliver_map_tiles=true");
+    base_extra.insert(base_extra.end(), opt.base_config.begin(), opt.base_config.end());
     auto role = make_role(base_role(), 250, "base", cfgs, base_extra, "base station config");
     if (!role) return role.error();
     t.base = std::move(role).value();
@@ -1350,6 +1357,8 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   s.radio_dropped_range = tot.dropped_range;
   s.radio_dropped_loss = tot.dropped_loss;
   s.radio_dropped_queue = tot.dropped_queue;
+  s.radio_bytes_sent = tot.bytes_sent;
+  s.radio_bytes_delivered = tot.bytes_delivered;
   for (const auto& r : exec.runnables()) s.stage_overruns += r.perf == &world_perf ? 0 : r.perf->overruns.load();
   for (auto& up : t.ugvs) {
     Ugv& u = *up;

@@ -126,6 +126,10 @@ struct RunOptions {
   double init_yaw_error_deg{0};   // [deg] ... and turned by this much (random sign); sigmas given = these (at least 0.5 m / 2 deg)
   std::vector<std::string> ugv_config{};  // "section.key=value" set on every ground robot's role config
   std::vector<std::string> uav_config{};  // "section.key=value" set on the quadrotor's role config
+  // Per ground robot (0-based) with its true start pose: more "section.key=value" (its priority, its start).
+  std::function<std::vector<std::string>(int ugv, const Pose2& start)> ugv_config_for{};
+  std::vector<std::string> base_config{};  // "section.key=value" set on the base station's role config
+  bool init_error_uniform{false};  // the initial guess is U(0, init_error_m) off (per robot), not exactly init_error_m
 
   // --- scripted ground robots
   // Per ground robot (index 0-based), a road route to drive once (a polyline in the map frame, e.g. from
@@ -214,6 +218,7 @@ struct RunSummary {
   double uav_distance_m{0};
   std::uint64_t uav_waypoints_reached{0};
   std::uint64_t radio_sent{0}, radio_delivered{0}, radio_dropped_range{0}, radio_dropped_loss{0}, radio_dropped_queue{0};
+  std::uint64_t radio_bytes_sent{0}, radio_bytes_delivered{0};  // payload bytes put on the air / received
   std::uint64_t stage_overruns{0};
   std::vector<RobotSummary> ugvs;
 };

@@ -1,0 +1,69 @@
+// `airground-sim mission`: a whole team mission in the lockstep runner — the quadrotor surveys and maps,
+// finds the regions of interest, the ground robots localize in its map (GPS-denied, a rough initial guess),
+// claim regions among themselves over the radio's gossip, plan, drive and report; the base station only
+// listens. Scored against the world's targets and the true poses; a report folder a person can read.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "airground/platform/result.hpp"
+#include "airground/sim/runner.hpp"
+
+namespace ag::sim {
+
+struct MissionOptions {
+  std::string world{"default"};
+  std::string out_dir{"mission"};
+  std::string mission_file{};      // optional mission YAML (config/missions/*.yaml); empty = region investigation
+  int ugvs{3};
+  std::uint64_t seed{1};
+  double comm_range_m{0};          // [m] 0 = the radio model's default
+  double uav_altitude_m{40};
+  double init_error_m{16};         // [m] each robot's initial guess is up to this far off (uniform)
+  double init_yaw_error_deg{10};
+  double max_duration_s{1800};     // [s] simulated; the mission normally ends earlier (every robot back)
+  int lidar_columns{1024};
+  int threads{0};
+  bool progress{true};
+  RecordLevel record{RecordLevel::kLight};
+  std::vector<RunOptions::Kill> kills{};   // ugv -1 = the base station
+  std::vector<std::string> ugv_config{}, uav_config{};
+  int web_port{0};                 // > 0: the base station serves its page on this port during the run
+  double web_pace{0};              // > 0: hold the simulation to this many times real time (to watch it)
+};
+
+struct MissionRobot {
+  std::string name;
+  double distance_m{0};
+  std::uint64_t collisions{0};
+  std::uint32_t visited{0}, failed{0}, false_visits{0};
+  double loc_error_mean_m{-1}, loc_error_p95_m{-1};
+  double odom_only_error_mean_m{0};
+  double first_tracking_s{-1};
+  double done_s{-1};    // [s] back at its start with nothing left
+  double killed_s{-1};
+  std::string final_state;
+};
+
+struct MissionMetrics {
+  std::uint32_t targets_total{0}, targets_visited{0};
+  std::uint32_t regions_found{0}, regions_visited{0};
+  double mission_time_s{0};        // [s] until every robot still running was back (or the cap)
+  bool completed{false};           // every running robot finished its mission before the cap
+  double loc_error_mean_m{-1}, loc_error_p95_m{-1};  // [m] tracking samples of every robot
+  double odom_only_error_mean_m{0};
+  std::uint64_t collisions{0};
+  std::uint32_t failed_goals{0}, false_visits{0};
+  std::uint32_t takeovers{0}, clashes_lost{0};
+  double map_class_accuracy{0};
+  std::uint64_t bytes_on_air{0};   // [B] payload bytes the radio carried (every copy)
+  double realtime_factor{0};
+  double sim_s{0}, wall_s{0};
+  std::vector<MissionRobot> robots;
+};
+
+Result<MissionMetrics> run_mission(const MissionOptions& options, const ProgressFn& progress = {});
+
+}  // namespace ag::sim
