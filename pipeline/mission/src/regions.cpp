@@ -103,27 +103,45 @@ void RegionExtractor::open_vehicle_mask() noexcept {
   for (std::size_t i = 0; i < n; ++i) veh_[i] = cls_[i] == vc ? 1 : 0;
   const int k = p_.open_radius_cells;
   if (k <= 0) return;
-  auto pass = [&](std::uint8_t* src, std::uint8_t* dst, bool rows, bool erode) {
-    const std::int32_t len = rows ? w_ : h_, lines = rows ? h_ : w_;
-    for (std::int32_t l = 0; l < lines; ++l)
-      for (std::int32_t a = 0; a < len; ++a) {
+  const std::size_t w = static_cast<std::size_t>(w_);
+  // along rows: dst[c] = AND / OR of src[c-k .. c+k] (outside the grid: not a vehicle)
+  auto rows = [&](const std::uint8_t* src, std::uint8_t* dst, bool erode) {
+    for (std::int32_t r = 0; r < h_; ++r) {
+      const std::uint8_t* s = src + static_cast<std::size_t>(r) * w;
+      std::uint8_t* d = dst + static_cast<std::size_t>(r) * w;
+      for (std::int32_t c = 0; c < w_; ++c) {
         std::uint8_t v = erode ? 1 : 0;
-        for (std::int32_t d = -k; d <= k; ++d) {
-          const std::int32_t b = a + d;
-          // outside the grid: not a vehicle (erosion at the border removes, as for any other neighbour)
-          const std::uint8_t s = (b < 0 || b >= len) ? 0 : src[rows ? idx(b, l) : idx(l, b)];
-          if (erode ? s == 0 : s != 0) {
-            v = erode ? 0 : 1;
-            break;
-          }
+        for (std::int32_t o = c - k; o <= c + k; ++o) {
+          const std::uint8_t x = (o < 0 || o >= w_) ? 0 : s[o];
+          v = erode ? static_cast<std::uint8_t>(v & x) : static_cast<std::uint8_t>(v | x);
         }
-        dst[rows ? idx(a, l) : idx(l, a)] = v;
+        d[c] = v;
       }
+    }
   };
-  pass(veh_.data(), tmp_.data(), true, true);
-  pass(tmp_.data(), veh_.data(), false, true);
-  pass(veh_.data(), tmp_.data(), true, false);
-  pass(tmp_.data(), veh_.data(), false, false);
+  // along columns, row by row: dst[r] = AND / OR of src[r-k .. r+k]
+  auto cols = [&](const std::uint8_t* src, std::uint8_t* dst, bool erode) {
+    for (std::int32_t r = 0; r < h_; ++r) {
+      std::uint8_t* d = dst + static_cast<std::size_t>(r) * w;
+      const bool clipped = r - k < 0 || r + k >= h_;
+      if (erode && clipped) {
+        std::fill(d, d + w, std::uint8_t{0});
+        continue;
+      }
+      std::fill(d, d + w, static_cast<std::uint8_t>(erode ? 1 : 0));
+      for (std::int32_t o = std::max(0, r - k); o <= std::min(h_ - 1, r + k); ++o) {
+        const std::uint8_t* s = src + static_cast<std::size_t>(o) * w;
+        if (erode)
+          for (std::size_t c = 0; c < w; ++c) d[c] = static_cast<std::uint8_t>(d[c] & s[c]);
+        else
+          for (std::size_t c = 0; c < w; ++c) d[c] = static_cast<std::uint8_t>(d[c] | s[c]);
+      }
+    }
+  };
+  rows(veh_.data(), tmp_.data(), true);
+  cols(tmp_.data(), veh_.data(), true);
+  rows(veh_.data(), tmp_.data(), false);
+  cols(tmp_.data(), veh_.data(), false);
 }
 
 // Exact squared Euclidean distance transform (Felzenszwalb & Huttenlocher), in cells.
@@ -167,15 +185,34 @@ void RegionExtractor::squared_distance(const std::uint8_t* feature) noexcept {
       d[q] = dq * dq + f[v[k]];
     }
   };
-  // columns
-  for (std::int32_t c = 0; c < w_; ++c) {
-    for (std::int32_t r = 0; r < h_; ++r) line_f_[static_cast<std::size_t>(r)] = feature[idx(c, r)] ? 0.0 : kBig;
-    line(h_);
-    for (std::int32_t r = 0; r < h_; ++r) dist_[idx(c, r)] = static_cast<float>(std::min(line_d_[static_cast<std::size_t>(r)], 1e30));
+  // phase 1 (Meijster): the distance to the nearest feature in the same column, by a sweep north and a
+  // sweep south over whole rows (contiguous, no strided access)
+  float* g = dist_.data();
+  const std::size_t w = static_cast<std::size_t>(w_);
+  const float inf = 1e15f;
+  for (std::size_t c = 0; c < w; ++c) g[c] = feature[c] ? 0.0f : inf;
+  for (std::int32_t r = 1; r < h_; ++r) {
+    float* row = g + static_cast<std::size_t>(r) * w;
+    const float* prev = row - w;
+    const std::uint8_t* f = feature + static_cast<std::size_t>(r) * w;
+    for (std::size_t c = 0; c < w; ++c) row[c] = f[c] ? 0.0f : prev[c] + 1.0f;
   }
+  for (std::int32_t r = h_ - 2; r >= 0; --r) {
+    float* row = g + static_cast<std::size_t>(r) * w;
+    const float* next = row + w;
+    for (std::size_t c = 0; c < w; ++c) row[c] = std::min(row[c], next[c] + 1.0f);
+  }
+  const std::size_t n = dist_.size();
+  for (std::size_t i = 0; i < n; ++i) g[i] = g[i] >= 1e14f ? static_cast<float>(kBig) : g[i] * g[i];
   // rows
   for (std::int32_t r = 0; r < h_; ++r) {
-    for (std::int32_t c = 0; c < w_; ++c) line_f_[static_cast<std::size_t>(c)] = dist_[idx(c, r)];
+    const float* row = g + static_cast<std::size_t>(r) * w;
+    bool any = false;
+    for (std::size_t c = 0; c < w; ++c) {
+      line_f_[c] = row[c];
+      any = any || row[c] < 1e19f;
+    }
+    if (!any) continue;  // no feature anywhere in this row's columns: stays kBig
     line(w_);
     for (std::int32_t c = 0; c < w_; ++c) dist_[idx(c, r)] = static_cast<float>(std::min(line_d_[static_cast<std::size_t>(c)], 1e30));
   }
