@@ -4,6 +4,7 @@
 #include "airground/comms/stage.hpp"
 
 #include "airground/localization/stage.hpp"
+#include "airground/mission/stages.hpp"
 #include "airground/planning/stages.hpp"
 #include "airground/platform/status_stage.hpp"
 
@@ -28,6 +29,8 @@ constexpr StageSpec kUgvStages[] = {
      "semantic roadmap over the aerial map: a route from the robot's pose to the goal on 'planned_path'"},
     {"drive", &DriveStage::make, 20.0, 1'000, 50, -1, DriveStage::kParams,
      "path follower with acceleration limits: wheel speeds on 'wheel_command'"},
+    {"mission", &mission::MissionStage::make, 5.0, 2'000, 22, -1, mission::MissionStage::kParams,
+     "mission manager: choose, claim and visit regions, resolve clashes by priority, report failures, return to start"},
 };
 static_assert(role_table_ok(kUgvStages));
 }  // namespace

@@ -78,11 +78,11 @@ struct RegionsRig {
     gossip_r = probe->gossip_r;
     regions_r = probe->regions_r;
   }
-  void push(const GridWorld& w, int tx, int ty, std::uint64_t version) {
+  void push(const GridWorld& w, int tx, int ty, std::uint64_t version) { push(w.tile(tx, ty), tx, ty, version); }
+  void push(const std::vector<std::uint8_t>& t, int tx, int ty, std::uint64_t version) {
     tile->tx = tx;
     tile->ty = ty;
     tile->version = version;
-    const auto t = w.tile(tx, ty);
     std::copy(t.begin(), t.end(), tile->cls.begin());
     EXPECT_EQ(tile_w.push(*tile), 0U);
   }
