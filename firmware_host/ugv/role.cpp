@@ -4,6 +4,7 @@
 #include "airground/comms/stage.hpp"
 
 #include "airground/localization/stage.hpp"
+#include "airground/mission/stages.hpp"
 #include "airground/planning/stages.hpp"
 #include "airground/platform/status_stage.hpp"
 
@@ -32,6 +33,8 @@ constexpr StageSpec kUgvStages[] = {
     // One LiDAR revolution into the local grid and the local goal: ~1-3 ms at 1024 columns.
     {"tracker", &TrackerStage::make, 10.0, 15'000, 45, -1, TrackerStage::kParams,
      "local waypoint tracker: obstacles the LiDAR sees, the local goal along the route, the reflex stop"},
+    {"mission", &mission::MissionStage::make, 5.0, 2'000, 22, -1, mission::MissionStage::kParams,
+     "mission manager: choose, claim and visit regions, resolve clashes by priority, report failures, return to start"},
 };
 static_assert(role_table_ok(kUgvStages));
 }  // namespace

@@ -1,0 +1,116 @@
+// The mission stages (thin wrappers, docs/missions.md):
+//   regions (quadrotor): map_tiles -> class grid over the mission area -> RegionExtractor at most every
+//            period_s when tiles changed -> on a new regions version: the batches on "gossip_out"
+//            (TopicKind::kRegions, index = batch) and the set on "regions" (RegionsMsg).
+//   mission (ground robot): gossip_in (regions, claims, visited, failures), team_poses (liveness),
+//            localization, planned_path (route status) -> MissionManager -> "goal" (GoalMsg for the
+//            planner, on every new goal or cancel), own claim / visited / failure records on
+//            "gossip_out", the state on "mission_status" (MissionStatusMsg).
+// Everything is allocated in init(); step() never allocates and never blocks.
+#pragma once
+
+#include <array>
+#include <memory>
+#include <span>
+
+#include "airground/comms/messages.hpp"
+#include "airground/core/drive_messages.hpp"
+#include "airground/core/messages.hpp"
+#include "airground/mission/manager.hpp"
+#include "airground/mission/messages.hpp"
+#include "airground/mission/regions.hpp"
+#include "airground/platform/stage.hpp"
+
+namespace ag::mission {
+
+inline constexpr ParamSpec kRegionsParams[] = {
+    ParamSpec::real("area_x0_m", -500.0, -1e6, 1e6, "m", "mission area in the map frame: west edge (the class grid covers it)"),
+    ParamSpec::real("area_y0_m", -500.0, -1e6, 1e6, "m", "mission area: south edge"),
+    ParamSpec::real("area_x1_m", 500.0, -1e6, 1e6, "m", "mission area: east edge"),
+    ParamSpec::real("area_y1_m", 500.0, -1e6, 1e6, "m", "mission area: north edge"),
+    ParamSpec::real("period_s", 1.0, 0.1, 600.0, "s", "re-extract the regions at most this often (and only when tiles changed)"),
+    ParamSpec::real("merge_distance_m", 12.0, 0.5, 100.0, "m", "vehicle blobs closer than this (gap) form one region"),
+    ParamSpec::integer("open_radius_cells", 1, 0, 5, "cells", "opening of the vehicle mask (removes noise cells); 0 = off"),
+    ParamSpec::integer("min_region_cells", 8, 1, 100000, "cells", "regions with fewer vehicle cells (0.5 m) are dropped"),
+    ParamSpec::real("goal_search_radius_m", 15.0, 1.0, 100.0, "m", "the goal is searched this far around the region"),
+    ParamSpec::real("min_goal_clearance_m", 0.6, 0.0, 10.0, "m", "the goal keeps this from anything not traversable"),
+    ParamSpec::real("goal_clearance_cap_m", 3.0, 0.5, 50.0, "m", "clearance beyond this does not make a goal better"),
+    ParamSpec::integer("reachable_min_cells", 1600, 1, 100000000, "cells", "a traversable component this big (or the largest) is reachable"),
+    ParamSpec::text("traversable", "rough", "free|rough|costly", "highest traversability level a goal may lie on (as the planner's)"),
+};
+
+struct RegionsCounters {
+  std::uint64_t tiles_in{0}, tiles_applied{0}, tiles_rejected{0};
+  std::uint64_t extractions{0}, versions_published{0}, batches_published{0}, publish_deferred{0}, regions_dropped{0};
+};
+
+class RegionsStage final : public Stage {
+ public:
+  static constexpr std::span<const ParamSpec> kParams{kRegionsParams};
+  static std::unique_ptr<Stage> make() { return std::make_unique<RegionsStage>(); }
+  Status init(StageContext& ctx) override;
+  void step(TimeNs now) noexcept override;
+  [[nodiscard]] const RegionExtractor& extractor() const noexcept { return *ex_; }
+  [[nodiscard]] const RegionsMsg& published() const noexcept { return *msg_; }
+  [[nodiscard]] const RegionsCounters& counters() const noexcept { return c_; }
+
+ private:
+  bool publish_batches(TimeNs now) noexcept;
+  std::unique_ptr<RegionExtractor> ex_;
+  std::unique_ptr<RegionsMsg> msg_;
+  std::unique_ptr<comms::GossipPublishMsg> pub_;
+  std::unique_ptr<RegionBatch> batch_;
+  RingReader<MapTileMsg, kMapTileRing> tiles_;
+  RingWriter<comms::GossipPublishMsg, comms::kGossipRing> gossip_;
+  LatestWriter<RegionsMsg> out_;
+  TimeNs period_{0}, last_extract_{-1};
+  std::uint32_t published_version_{0};
+  bool pending_{false};
+  RegionsCounters c_;
+};
+
+inline constexpr ParamSpec kMissionParams[] = {
+    ParamSpec::integer("priority", 1, 0, 255, "", "fixed mission priority: the lower number keeps a region two robots claim"),
+    ParamSpec::real("start_x_m", 0.0, -1e6, 1e6, "m", "start pose (map frame): where the robot returns at the end"),
+    ParamSpec::real("start_y_m", 0.0, -1e6, 1e6, "m", "start pose: north"),
+    ParamSpec::real("visit_radius_m", 3.0, 0.5, 20.0, "m", "a region is visited when the robot is this close to its goal ..."),
+    ParamSpec::real("max_sigma_m", 1.5, 0.1, 50.0, "m", "... while tracking with a pose sigma (largest xy axis) below this"),
+    ParamSpec::integer("max_no_route", 5, 1, 1000, "plans", "failed plans in a row for the current goal: the goal failed"),
+    ParamSpec::real("no_progress_timeout_s", 90.0, 5.0, 3600.0, "s", "no progress_min_m closer for this long: the goal failed"),
+    ParamSpec::real("progress_min_m", 2.0, 0.1, 50.0, "m", "what counts as progress"),
+    ParamSpec::real("retry_after_s", 120.0, 0.0, 36000.0, "s", "a region this robot failed is not chosen by it again for this long"),
+    ParamSpec::real("claim_timeout_s", 20.0, 1.0, 3600.0, "s", "a robot not heard this long: its claim is void, others take over"),
+    ParamSpec::real("idle_return_s", 60.0, 0.0, 36000.0, "s", "nothing left and no new region this long: return to the start"),
+    ParamSpec::real("mission_end_s", 0.0, 0.0, 360000.0, "s", "> 0: return to the start this long after start-up regardless"),
+    ParamSpec::real("republish_s", 2.0, 0.1, 600.0, "s", "own claim and visited records are re-sent this often"),
+};
+
+struct MissionCounters {
+  std::uint64_t records_in{0}, records_bad{0}, records_published{0}, publish_refused{0}, goals_published{0};
+};
+
+class MissionStage final : public Stage {
+ public:
+  static constexpr std::span<const ParamSpec> kParams{kMissionParams};
+  static std::unique_ptr<Stage> make() { return std::make_unique<MissionStage>(); }
+  Status init(StageContext& ctx) override;
+  void step(TimeNs now) noexcept override;
+  [[nodiscard]] const MissionManager& manager() const noexcept { return *mgr_; }
+  [[nodiscard]] const MissionCounters& counters() const noexcept { return c_; }
+
+ private:
+  std::unique_ptr<MissionManager> mgr_;
+  std::unique_ptr<comms::GossipPublishMsg> pub_;
+  std::unique_ptr<std::array<TimeNs, 256>> heard_;
+  RingReader<comms::GossipRecordMsg, comms::kGossipRing> gossip_in_;
+  RingWriter<comms::GossipPublishMsg, comms::kGossipRing> gossip_out_;
+  LatestReader<comms::TeamPosesMsg> team_;
+  LatestReader<LocalizationMsg> loc_;
+  LatestReader<PlannedPathMsg> path_;
+  LatestWriter<GoalMsg> goal_out_;
+  LatestWriter<MissionStatusMsg> status_out_;
+  std::uint32_t goal_sent_{0};
+  MissionCounters c_;
+};
+
+}  // namespace ag::mission

@@ -1,0 +1,222 @@
+// The regions and mission stages.
+#include "airground/mission/stages.hpp"
+
+#include <algorithm>
+#include <cstring>
+#include <string>
+
+#include "airground/platform/log.hpp"
+
+namespace ag::mission {
+
+// ----------------------------------------------------------------------------------------- regions
+Status RegionsStage::init(StageContext& ctx) {
+  const SectionView v = ctx.params();
+  const std::string where = std::string(ctx.stage_name) + ".";
+  const double x0 = v.real("area_x0_m"), y0 = v.real("area_y0_m"), x1 = v.real("area_x1_m"), y1 = v.real("area_y1_m");
+  if (!(x1 > x0) || !(y1 > y0))
+    return Error::make(ErrorCode::kConfig, "config error: " + where + "area_x1_m/area_y1_m must be east/north of area_x0_m/area_y0_m");
+  RegionParams p;
+  p.resolution_m = kMapResolutionM;
+  p.tile_cells = kTileCells;
+  p.merge_distance_m = v.real("merge_distance_m");
+  p.open_radius_cells = static_cast<int>(v.integer("open_radius_cells"));
+  p.min_region_cells = static_cast<int>(v.integer("min_region_cells"));
+  p.goal_search_radius_m = v.real("goal_search_radius_m");
+  p.min_goal_clearance_m = v.real("min_goal_clearance_m");
+  p.goal_clearance_cap_m = v.real("goal_clearance_cap_m");
+  p.reachable_min_cells = static_cast<int>(v.integer("reachable_min_cells"));
+  p.max_regions = static_cast<int>(kMaxRegionsMsg);
+  const std::string& t = v.text("traversable");
+  p.max_level = t == "free" ? Traversability::kFree : t == "costly" ? Traversability::kCostly : Traversability::kRough;
+  ex_ = std::make_unique<RegionExtractor>(p, ClassTable::builtin(), plan::extent_covering_area(x0, y0, x1, y1, kMapResolutionM, kTileCells));
+  msg_ = std::make_unique<RegionsMsg>();
+  pub_ = std::make_unique<comms::GossipPublishMsg>();
+  batch_ = std::make_unique<RegionBatch>();
+  period_ = from_seconds(v.real("period_s"));
+  auto tiles = ctx.channels.ring_reader<MapTileMsg, kMapTileRing>("map_tiles");
+  if (!tiles) return tiles.error();
+  tiles_ = tiles.value();
+  auto g = ctx.channels.ring_writer<comms::GossipPublishMsg, comms::kGossipRing>("gossip_out");
+  if (!g) return g.error();
+  gossip_ = g.value();
+  auto out = ctx.channels.latest_writer<RegionsMsg>("regions");
+  if (!out) return out.error();
+  out_ = out.value();
+  return ok_status();
+}
+
+bool RegionsStage::publish_batches(TimeNs now) noexcept {
+  const std::uint32_t n = msg_->count;
+  constexpr std::uint32_t kPer = static_cast<std::uint32_t>(kRegionsPerBatch);
+  const std::uint32_t batches = std::max<std::uint32_t>(1, (n + kPer - 1) / kPer);
+  if (gossip_.free_slots() < batches) {
+    ++c_.publish_deferred;
+    return false;
+  }
+  for (std::uint32_t b = 0; b < batches; ++b) {
+    RegionBatch& rb = *batch_;
+    rb.regions_version = msg_->version;
+    rb.batches = static_cast<std::uint16_t>(batches);
+    rb.count = static_cast<std::uint8_t>(std::min<std::uint32_t>(kRegionsPerBatch, n - std::min(n, b * kPer)));
+    for (std::uint32_t i = 0; i < rb.count; ++i) rb.regions[i] = msg_->regions[b * kPer + i];
+    comms::GossipPublishMsg& m = *pub_;
+    m.stamp = now;
+    m.published = now;
+    m.topic = regions_topic(b);
+    m.priority = 0;
+    m.size = static_cast<std::uint32_t>(encode(rb, m.payload));
+    (void)gossip_.push(m);
+    ++c_.batches_published;
+  }
+  msg_->batches = batches;
+  ++c_.versions_published;
+  return true;
+}
+
+void RegionsStage::step(TimeNs now) noexcept {
+  for (MapTileMsg* t = tiles_.front(); t != nullptr; t = tiles_.front()) {
+    ++c_.tiles_in;
+    if (ex_->set_tile(t->tx, t->ty, t->version, std::span<const std::uint8_t>(t->cls.data(), t->cls.size())))
+      ++c_.tiles_applied;
+    else if (c_.tiles_rejected++ == 0)
+      AG_LOG_WARN("regions", "map tile (%d, %d) v%llu outside the mission area (regions.area_*) or not newer: dropped (counted)",
+                  static_cast<int>(t->tx), static_cast<int>(t->ty), static_cast<unsigned long long>(t->version));
+    tiles_.pop();
+  }
+  if (ex_->changed() && (last_extract_ < 0 || now - last_extract_ >= period_)) {
+    last_extract_ = now;
+    ex_->extract();
+    ++c_.extractions;
+    if (ex_->version() != published_version_) {
+      published_version_ = ex_->version();
+      RegionsMsg& m = *msg_;
+      const auto regs = ex_->regions();
+      m.count = static_cast<std::uint32_t>(std::min(regs.size(), kMaxRegionsMsg));
+      m.dropped = regs.size() - m.count;
+      c_.regions_dropped = m.dropped;
+      for (std::uint32_t i = 0; i < m.count; ++i) {
+        const Region& r = regs[i];
+        m.regions[i] = RegionRecord{r.id, static_cast<float>(r.cx), static_cast<float>(r.cy), static_cast<float>(r.goal_x),
+                                    static_cast<float>(r.goal_y), static_cast<std::uint16_t>(std::min<std::uint32_t>(r.cells, 0xFFFF)), r.goal_valid};
+      }
+      m.version = published_version_;
+      m.stamp = now;
+      m.published = now;
+      m.extractions = c_.extractions;
+      pending_ = true;
+    }
+  }
+  if (pending_ && publish_batches(now)) {
+    pending_ = false;
+    out_.publish(*msg_);
+  }
+}
+
+// ----------------------------------------------------------------------------------------- mission
+Status MissionStage::init(StageContext& ctx) {
+  const SectionView v = ctx.params();
+  ManagerParams p;
+  p.self = static_cast<comms::RobotId>(ctx.config.get_int("robot.id"));
+  p.priority = static_cast<std::uint8_t>(v.integer("priority"));
+  p.start_x = v.real("start_x_m");
+  p.start_y = v.real("start_y_m");
+  p.visit_radius_m = v.real("visit_radius_m");
+  p.max_sigma_m = v.real("max_sigma_m");
+  p.max_no_route = static_cast<int>(v.integer("max_no_route"));
+  p.no_progress_timeout_s = v.real("no_progress_timeout_s");
+  p.progress_min_m = v.real("progress_min_m");
+  p.retry_after_s = v.real("retry_after_s");
+  p.claim_timeout_s = v.real("claim_timeout_s");
+  p.idle_return_s = v.real("idle_return_s");
+  p.mission_end_s = v.real("mission_end_s");
+  p.republish_s = v.real("republish_s");
+  mgr_ = std::make_unique<MissionManager>(p);
+  pub_ = std::make_unique<comms::GossipPublishMsg>();
+  heard_ = std::make_unique<std::array<TimeNs, 256>>();
+  heard_->fill(-1);
+  auto gin = ctx.channels.ring_reader<comms::GossipRecordMsg, comms::kGossipRing>("gossip_in");
+  if (!gin) return gin.error();
+  gossip_in_ = gin.value();
+  auto gout = ctx.channels.ring_writer<comms::GossipPublishMsg, comms::kGossipRing>("gossip_out");
+  if (!gout) return gout.error();
+  gossip_out_ = gout.value();
+  auto team = ctx.channels.latest_reader<comms::TeamPosesMsg>("team_poses");
+  if (!team) return team.error();
+  team_ = team.value();
+  auto loc = ctx.channels.latest_reader<LocalizationMsg>("localization");
+  if (!loc) return loc.error();
+  loc_ = loc.value();
+  auto path = ctx.channels.latest_reader<PlannedPathMsg>("planned_path");
+  if (!path) return path.error();
+  path_ = path.value();
+  auto goal = ctx.channels.latest_writer<GoalMsg>("goal");
+  if (!goal) return goal.error();
+  goal_out_ = goal.value();
+  auto st = ctx.channels.latest_writer<MissionStatusMsg>("mission_status");
+  if (!st) return st.error();
+  status_out_ = st.value();
+  return ok_status();
+}
+
+void MissionStage::step(TimeNs now) noexcept {
+  MissionManager& m = *mgr_;
+  for (comms::GossipRecordMsg* r = gossip_in_.front(); r != nullptr; r = gossip_in_.front()) {
+    ++c_.records_in;
+    const std::uint32_t size = std::min<std::uint32_t>(r->size, static_cast<std::uint32_t>(r->payload.size()));
+    const DecodeError e = m.on_record(r->key.origin, r->key.topic, std::span<const std::uint8_t>(r->payload.data(), size), now);
+    if (e != DecodeError::kOk && c_.records_bad++ % 100 == 0)
+      AG_LOG_WARN("mission", "record of robot %u topic 0x%08x (%u B): %s (%llu malformed so far, dropped)", static_cast<unsigned>(r->key.origin),
+                  static_cast<unsigned>(r->key.topic), static_cast<unsigned>(r->size), to_string(e),
+                  static_cast<unsigned long long>(c_.records_bad));
+    gossip_in_.pop();
+  }
+  if (team_.fresh()) {
+    const comms::TeamPosesMsg& t = team_.read();
+    for (std::uint32_t i = 0; i < std::min<std::uint32_t>(t.count, static_cast<std::uint32_t>(t.robots.size())); ++i) {
+      const comms::TeamPose& tp = t.robots[i];
+      if (tp.stamp != (*heard_)[tp.robot]) {
+        (*heard_)[tp.robot] = tp.stamp;
+        m.on_peer_heard(tp.robot, now);
+      }
+    }
+  }
+  if (loc_.fresh()) m.on_localization(loc_.read());
+  if (path_.fresh()) {
+    const PlannedPathMsg& pp = path_.read();
+    m.on_route(pp.goal_id, pp.seq, pp.status);
+  }
+  m.tick(now);
+  for (const OutRecord& o : m.outbox()) {
+    if (o.size == 0) continue;
+    comms::GossipPublishMsg& g = *pub_;
+    g.stamp = now;
+    g.published = now;
+    g.topic = o.topic;
+    g.priority = 0;
+    g.size = o.size;
+    std::memcpy(g.payload.data(), o.payload.data(), o.size);
+    if (gossip_out_.push(g) == 0)
+      ++c_.records_published;
+    else
+      ++c_.publish_refused;
+  }
+  m.clear_outbox();
+  const GoalCommand& gc = m.goal();
+  if (gc.id != goal_sent_) {
+    goal_sent_ = gc.id;
+    GoalMsg gm;
+    gm.stamp = now;
+    gm.published = now;
+    gm.id = gc.id;
+    gm.goal = RoutePoint{gc.x, gc.y};
+    gm.cancel = gc.cancel;
+    goal_out_.publish(gm);
+    ++c_.goals_published;
+  }
+  MissionStatusMsg s = m.status();
+  s.published = now;
+  status_out_.publish(s);
+}
+
+}  // namespace ag::mission
