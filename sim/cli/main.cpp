@@ -1,4 +1,5 @@
 // airground-sim: worlds (generate, import, show), one camera frame or LiDAR scan, and team runs.
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <opencv2/imgcodecs.hpp>
@@ -12,6 +13,7 @@
 #include <fstream>
 #include <map>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "airground/platform/log.hpp"
@@ -30,6 +32,7 @@
 #include "airground/sim/lidar.hpp"
 #include "airground/sim/raycast.hpp"
 #include "airground/sim/runner.hpp"
+#include "airground/sim/eval_mission.hpp"
 #include "airground/sim/world_png.hpp"
 
 namespace fs = std::filesystem;
@@ -54,6 +57,9 @@ constexpr const char* kUsage =
     "  airground-sim eval localization --world W --seed S --init-error 16 --map gt|online --out DIR [options]\n"
     "                                  (see eval localization --help)\n"
     "  airground-sim eval planning --world W --seed S --pairs 20 --out DIR   (see eval planning --help)\n"
+    "  airground-sim mission --world W --ugvs N --seed S [--comm-range METRES] [--mission FILE.yaml] --out DIR\n"
+    "                        (a whole team mission and its report; see mission --help)\n"
+    "  airground-sim study --ugvs 1,2,3,5,10 --comm-range 50,150,1000 --seeds K --out DIR   (a grid of missions)\n"
     "  airground-sim segment --weights FILE --image IMAGE.png --out DIR [--threads N]   (ErfNet: logits.npy,\n"
     "                        classes.png; see segment --help)\n"
     "  airground-sim config --out DIR   (every simulator model's parameters with units and ranges, as\n"
@@ -481,6 +487,236 @@ int run(const Args& a) {
   return 0;
 }
 
+constexpr const char* kMissionHelp =
+    "airground-sim mission — a whole team mission: the quadrotor surveys and maps, finds the regions of\n"
+    "interest (vehicle clusters), the ground robots localize in its map from a rough guess, claim regions\n"
+    "among themselves over the radio's gossip (no central server), plan, drive, visit and return; the base\n"
+    "station only listens. Scored against the world's targets and the true poses.\n\n"
+    "Usage: airground-sim mission --world W --ugvs N --seed S [--comm-range METRES] [--mission FILE.yaml] --out DIR\n\n"
+    "Writes DIR/metrics.json (targets_total, targets_visited, mission_time_s, loc_error_mean_m, loc_error_p95_m,\n"
+    "odom_only_error_mean_m, collisions, failed_goals, false_visits, map_class_accuracy, bytes_on_air,\n"
+    "realtime_factor, per robot), DIR/report.md with mission_map.png, pose_error.png, odometry_error.png,\n"
+    "claims_timeline.png, comms_traffic.png, the quadrotor's final maps in DIR/maps (PNG and GeoTIFF),\n"
+    "visits.csv and the runner's recordings.\n"
+    "Defaults: --world default --ugvs 3 --seed 1 --out mission (comm range: the radio model's 100 m).\n\n"
+    "Options:\n"
+    "  --init-error M          initial guesses up to M metres off, uniform per robot (16)\n"
+    "  --init-yaw-error D      ... and D degrees (10)\n"
+    "  --altitude A            quadrotor survey altitude (40 m)\n"
+    "  --max-duration T        stop after T simulated seconds at the latest (1800)\n"
+    "  --kill-ugv I@T          power ground robot I (1-based) off at T seconds (repeatable)\n"
+    "  --kill-base T           power the base station off at T seconds\n"
+    "  --set SECTION.KEY=VALUE any parameter of the ground robots' role config (repeatable)\n"
+    "  --set-uav SECTION.KEY=VALUE  ... of the quadrotor's\n"
+    "  --lidar-columns C       512|1024|2048 (1024)\n"
+    "  --web-port P            the base station serves its live page on http://localhost:P/ during the run\n"
+    "  --pace X                hold the run to X times real time (to watch it on the page)\n"
+    "  --record none|light|full  recordings (light)\n"
+    "  --threads N             sensor worker threads (all cores)\n"
+    "  --verbose [S]           every S simulated seconds (30) a status line per robot\n"
+    "  --quiet                 no progress bar\n";
+
+void progress_bar(double sim, double total, double rtf, bool tty, double& last_print) {
+  if (!tty && sim - last_print < 60 && sim < total) return;
+  last_print = sim;
+  const int width = 30;
+  const int filled = static_cast<int>(std::lround(width * std::min(1.0, sim / std::max(total, 1e-9))));
+  std::string bar(static_cast<std::size_t>(filled), '#');
+  bar.resize(static_cast<std::size_t>(width), '.');
+  std::fprintf(stderr, "%s[%s] sim %6.0f s (cap %.0f s)  real-time factor %.1fx%s", tty ? "\r" : "", bar.c_str(), sim, total, rtf, tty ? "   " : "\n");
+}
+
+int mission_cmd(const Args& a) {
+  MissionOptions o;
+  o.world = a.get("world", o.world);
+  o.out_dir = a.get("out", o.out_dir);
+  o.mission_file = a.get("mission");
+  o.ugvs = static_cast<int>(number(a, "ugvs", o.ugvs));
+  o.seed = static_cast<std::uint64_t>(number(a, "seed", static_cast<double>(o.seed)));
+  o.comm_range_m = number(a, "comm-range", o.comm_range_m);
+  o.init_error_m = number(a, "init-error", o.init_error_m);
+  o.init_yaw_error_deg = number(a, "init-yaw-error", o.init_yaw_error_deg);
+  o.uav_altitude_m = number(a, "altitude", o.uav_altitude_m);
+  o.max_duration_s = number(a, "max-duration", o.max_duration_s);
+  o.lidar_columns = static_cast<int>(number(a, "lidar-columns", o.lidar_columns));
+  o.threads = static_cast<int>(number(a, "threads", 0));
+  o.web_port = static_cast<int>(number(a, "web-port", 0));
+  o.web_pace = number(a, "pace", 0);
+  o.status_period_s = a.has("verbose") ? number(a, "verbose", 30) : 0;
+  if (o.ugvs < 1 || o.ugvs > 32) usage_error("--ugvs must be 1..32");
+  if (o.comm_range_m < 0 || o.init_error_m < 0 || !(o.max_duration_s > 0)) usage_error("--comm-range, --init-error must be >= 0, --max-duration > 0");
+  if (o.web_port < 0 || o.web_port > 65535) usage_error("--web-port must be 1..65535");
+  if (a.has("kill-ugv"))
+    for (const auto& k : a.opt.at("kill-ugv")) {
+      const auto at = k.find('@');
+      if (at == std::string::npos) usage_error("--kill-ugv needs I@T, got '" + k + "'");
+      const int i = std::atoi(k.substr(0, at).c_str());
+      const double t = std::atof(k.substr(at + 1).c_str());
+      if (i < 1 || i > o.ugvs || !(t >= 0)) usage_error("--kill-ugv I@T: I in 1..ugvs, T >= 0, got '" + k + "'");
+      o.kills.push_back(RunOptions::Kill{i - 1, t});
+    }
+  if (a.has("kill-base")) o.kills.push_back(RunOptions::Kill{-1, number(a, "kill-base", 0)});
+  for (const char* key : {"set", "set-uav"})
+    if (a.has(key))
+      for (const auto& s : a.opt.at(key)) {
+        if (s.find('=') == std::string::npos || s.find('.') == std::string::npos) usage_error(std::string("--") + key + " needs SECTION.KEY=VALUE, got '" + s + "'");
+        (std::string(key) == "set" ? o.ugv_config : o.uav_config).push_back(s);
+      }
+  const std::string rec = a.get("record", "light");
+  if (rec == "none") o.record = RecordLevel::kNone;
+  else if (rec == "light") o.record = RecordLevel::kLight;
+  else if (rec == "full") o.record = RecordLevel::kFull;
+  else usage_error("--record must be none, light or full");
+  if (!o.mission_file.empty()) usage_error("--mission: mission files are read by the mission library; this build runs the region investigation only");
+  const bool tty = isatty(2) != 0;
+  const bool show = !a.has("quiet");
+  double last_print = -1;
+  std::fprintf(stderr, "mission: 1 quadrotor + %d ground robots on world '%s' (seed %llu)%s -> %s\n", o.ugvs, o.world.c_str(),
+               static_cast<unsigned long long>(o.seed), o.web_port > 0 ? (", live page on http://localhost:" + std::to_string(o.web_port) + "/").c_str() : "",
+               o.out_dir.c_str());
+  auto m = run_mission(o, [&](double sim, double total, double rtf) {
+    if (show) progress_bar(sim, total, rtf, tty, last_print);
+  });
+  if (show && tty) std::fprintf(stderr, "\n");
+  if (!m) return fail(m.error());
+  const MissionMetrics& r = m.value();
+  std::printf("targets visited %u of %u (regions found %u, visited %u); mission time %.0f s%s\n", r.targets_visited, r.targets_total,
+              r.regions_found, r.regions_visited, r.mission_time_s, r.completed ? "" : " (time cap reached)");
+  std::printf("localization error mean %.2f m, p95 %.2f m (odometry alone %.1f m); false visits %u, failed goals %u, collisions %llu\n",
+              r.loc_error_mean_m, r.loc_error_p95_m, r.odom_only_error_mean_m, r.false_visits, r.failed_goals, static_cast<unsigned long long>(r.collisions));
+  std::printf("map class accuracy %.3f; %.1f MB on air; real-time factor %.2fx; report: %s/report.md\n", r.map_class_accuracy,
+              static_cast<double>(r.bytes_on_air) / 1e6, r.realtime_factor, o.out_dir.c_str());
+  return 0;
+}
+
+constexpr const char* kStudyHelp =
+    "airground-sim study — the paper's simulation study: a grid of team missions over team size, radio\n"
+    "range and seed, run as parallel 'airground-sim mission' processes, then a table and plots.\n\n"
+    "Usage: airground-sim study --ugvs 1,2,3,5,10 --comm-range 50,150,1000 --seeds K --out DIR [options]\n\n"
+    "Writes DIR/runs/u<N>_r<R>_s<S>/ (each mission's report), DIR/study.csv (one row per mission),\n"
+    "DIR/study.md (the table and the summary: targets reached in every run, false visits, localization\n"
+    "error, mission time by team size and range), DIR/mission_time.png, DIR/pose_error.png, DIR/targets.png.\n"
+    "A mission whose folder already has metrics.json is not run again (resume an interrupted study).\n"
+    "Defaults: --ugvs 1,2,3 --comm-range 150 --seeds 1 --out study --jobs (cores / 2, at least 1).\n\n"
+    "Options:\n"
+    "  --world W              (default)\n"
+    "  --first-seed S         seeds S .. S+K-1 (1)\n"
+    "  --jobs J               missions at once (each gets cores / J sensor threads)\n"
+    "  --max-duration T       per mission (1800 s)\n"
+    "  --altitude A           quadrotor altitude (40 m; the paper flew 60 m)\n"
+    "  --lidar-columns C      (1024)\n"
+    "  --set SECTION.KEY=VALUE  passed to every mission (repeatable)\n";
+
+std::vector<double> number_list(const Args& a, const std::string& k, const std::string& def) {
+  std::vector<double> out;
+  std::string v = a.has(k) ? "" : def;
+  if (a.has(k))
+    for (const auto& p : a.opt.at(k)) v += (v.empty() ? "" : ",") + p;
+  std::size_t i = 0;
+  while (i <= v.size()) {
+    const std::size_t j = std::min(v.find(',', i), v.size());
+    const std::string tok = v.substr(i, j - i);
+    if (!tok.empty()) {
+      char* end = nullptr;
+      const double d = std::strtod(tok.c_str(), &end);
+      if (*end != '\0' || !std::isfinite(d)) usage_error("--" + k + ": '" + tok + "' is not a number");
+      out.push_back(d);
+    }
+    i = j + 1;
+  }
+  if (out.empty()) usage_error("--" + k + " needs at least one value");
+  return out;
+}
+
+int study_cmd(const Args& a, const char* self) {
+  const auto ugvs = number_list(a, "ugvs", "1,2,3");
+  const auto ranges = number_list(a, "comm-range", "150");
+  const int seeds = static_cast<int>(number(a, "seeds", 1));
+  const int first_seed = static_cast<int>(number(a, "first-seed", 1));
+  const std::string out = a.get("out", "study");
+  const std::string world = a.get("world", "default");
+  const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  const int jobs = std::max(1, static_cast<int>(number(a, "jobs", std::max(1, cores / 2))));
+  const int threads = std::max(1, cores / jobs);
+  if (seeds < 1) usage_error("--seeds must be >= 1");
+  for (double u : ugvs)
+    if (u < 1 || u > 32 || u != std::floor(u)) usage_error("--ugvs: team sizes 1..32");
+  struct Job {
+    int ugvs;
+    double range;
+    int seed;
+    std::string dir;
+    pid_t pid{0};
+    bool done{false};
+    int status{0};
+  };
+  std::vector<Job> grid;
+  for (double u : ugvs)
+    for (double r : ranges)
+      for (int k = 0; k < seeds; ++k) {
+        char d[128];
+        std::snprintf(d, sizeof d, "u%d_r%.0f_s%d", static_cast<int>(u), r, first_seed + k);
+        grid.push_back(Job{static_cast<int>(u), r, first_seed + k, (std::filesystem::path(out) / "runs" / d).string()});
+      }
+  std::filesystem::create_directories(std::filesystem::path(out) / "runs");
+  std::fprintf(stderr, "study: %zu missions (%zu team sizes x %zu ranges x %d seeds), %d at once -> %s\n", grid.size(), ugvs.size(), ranges.size(), seeds, jobs, out.c_str());
+  std::size_t next = 0, running = 0, finished = 0;
+  const auto t0 = std::chrono::steady_clock::now();
+  auto launch = [&](Job& j) {
+    std::vector<std::string> args = {self, "mission", "--world", world, "--ugvs", std::to_string(j.ugvs), "--seed", std::to_string(j.seed),
+                                     "--comm-range", std::to_string(j.range), "--out", j.dir, "--threads", std::to_string(threads), "--quiet",
+                                     "--record", "none", "--max-duration", a.get("max-duration", "1800"), "--altitude", a.get("altitude", "40"),
+                                     "--lidar-columns", a.get("lidar-columns", "1024")};
+    if (a.has("set"))
+      for (const auto& s : a.opt.at("set")) {
+        args.emplace_back("--set");
+        args.push_back(s);
+      }
+    std::filesystem::create_directories(j.dir);
+    const pid_t pid = fork();
+    if (pid == 0) {
+      const std::string log = j.dir + "/mission.log";
+      if (std::freopen(log.c_str(), "w", stdout) == nullptr || std::freopen(log.c_str(), "a", stderr) == nullptr) _exit(127);
+      std::vector<char*> argv;
+      for (auto& s : args) argv.push_back(s.data());
+      argv.push_back(nullptr);
+      execv(self, argv.data());
+      _exit(127);
+    }
+    j.pid = pid;
+    ++running;
+  };
+  for (;;) {
+    while (running < static_cast<std::size_t>(jobs) && next < grid.size()) {
+      Job& j = grid[next++];
+      if (std::filesystem::exists(j.dir + "/metrics.json")) {
+        j.done = true;
+        ++finished;
+        continue;
+      }
+      launch(j);
+    }
+    if (running == 0) break;
+    int st = 0;
+    const pid_t pid = waitpid(-1, &st, 0);
+    if (pid <= 0) break;
+    for (auto& j : grid)
+      if (j.pid == pid && !j.done) {
+        j.done = true;
+        j.status = st;
+        --running;
+        ++finished;
+        const double el = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        std::fprintf(stderr, "[%zu/%zu] %s %s (%.0f s elapsed)\n", finished, grid.size(), j.dir.c_str(),
+                     WIFEXITED(st) && WEXITSTATUS(st) == 0 ? "done" : "FAILED (see its mission.log)", el);
+      }
+  }
+  auto s = summarise_study(out);
+  if (!s) return fail(s.error());
+  std::printf("%s", s.value().c_str());
+  return 0;
+}
+
 int eval_mapping_cmd(const Args& a) {
   EvalMappingOptions o;
   o.world = a.get("world", o.world);
@@ -710,6 +946,20 @@ int main(int argc, char** argv) {
         return 0;
       }
       return eval_mapping_cmd(parse(argc, argv, 3));
+    }
+    if (cmd == "mission") {
+      if (help) {
+        std::fputs(kMissionHelp, stdout);
+        return 0;
+      }
+      return mission_cmd(parse(argc, argv, 2));
+    }
+    if (cmd == "study") {
+      if (help) {
+        std::fputs(kStudyHelp, stdout);
+        return 0;
+      }
+      return study_cmd(parse(argc, argv, 2), "/proc/self/exe");
     }
     if (cmd == "run" && help) {
       std::fputs(kRunHelp, stdout);

@@ -178,6 +178,8 @@ Result<MissionMetrics> run_mission(const MissionOptions& o, const ProgressFn& pr
   std::uint64_t last_bytes = 0;
   double last_traffic_t = 0;
   const mapping::OrthoMapStage* ortho = nullptr;
+  double next_status = o.status_period_s;
+  std::vector<Sample> last_sample(static_cast<std::size_t>(n));
 
   r.sample = [&](const UgvSample& s) {
     Sample x;
@@ -189,6 +191,7 @@ Result<MissionMetrics> run_mission(const MissionOptions& o, const ProgressFn& pr
       x.err = std::hypot(s.localization->pose.x - s.truth_at_localization.x, s.localization->pose.y - s.truth_at_localization.y);
     }
     killed[static_cast<std::size_t>(s.ugv)] = s.killed;
+    last_sample[static_cast<std::size_t>(s.ugv)] = x;
     samples[static_cast<std::size_t>(s.ugv)].push_back(x);
   };
   r.observe = [&](TimeNs now, RoleInstance* uav, const std::vector<RoleInstance*>& ugvs, RoleInstance* base) {
@@ -218,6 +221,17 @@ Result<MissionMetrics> run_mission(const MissionOptions& o, const ProgressFn& pr
       for (std::uint16_t k = visits_seen[i]; k < v.count; ++k)
         visits.push_back(Visit{t, static_cast<int>(i), v.entries[k].region_id, v.entries[k].x, v.entries[k].y});
       visits_seen[i] = v.count;
+    }
+    if (o.status_period_s > 0 && t >= next_status) {
+      next_status += o.status_period_s;
+      std::fprintf(stderr, "t=%.0f s: %zu regions known to the quadrotor\n", t, regions.size());
+      for (std::size_t i = 0; i < ugvs.size(); ++i) {
+        const Sample& x = last_sample[i];
+        std::fprintf(stderr, "  ugv%zu %-10s region %-10d goal (%.0f, %.0f) at (%.0f, %.0f) loc %s err %.1f m sigma %.1f m visited %u failed %u regions %u%s\n", i + 1,
+                     mission::to_string(status[i].state), status[i].region_id == mission::kNoRegion ? -1 : static_cast<int>(status[i].region_id), status[i].goal_x,
+                     status[i].goal_y, x.truth.x, x.truth.y, x.tracking ? "tracking" : "not tracking", x.err, status[i].pose_sigma_m, status[i].visited_own,
+                     status[i].failed_own, status[i].regions_known, killed[i] ? " (off)" : "");
+      }
     }
     if (t - last_traffic_t >= 5.0) {
       traffic_t.push_back(t);

@@ -27,6 +27,7 @@ struct MissionOptions {
   int lidar_columns{1024};
   int threads{0};
   bool progress{true};
+  double status_period_s{0};       // > 0: a status line per robot on stderr this often (simulated seconds)
   RecordLevel record{RecordLevel::kLight};
   std::vector<RunOptions::Kill> kills{};   // ugv -1 = the base station
   std::vector<std::string> ugv_config{}, uav_config{};
@@ -65,5 +66,13 @@ struct MissionMetrics {
 };
 
 Result<MissionMetrics> run_mission(const MissionOptions& options, const ProgressFn& progress = {});
+
+}  // namespace ag::sim
+
+namespace ag::sim {
+
+// Reads DIR/runs/*/metrics.json of a study and writes DIR/study.csv, DIR/study.md and the plots
+// (mission_time.png, pose_error.png, targets.png); returns the summary printed at the end.
+Result<std::string> summarise_study(const std::string& dir);
 
 }  // namespace ag::sim

@@ -156,8 +156,8 @@ struct RunOptions {
   // The ground robots move by their own drive stage's "wheel_command" (planner -> drive -> wheels), not
   // the simulator's scripted pursuit; the planner's area is set to the world's extent.
   bool drive_by_stages{false};
-  // Per ground robot (0-based): a goal the runner writes once on its "goal" channel at the start, for
-  // tables without a mission stage (tests of planner -> drive). NaN = none.
+  // Per ground robot (0-based): a goal the runner writes once on its "goal" channel at the start (tests of
+  // planner -> drive); the robots' table then has no mission stage. NaN = none.
   std::vector<Eigen::Vector2d> ugv_goals{};
   // Power a robot off at at_s: it stops moving and its radio falls silent (nothing it sends reaches
   // anyone, nothing reaches it). ugv = -1 is the base station.

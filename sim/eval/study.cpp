@@ -1,0 +1,158 @@
+// The study's table and plots from the missions' metrics.json files.
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "airground/sim/eval_mission.hpp"
+#include "airground/sim/plot.hpp"
+
+namespace ag::sim {
+
+namespace {
+namespace fs = std::filesystem;
+
+struct Row {
+  std::string name;
+  int ugvs{0};
+  double range{0};
+  int seed{0};
+  double targets_total{0}, targets_visited{0}, mission_time_s{0}, loc_mean{-1}, loc_p95{-1}, odom_mean{0};
+  double false_visits{0}, failed_goals{0}, collisions{0}, bytes{0}, rtf{0};
+  bool completed{false};
+};
+}  // namespace
+
+Result<std::string> summarise_study(const std::string& dir) {
+  std::vector<Row> rows;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(fs::path(dir) / "runs", ec)) {
+    const fs::path mj = e.path() / "metrics.json";
+    if (!fs::exists(mj)) continue;
+    std::ifstream f(mj);
+    nlohmann::json j = nlohmann::json::parse(f, nullptr, false);
+    if (j.is_discarded() || !j.is_object()) {
+      std::fprintf(stderr, "study: %s: not valid JSON, skipped\n", mj.c_str());
+      continue;
+    }
+    Row r;
+    r.name = e.path().filename().string();
+    auto num = [&](const char* k, double def) { return j.contains(k) && j[k].is_number() ? j[k].get<double>() : def; };
+    r.ugvs = static_cast<int>(num("ugvs", 0));
+    r.range = num("comm_range_m", 0);
+    r.seed = static_cast<int>(num("seed", 0));
+    r.targets_total = num("targets_total", 0);
+    r.targets_visited = num("targets_visited", 0);
+    r.mission_time_s = num("mission_time_s", 0);
+    r.loc_mean = num("loc_error_mean_m", -1);
+    r.loc_p95 = num("loc_error_p95_m", -1);
+    r.odom_mean = num("odom_only_error_mean_m", 0);
+    r.false_visits = num("false_visits", 0);
+    r.failed_goals = num("failed_goals", 0);
+    r.collisions = num("collisions", 0);
+    r.bytes = num("bytes_on_air", 0);
+    r.rtf = num("realtime_factor", 0);
+    r.completed = j.contains("completed") && j["completed"].is_boolean() && j["completed"].get<bool>();
+    rows.push_back(r);
+  }
+  if (ec) return Error::make(ErrorCode::kIo, "cannot list " + (fs::path(dir) / "runs").string() + ": " + ec.message());
+  std::sort(rows.begin(), rows.end(), [](const Row& a, const Row& b) {
+    return std::tie(a.range, a.ugvs, a.seed) < std::tie(b.range, b.ugvs, b.seed);
+  });
+  const fs::path out(dir);
+  std::ofstream csv(out / "study.csv");
+  csv << "run,ugvs,comm_range_m,seed,targets_total,targets_visited,completed,mission_time_s,loc_error_mean_m,loc_error_p95_m,"
+         "odom_only_error_mean_m,false_visits,failed_goals,collisions,bytes_on_air,realtime_factor\n";
+  for (const Row& r : rows)
+    csv << r.name << "," << r.ugvs << "," << r.range << "," << r.seed << "," << r.targets_total << "," << r.targets_visited << ","
+        << (r.completed ? 1 : 0) << "," << r.mission_time_s << "," << r.loc_mean << "," << r.loc_p95 << "," << r.odom_mean << ","
+        << r.false_visits << "," << r.failed_goals << "," << r.collisions << "," << r.bytes << "," << r.rtf << "\n";
+  // Summary figures.
+  std::size_t all_reached = 0, zero_false = 0;
+  double loc_sum = 0, loc_max = 0, odom_sum = 0;
+  std::size_t loc_n = 0;
+  for (const Row& r : rows) {
+    if (r.targets_total > 0 && r.targets_visited >= r.targets_total) ++all_reached;
+    if (r.false_visits == 0) ++zero_false;
+    if (r.loc_mean >= 0) {
+      loc_sum += r.loc_mean;
+      loc_max = std::max(loc_max, r.loc_mean);
+      ++loc_n;
+    }
+    odom_sum += r.odom_mean;
+  }
+  // Mission time by team size, one series per range (mean over seeds).
+  std::map<double, std::map<int, std::pair<double, int>>> by_range;
+  for (const Row& r : rows) {
+    auto& cell = by_range[r.range][r.ugvs];
+    cell.first += r.mission_time_s;
+    cell.second += 1;
+  }
+  std::vector<PlotSeries> time_series, err_series, tgt_series;
+  std::size_t k = 0;
+  for (const auto& [range, m] : by_range) {
+    PlotSeries s{"range " + std::to_string(static_cast<int>(range)) + " m", {}, {}, series_colour(k), false};
+    for (const auto& [u, c] : m) {
+      s.x.push_back(u);
+      s.y.push_back(c.first / c.second);
+    }
+    time_series.push_back(s);
+    PlotSeries e{"range " + std::to_string(static_cast<int>(range)) + " m", {}, {}, series_colour(k), true};
+    PlotSeries t{e.name, {}, {}, series_colour(k), true};
+    for (const Row& r : rows)
+      if (r.range == range) {
+        e.x.push_back(r.ugvs + 0.08 * static_cast<double>(k));
+        e.y.push_back(r.loc_mean);
+        t.x.push_back(r.ugvs + 0.08 * static_cast<double>(k));
+        t.y.push_back(r.targets_visited);
+      }
+    err_series.push_back(e);
+    tgt_series.push_back(t);
+    ++k;
+  }
+  PlotOptions po;
+  po.title = "Mission time by team size (mean over seeds)";
+  po.x_label = "ground robots";
+  po.y_label = "mission time [s]";
+  cv::imwrite((out / "mission_time.png").string(), line_plot(time_series, po));
+  po.title = "Localization error after convergence (mean per mission), 1.5 m line";
+  po.y_label = "error [m]";
+  po.h_lines = {1.5};
+  cv::imwrite((out / "pose_error.png").string(), line_plot(err_series, po));
+  po.title = "Targets reached per mission";
+  po.y_label = "targets";
+  po.h_lines = {rows.empty() ? 0.0 : rows.front().targets_total};
+  cv::imwrite((out / "targets.png").string(), line_plot(tgt_series, po));
+
+  std::ostringstream md;
+  char line[512];
+  md << "# airground study\n\n" << rows.size() << " missions. All targets reached in " << all_reached << " of " << rows.size()
+     << "; no false visit in " << zero_false << " of " << rows.size() << ".";
+  if (loc_n > 0) {
+    std::snprintf(line, sizeof line, " Localization error after convergence: mean %.2f m over the missions (worst mission %.2f m); wheel odometry alone %.1f m.",
+                  loc_sum / static_cast<double>(loc_n), loc_max, odom_sum / static_cast<double>(rows.size()));
+    md << line;
+  }
+  md << "\n\n![mission time](mission_time.png)\n\n![pose error](pose_error.png)\n\n![targets](targets.png)\n\n"
+     << "| run | robots | range [m] | seed | targets | done | mission time [s] | loc error mean / p95 [m] | odometry only [m] | false visits | failed goals | collisions | MB on air | RTF |\n"
+     << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const Row& r : rows) {
+    std::snprintf(line, sizeof line, "| %s | %d | %.0f | %d | %.0f / %.0f | %s | %.0f | %.2f / %.2f | %.1f | %.0f | %.0f | %.0f | %.1f | %.2f |\n", r.name.c_str(), r.ugvs,
+                  r.range, r.seed, r.targets_visited, r.targets_total, r.completed ? "yes" : "cap", r.mission_time_s, r.loc_mean, r.loc_p95, r.odom_mean,
+                  r.false_visits, r.failed_goals, r.collisions, r.bytes / 1e6, r.rtf);
+    md << line;
+  }
+  std::ofstream f(out / "study.md");
+  f << md.str();
+  if (!f || !csv) return Error::make(ErrorCode::kIo, "cannot write the study files in " + dir);
+  std::snprintf(line, sizeof line, "study: %zu missions, all targets in %zu, no false visit in %zu; table %s/study.md\n", rows.size(), all_reached, zero_false, dir.c_str());
+  return std::string(line);
+}
+
+}  // namespace ag::sim
