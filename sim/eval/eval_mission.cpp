@@ -224,7 +224,9 @@ Result<MissionMetrics> run_mission(const MissionOptions& o, const ProgressFn& pr
     }
     if (o.status_period_s > 0 && t >= next_status) {
       next_status += o.status_period_s;
-      std::fprintf(stderr, "t=%.0f s: %zu regions known to the quadrotor\n", t, regions.size());
+      const auto* rs = find_stage<mission::RegionsStage>(uav);
+      std::fprintf(stderr, "t=%.0f s: quadrotor: %zu regions, %llu map tiles in, %llu extractions\n", t, regions.size(),
+                   rs ? static_cast<unsigned long long>(rs->counters().tiles_in) : 0ULL, rs ? static_cast<unsigned long long>(rs->counters().extractions) : 0ULL);
       for (std::size_t i = 0; i < ugvs.size(); ++i) {
         const Sample& x = last_sample[i];
         std::fprintf(stderr, "  ugv%zu %-10s region %-10d goal (%.0f, %.0f) at (%.0f, %.0f) loc %s err %.1f m sigma %.1f m visited %u failed %u regions %u%s\n", i + 1,

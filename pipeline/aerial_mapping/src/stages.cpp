@@ -281,7 +281,68 @@ Status OrthoMapStage::init(StageContext& ctx) {
   depth_scratch_.reserve(kImagePixels / kDepthSampleStride + 1);
   points_.reserve(kImagePixels);
   corrections_.reserve(KeyframePosesMsg::kCapacity);
+  // Changed tiles on "map_tiles" (the gossip's and the regions stage's input), in the 0.5 m / 64-cell
+  // format of MapTileMsg; a map of another cell or tile size is not published (logged).
+  tiles_per_step_ = static_cast<std::size_t>(v.integer("tiles_per_step"));
+  min_elevation_points_ = static_cast<std::uint32_t>(std::max<std::int64_t>(1, v.integer("min_elevation_points")));
+  tiles_enabled_ = std::abs(map_->params().resolution_m - kMapResolutionM) < 1e-9 && map_->params().tile_cells == kTileCells;
+  if (tiles_enabled_) {
+    auto tw = ctx.channels.ring_writer<MapTileMsg, kMapTileRing>("map_tiles");
+    if (!tw) return tw.error();
+    tiles_out_ = tw.value();
+    const auto max_tiles = static_cast<std::size_t>(v.integer("max_tiles"));
+    std::size_t cap = 16;
+    while (cap < 2 * max_tiles) cap <<= 1;
+    slots_.assign(cap, TileSlot{});
+    queue_.assign(max_tiles, 0);
+    tile_msg_ = std::make_unique<MapTileMsg>();
+  } else {
+    AG_LOG_WARN("ortho_map", "%s: cells of %.2f m in %d-cell tiles: 'map_tiles' carries 0.5 m cells in 64-cell tiles only, so no tiles are published",
+                std::string(ctx.stage_name).c_str(), map_->params().resolution_m, map_->params().tile_cells);
+  }
   return ok_status();
+}
+
+void OrthoMapStage::publish_tiles(TimeNs now) noexcept {
+  if (!tiles_enabled_) return;
+  if (map_->version() != seen_version_) {
+    seen_version_ = map_->version();
+    const std::size_t mask = slots_.size() - 1;
+    map_->for_each_tile([&](const Tile& t) {
+      const std::uint64_t key = t.key.packed();
+      std::size_t i = static_cast<std::size_t>((key * 0x9E3779B97F4A7C15ULL) >> 20) & mask;
+      while (slots_[i].used && slots_[i].key != key) i = (i + 1) & mask;
+      TileSlot& s = slots_[i];
+      if (!s.used) {
+        s.used = true;
+        s.key = key;
+        s.tile = &t;
+      }
+      if (s.version == t.version || s.queued || queue_n_ >= queue_.size()) return;
+      s.queued = true;
+      queue_[(queue_head_ + queue_n_) % queue_.size()] = static_cast<std::uint32_t>(i);
+      ++queue_n_;
+    });
+  }
+  for (std::size_t k = 0; k < tiles_per_step_ && queue_n_ > 0 && tiles_out_.free_slots() > 0; ++k) {
+    TileSlot& s = slots_[queue_[queue_head_]];
+    MapTileMsg& m = *tile_msg_;
+    m.tx = s.tile->key.tx;
+    m.ty = s.tile->key.ty;
+    m.version = s.tile->version;
+    for (std::size_t c = 0; c < kTileCellCount; ++c) {
+      m.cls[c] = s.tile->live[c].cls;
+      m.elevation[c] = s.tile->live[c].reported_elevation(min_elevation_points_);
+    }
+    m.stamp = now;
+    m.published = now;
+    (void)tiles_out_.push(m);
+    s.version = m.version;
+    s.queued = false;
+    queue_head_ = (queue_head_ + 1) % queue_.size();
+    --queue_n_;
+    ++tiles_published_;
+  }
 }
 
 Eigen::Isometry3d OrthoMapStage::camera_pose(const Pose3& body) const noexcept {
@@ -373,6 +434,7 @@ void OrthoMapStage::step(TimeNs now) noexcept {
     history_count_ = std::min(history_count_ + 1, history_.size());
     keyframes_.pop();
   }
+  publish_tiles(now);
   status_.stamp = now;
   status_.version = map_->version();
   status_.keyframes = static_cast<std::uint32_t>(map_->stats().keyframes);

@@ -195,7 +195,8 @@ void MissionManager::release(ClaimState next, TimeNs now) noexcept {
 }
 
 bool MissionManager::choose(TimeNs now) noexcept {
-  if (!have_loc_ || loc_.status != LocalizationStatus::kTracking) return false;
+  // Also while the localizer converges: it needs the robot to move (the drive stage goes slowly until it tracks).
+  if (!have_loc_ || (loc_.status != LocalizationStatus::kTracking && loc_.status != LocalizationStatus::kInitialising)) return false;
   const KnownRegion* best = nullptr;
   double best_d = std::numeric_limits<double>::infinity();
   bool best_takeover = false;

@@ -157,6 +157,7 @@ class OrthoMapStage final : public Stage {
       ParamSpec::integer("max_tiles", 16384, 1, 1000000, "tiles", "map size limit; points beyond are refused (counted)"),
       ParamSpec::text("keyframes_channel", "keyframes", "keyframes|keyframes_labelled",
                       "keyframes from pose_graph directly (their camera classes), or relabelled by the segmentation stage"),
+      ParamSpec::integer("tiles_per_step", 16, 1, 1024, "tiles", "changed tiles published on 'map_tiles' per step (the rest follow)"),
   };
   static std::unique_ptr<Stage> make() { return std::make_unique<OrthoMapStage>(); }
 
@@ -166,9 +167,31 @@ class OrthoMapStage final : public Stage {
   [[nodiscard]] const OrthoMap& map() const noexcept { return *map_; }
   [[nodiscard]] const OrthoMapStageCounters& counters() const noexcept { return c_; }
   [[nodiscard]] const DenseStereo& stereo() const noexcept { return *stereo_; }
+  [[nodiscard]] std::uint64_t tiles_published() const noexcept { return tiles_published_; }
+  [[nodiscard]] std::size_t tiles_pending() const noexcept { return queue_n_; }
 
  private:
   [[nodiscard]] Eigen::Isometry3d camera_pose(const Pose3& body) const noexcept;
+  void publish_tiles(TimeNs now) noexcept;
+
+  // Changed tiles for "map_tiles": every tile's last published version (open addressing, sized from
+  // max_tiles at init; tiles are never removed from the map) and a FIFO of tiles waiting to go out.
+  struct TileSlot {
+    std::uint64_t key{0};
+    const Tile* tile{nullptr};
+    std::uint64_t version{0};
+    bool used{false}, queued{false};
+  };
+  std::vector<TileSlot> slots_;
+  std::vector<std::uint32_t> queue_;
+  std::size_t queue_head_{0}, queue_n_{0};
+  std::uint64_t seen_version_{~std::uint64_t{0}};
+  std::uint64_t tiles_published_{0};
+  std::size_t tiles_per_step_{16};
+  std::uint32_t min_elevation_points_{1};
+  bool tiles_enabled_{false};
+  RingWriter<MapTileMsg, kMapTileRing> tiles_out_;
+  std::unique_ptr<MapTileMsg> tile_msg_;
 
   std::unique_ptr<OrthoMap> map_;
   std::unique_ptr<DenseStereo> stereo_;
