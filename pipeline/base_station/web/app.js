@@ -16,6 +16,7 @@
   const stats = {connected: false, frames: 0, tiles: 0, robots: 0, regions: 0, claims: 0, visited: 0, failed: 0,
                  drawn: 0, drawnTiles: 0, drawnRobots: 0, drawnRegions: 0, lastStateSeq: -1, badFrames: 0};
   window.agStats = stats;
+  window.agState = () => state;  // the last state message (tests, the console)
   const palette = ['#ffd24a', '#4ad9ff', '#ff7ad9', '#8cff6a', '#ff9a4a', '#b18cff', '#4affc3', '#ff4a6e'];
   const robotColor = (id) => id === 0 ? '#ffffff' : palette[(id - 1) % palette.length];
 

@@ -49,6 +49,7 @@ struct HttpServer::Conn {
   bool dead{false};
   bool want_out{false};
   std::int64_t last_progress_ns{0};  // last time output drained a byte (or became non-empty)
+  std::int64_t last_request_ns{0};   // accept or the last complete request
   char peer[48]{};
   [[nodiscard]] std::size_t pending() const noexcept { return out.size() - out_off; }
 };
@@ -183,10 +184,12 @@ void HttpServer::accept_all() noexcept {
     }
     const int one = 1;
     ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+    if (p_.socket_send_buffer > 0) ::setsockopt(fd, SOL_SOCKET, SO_SNDBUF, &p_.socket_send_buffer, sizeof p_.socket_send_buffer);
     auto c = std::make_unique<Conn>();
     c->fd = fd;
     c->id = next_id_++;
     c->last_progress_ns = monotonic_now();
+    c->last_request_ns = c->last_progress_ns;
     char ip[INET_ADDRSTRLEN] = "?";
     ::inet_ntop(AF_INET, &sa.sin_addr, ip, sizeof ip);
     std::snprintf(c->peer, sizeof c->peer, "%s:%d", ip, static_cast<int>(ntohs(sa.sin_port)));
@@ -237,6 +240,7 @@ void HttpServer::handle_http(Conn& c) noexcept {
       return;
     }
     c_.requests.fetch_add(1, std::memory_order_relaxed);
+    c.last_request_ns = monotonic_now();
     c.in.erase(0, used);
     if (req.method != "GET") {
       c_.not_allowed.fetch_add(1, std::memory_order_relaxed);
@@ -402,7 +406,14 @@ void HttpServer::update_interest(Conn& c) noexcept {
 
 void HttpServer::check_slow(std::int64_t now) noexcept {
   const auto limit = static_cast<std::int64_t>(p_.slow_client_s * 1e9);
+  const auto idle = static_cast<std::int64_t>(p_.request_timeout_s * 1e9);
   for (auto& c : conns_) {
+    if (!c->dead && !c->ws && c->pending() == 0 && now - c->last_request_ns >= idle) {
+      c_.timed_out.fetch_add(1, std::memory_order_relaxed);
+      c->dead = true;
+      to_close_.push_back(c->id);
+      continue;
+    }
     if (c->dead || c->pending() == 0 || now - c->last_progress_ns < limit) continue;
     const auto n = c_.slow_dropped.fetch_add(1, std::memory_order_relaxed) + 1;
     AG_LOG_WARN(p_.name.c_str(), "dropping %s: %zu B not drained for %.1f s slow_dropped=%llu", c->peer, c->pending(), p_.slow_client_s,

@@ -32,6 +32,8 @@ struct HttpServerParams {
   std::size_t max_ws_in_frame{65536};
   std::size_t client_buffer_bytes{4u << 20};
   double slow_client_s{5.0};
+  double request_timeout_s{10.0};        // an HTTP connection without a complete request this long is closed
+  int socket_send_buffer{256 * 1024};    // [B] SO_SNDBUF of each client socket (bounds the kernel's share too)
   int tick_ms{50};
   std::string ws_path{"/ws"};
   std::string name{"web"};  // for log lines and the thread name
@@ -51,6 +53,7 @@ struct HttpServerCounters {
   std::atomic<std::uint64_t> rejected_full{0};  // 503: max_clients reached
   std::atomic<std::uint64_t> ws_opened{0}, ws_closed{0}, ws_frames_out{0}, ws_frames_in{0}, ws_bad_frames{0};
   std::atomic<std::uint64_t> slow_dropped{0};   // clients dropped for not reading
+  std::atomic<std::uint64_t> timed_out{0};      // HTTP connections closed for sending no complete request
   std::atomic<std::uint64_t> bytes_out{0}, bytes_in{0};
   std::atomic<std::uint64_t> bind_failures{0};
   std::atomic<std::uint32_t> clients{0}, ws_clients{0};
