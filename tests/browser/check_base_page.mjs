@@ -73,19 +73,19 @@ try {
     if (!close(p.rgb, [r, g, b])) fail(`map point (${x}, ${y}) is drawn rgb(${p.rgb}), expected rgb(${r},${g},${b})`);
   }
   for (const [id, r, g, b] of args.robotProbes) {
-    const at = await page.evaluate((rid) => {
+    // In one task: draw the current state, then read a point 3 px ahead of the arrow's centre (inside it).
+    const p = await page.evaluate((rid) => {
       const s = window.agState && window.agState();
       const rob = s && s.robots.find((q) => q.id === rid && q.has_pose);
-      return rob ? [rob.x, rob.y, rob.yaw] : null;
-    }, id);
-    if (!at) { fail(`robot ${id} has no pose on the page`); continue; }
-    // A point 3 px ahead of the arrow's centre lies inside the arrow.
-    const p = await page.evaluate(([x, y, yaw]) => {
-      const [px, py] = window.agView.toCanvas(x, y);
-      const qx = Math.round(px + 3 * Math.cos(yaw)), qy = Math.round(py - 3 * Math.sin(yaw));
+      if (!rob) return null;
+      window.agView.redraw();
+      const [px, py] = window.agView.toCanvas(rob.x, rob.y);
+      const qx = Math.round(px + 3 * Math.cos(rob.yaw)), qy = Math.round(py - 3 * Math.sin(rob.yaw));
       const d = document.getElementById('map').getContext('2d').getImageData(qx, qy, 1, 1).data;
-      return { px: qx, py: qy, rgb: [d[0], d[1], d[2]] };
-    }, at);
+      return { at: [rob.x, rob.y], px: qx, py: qy, rgb: [d[0], d[1], d[2]] };
+    }, id);
+    if (!p) { fail(`robot ${id} has no pose on the page`); continue; }
+    const at = p.at;
     log(`robot ${id} at (${at[0].toFixed(1)}, ${at[1].toFixed(1)}) -> canvas (${p.px}, ${p.py}) rgb ${p.rgb}`);
     if (!close(p.rgb, [r, g, b])) fail(`robot ${id}'s arrow is drawn rgb(${p.rgb}), expected rgb(${r},${g},${b})`);
   }

@@ -121,7 +121,7 @@
   const toCanvas = (x, y) => [canvas.width / 2 + (x - view.cx) * view.scale, canvas.height / 2 - (y - view.cy) * view.scale];
   const toWorld = (px, py) => [view.cx + (px - canvas.width / 2) / view.scale, view.cy - (py - canvas.height / 2) / view.scale];
   // For tests and tools: canvas pixel of a map point, and the view.
-  window.agView = {toCanvas: (x, y) => toCanvas(x, y), toWorld: (px, py) => toWorld(px, py), view: () => ({...view})};
+  window.agView = {toCanvas: (x, y) => toCanvas(x, y), toWorld: (px, py) => toWorld(px, py), view: () => ({...view}), redraw: () => draw()};
 
   // ------------------------------------------------------------------ drawing
   function draw() {
