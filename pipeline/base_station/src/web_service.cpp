@@ -28,7 +28,8 @@ std::string topic_hex(comms::Topic t) {
 }
 }  // namespace
 
-WebTile::WebTile(const MapTileMsg& m) noexcept : stamp(m.stamp), tx(m.tx), ty(m.ty), version(m.version), cls(m.cls) {
+WebTile::WebTile(const MapTileMsg& m, TimeNs received_at) noexcept
+    : stamp(m.stamp), received(received_at), tx(m.tx), ty(m.ty), version(m.version), cls(m.cls) {
   for (std::size_t i = 0; i < kTileCellCount; ++i) {
     const float e = m.elevation[i];
     if (!std::isfinite(e)) elev_dm[i] = INT16_MIN;
@@ -285,7 +286,6 @@ void WebService::drain_log() noexcept {
 }
 
 void WebService::take_tiles() noexcept {
-  const TimeNs now = monotonic_now();
   bool wrote = false;
   while (WebTile* t = tiles_in_.front()) {
     const Key k{t->tx, t->ty};
@@ -298,7 +298,7 @@ void WebService::take_tiles() noexcept {
       for (auto& [id, c] : clients_)
         if (c.queued.insert(k).second) c.pending.push_back(k);
       if (log_ != nullptr) {
-        const std::string line = tile_log_line(*t, now, start_);
+        const std::string line = tile_log_line(*t, t->received, start_);
         if (std::fputs(line.c_str(), log_) < 0 || std::fputc('\n', log_) == EOF) ++log_errors_;
         else ++log_lines_;
         wrote = true;

@@ -58,7 +58,7 @@ void WebStage::step(TimeNs now) noexcept {
   for (std::size_t k = 0; k < tiles_per_step_; ++k) {
     MapTileMsg* t = tiles_.front();
     if (t == nullptr) break;
-    if (!tiles_to_server_->try_emplace(*t)) {
+    if (!tiles_to_server_->try_emplace(*t, now)) {
       ++m.counters.tiles_held_back;
       break;
     }

@@ -177,9 +177,9 @@ void HttpServer::accept_all() noexcept {
       static constexpr char kFull[] =
           "HTTP/1.1 503 Service Unavailable\r\nContent-Type: text/plain\r\nContent-Length: 24\r\nConnection: close\r\n\r\n"
           "too many clients, retry\n";
+      c_.rejected_full.fetch_add(1, std::memory_order_relaxed);
       [[maybe_unused]] const ssize_t w = ::send(fd, kFull, sizeof kFull - 1, MSG_NOSIGNAL);
       ::close(fd);
-      c_.rejected_full.fetch_add(1, std::memory_order_relaxed);
       continue;
     }
     const int one = 1;

@@ -34,13 +34,14 @@ inline constexpr ParamSpec kWebStageParams[] = {
 
 // A map tile as the server keeps and sends it: classes and elevation in decimetres (INT16_MIN unknown).
 struct WebTile {
-  TimeNs stamp{0};
+  TimeNs stamp{0};     // [ns] when the tile last changed (the mapper's clock)
+  TimeNs received{0};  // [ns] base clock
   std::int32_t tx{0}, ty{0};
   std::uint64_t version{0};
   std::array<std::uint8_t, kTileCellCount> cls{};
   std::array<std::int16_t, kTileCellCount> elev_dm{};
   WebTile() = default;
-  explicit WebTile(const MapTileMsg& m) noexcept;
+  WebTile(const MapTileMsg& m, TimeNs received_at) noexcept;
 };
 
 // One mission-log entry on its way to the writer (server) thread.
