@@ -56,7 +56,7 @@ struct LogItem {
 };
 
 inline constexpr std::size_t kWebTileRing = 64;
-inline constexpr std::size_t kLogRing = 256;
+inline constexpr std::size_t kLogRing = 1024;
 
 class WebService;
 
