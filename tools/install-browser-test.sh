@@ -4,6 +4,10 @@
 # chromium; no browser is downloaded (--ignore-scripts). Idempotent: does nothing when the pinned
 # version is already there. Needs node and npm (Debian: apt-get install nodejs npm).
 set -euo pipefail
+if [ "${1:-}" = "--help" ] || [ "${1:-}" = "-h" ]; then
+  sed -n "2,6p" "$0" | sed "s/^# \{0,1\}//"
+  exit 0
+fi
 here=$(cd "$(dirname "$0")" && pwd)
 dir=$(cd "$here/../tests/browser" && pwd)
 want=$(sed -n 's/.*"playwright-core": *"\([^"]*\)".*/\1/p' "$dir/package.json" | head -1)
