@@ -5,7 +5,7 @@
 # version is already there. Needs node and npm (Debian: apt-get install nodejs npm).
 set -euo pipefail
 if [ "${1:-}" = "--help" ] || [ "${1:-}" = "-h" ]; then
-  sed -n "2,6p" "$0" | sed "s/^# \{0,1\}//"
+  sed -n "2,5p" "$0" | sed "s/^# \{0,1\}//"
   exit 0
 fi
 here=$(cd "$(dirname "$0")" && pwd)
