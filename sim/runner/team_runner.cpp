@@ -1116,7 +1116,8 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     t.ugvs.push_back(std::move(u));
   }
   {
-    auto role = make_role(base_role(), 250, "base", cfgs);
+    // The base station's page on any free loopback port (many simulations run at once; the log names it).
+    auto role = make_role(base_role(), 250, "base", cfgs, {"web.port=0", "web.bind=127.0.0.1"}, "the simulated base station");
     if (!role) return role.error();
     t.base = std::move(role).value();
   }
