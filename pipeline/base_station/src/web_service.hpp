@@ -50,8 +50,13 @@ class WebService final : public net::http::HttpServer::Handler {
   void ws_open(net::http::HttpServer& s, net::http::HttpServer::ClientId id) override;
   void ws_close(net::http::HttpServer::ClientId id) override;
   void tick(net::http::HttpServer& s) override;
-  // Writes what waits in the log ring (also called at stop).
+  // Writes what waits in the log ring.
   void drain_log() noexcept;
+  // At stop (server thread joined): takes and logs the tiles handed over, then the log ring.
+  void flush() noexcept {
+    take_tiles();
+    drain_log();
+  }
 
   // JSON of the model (what /api/state and the "state" WebSocket messages carry).
   static std::string state_json(const MissionModel& m, TimeNs start, const net::http::HttpServerCounters* http,

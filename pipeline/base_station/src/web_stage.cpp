@@ -82,7 +82,11 @@ void WebStage::step(TimeNs now) noexcept {
     }
     m.apply_poses(team, now);
   }
-  if (stats_.fresh()) m.apply_comms(stats_.read());
+  // Comms counters change every step: taken twice a second, so the model is not copied every step for them.
+  if (stats_.fresh() && now - last_comms_ >= kNsPerS / 2) {
+    m.apply_comms(stats_.read());
+    last_comms_ = now;
+  }
   if (m.seq != published_seq_) {
     m.now = now;
     snapshot_->write_slot() = m;
@@ -96,7 +100,7 @@ void WebStage::stop() noexcept {
     server_->stop();
     server_.reset();
   }
-  if (service_) service_->drain_log();
+  if (service_) service_->flush();
 }
 
 int WebStage::port() const noexcept { return server_ ? server_->port() : 0; }

@@ -89,6 +89,7 @@ class WebStage final : public Stage {
   RingReader<comms::GossipRecordMsg, comms::kGossipRing> records_;
   std::size_t tiles_per_step_{16};
   std::uint64_t published_seq_{~std::uint64_t{0}};
+  TimeNs last_comms_{-kNsPerS};
 };
 
 }  // namespace ag::base
