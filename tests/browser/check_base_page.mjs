@@ -1,17 +1,17 @@
 // Loads the base station page in headless chromium (Playwright), waits until it has drawn the map and
 // the robots, checks canvas pixels where a map tile and a robot are known to be, saves a screenshot.
 //   node check_base_page.mjs --url http://127.0.0.1:PORT/ --out DIR [--tiles N] [--robots N] [--regions N]
-//        [--visited N] [--failed N] [--probe x,y,r,g,b ...] [--robot-probe id,r,g,b ...] [--timeout-s S]
+//        [--visited N] [--failed N] [--objects N] [--probe x,y,r,g,b ...] [--robot-probe id,r,g,b ...] [--timeout-s S]
 // Exit 0 when every check passed, 1 otherwise (the reason on stderr), 2 on bad arguments.
 import { chromium } from 'playwright-core';
 import fs from 'node:fs';
 import path from 'node:path';
 
 function parse(argv) {
-  const a = { tiles: 1, robots: 1, regions: 0, visited: 0, failed: 0, probes: [], robotProbes: [], timeout: 20 };
+  const a = { tiles: 1, robots: 1, regions: 0, visited: 0, failed: 0, objects: 0, probes: [], robotProbes: [], timeout: 20 };
   for (let i = 2; i < argv.length; i++) {
     const k = argv[i], v = argv[i + 1];
-    if (k === '--help') { console.log('usage: node check_base_page.mjs --url URL --out DIR [--tiles N] [--robots N] [--regions N] [--visited N] [--failed N] [--probe x,y,r,g,b] [--robot-probe id,r,g,b] [--timeout-s S]'); process.exit(0); }
+    if (k === '--help') { console.log('usage: node check_base_page.mjs --url URL --out DIR [--tiles N] [--robots N] [--regions N] [--visited N] [--failed N] [--objects N] [--probe x,y,r,g,b] [--robot-probe id,r,g,b] [--timeout-s S]'); process.exit(0); }
     if (v === undefined) { console.error(`check_base_page: ${k} needs a value`); process.exit(2); }
     i++;
     if (k === '--url') a.url = v;
@@ -21,6 +21,7 @@ function parse(argv) {
     else if (k === '--regions') a.regions = +v;
     else if (k === '--visited') a.visited = +v;
     else if (k === '--failed') a.failed = +v;
+    else if (k === '--objects') a.objects = +v;
     else if (k === '--timeout-s') a.timeout = +v;
     else if (k === '--probe') a.probes.push(v.split(',').map(Number));
     else if (k === '--robot-probe') a.robotProbes.push(v.split(',').map(Number));
@@ -46,12 +47,12 @@ try {
   page.on('console', (m) => { if (m.type() === 'error') errors.push(m.text()); });
   await page.goto(args.url, { waitUntil: 'load', timeout: args.timeout * 1000 });
   log(`loaded ${args.url}`);
-  const want = { tiles: args.tiles, robots: args.robots, regions: args.regions, visited: args.visited, failed: args.failed };
+  const want = { tiles: args.tiles, robots: args.robots, regions: args.regions, visited: args.visited, failed: args.failed, objects: args.objects };
   try {
     await page.waitForFunction((w) => {
       const s = window.agStats;
       return s && s.connected && s.tiles >= w.tiles && s.drawnTiles >= w.tiles && s.robots >= w.robots && s.drawnRobots >= w.robots &&
-        s.regions >= w.regions && s.drawnRegions >= w.regions && s.visited >= w.visited && s.failed >= w.failed;
+        s.regions >= w.regions && s.drawnRegions >= w.regions && s.visited >= w.visited && s.failed >= w.failed && s.objects >= w.objects;
     }, want, { timeout: args.timeout * 1000, polling: 100 });
   } catch (e) {
     fail(`the page did not draw ${JSON.stringify(want)} within ${args.timeout} s`);

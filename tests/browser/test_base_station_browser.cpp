@@ -73,7 +73,7 @@ TEST(BaseStationBrowser, ChromiumDrawsTheMapRobotsRegionsAndGoalsOfALiveMission)
     ::setenv("AG_CHROMIUM", chromium.c_str(), 1);
     // water tile (2, 1) near its centre (off the grid lines); grass in tile (1, 0) away from robots and regions; robots' colours
     ::execl(node.c_str(), node.c_str(), script.c_str(), "--url", url.c_str(), "--out", out_dir.c_str(), "--tiles", "6", "--robots",
-            "2", "--regions", "3", "--visited", "1", "--failed", "1", "--probe", "83,51,40,110,210", "--probe", "57,3,110,190,60",
+            "2", "--regions", "3", "--visited", "1", "--failed", "1", "--objects", "1", "--probe", "83,51,40,110,210", "--probe", "57,3,110,190,60",
             "--robot-probe", "1,255,210,74", "--robot-probe", "2,74,217,255", "--timeout-s", "30", static_cast<char*>(nullptr));
     std::_Exit(127);
   }

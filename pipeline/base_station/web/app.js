@@ -14,7 +14,7 @@
   let userView = null;            // {cx, cy, scale} once the user panned or zoomed
   let view = {cx: 0, cy: 0, scale: 4};
   const stats = {connected: false, frames: 0, tiles: 0, robots: 0, regions: 0, claims: 0, visited: 0, failed: 0,
-                 drawn: 0, drawnTiles: 0, drawnRobots: 0, drawnRegions: 0, lastStateSeq: -1, badFrames: 0};
+                 objects: 0, drawn: 0, drawnTiles: 0, drawnRobots: 0, drawnRegions: 0, lastStateSeq: -1, badFrames: 0};
   window.agStats = stats;
   window.agState = () => state;  // the last state message (tests, the console)
   const palette = ['#ffd24a', '#4ad9ff', '#ff7ad9', '#8cff6a', '#ff9a4a', '#b18cff', '#4affc3', '#ff4a6e'];
@@ -96,6 +96,7 @@
     stats.claims = m.robots.filter(r => r.claim && r.claim.region !== null && r.claim.region !== undefined).length;
     stats.visited = m.robots.reduce((a, r) => a + r.visited.length, 0);
     stats.failed = m.failures.length;
+    stats.objects = m.objects.length;
     dirty = true;
     panels(m);
   }
@@ -167,6 +168,14 @@
         const [px, py] = toCanvas(f.x, f.y);
         ctx.lineWidth = 3; cross(px, py, 7, '#ff3b3b');
       }
+      for (const o of state.objects) {             // detected objects: diamond + 2-sigma circle of the EKF
+        const [px, py] = toCanvas(o.x, o.y);
+        const sig = 2 * Math.sqrt(Math.max(o.cxx, o.cyy, 0)) * view.scale;
+        ctx.strokeStyle = '#ff5cf0'; ctx.lineWidth = 1.5;
+        if (sig > 2) { ctx.beginPath(); ctx.arc(px, py, sig, 0, 2 * Math.PI); ctx.stroke(); }
+        ctx.fillStyle = '#ff5cf0';
+        ctx.beginPath(); ctx.moveTo(px, py - 5); ctx.lineTo(px + 5, py); ctx.lineTo(px, py + 5); ctx.lineTo(px - 5, py); ctx.closePath(); ctx.fill();
+      }
       for (const r of state.robots) {
         if (!r.has_pose) continue;
         const col = robotColor(r.id);
@@ -220,7 +229,7 @@
   function panels(m) {
     document.getElementById('summary').textContent =
       `t=${m.t.toFixed(0)} s · ${stats.robots} robots · ${tiles.size} tiles · ${m.regions.list.length} regions · ` +
-      `${stats.visited} visited · ${m.failures.length} failed`;
+      `${stats.visited} visited · ${m.failures.length} failed · ${m.objects.length} objects`;
     document.querySelector('#robots tbody').innerHTML = m.robots.map(r => {
       const c = r.claim;
       const goal = c ? `${esc(c.state)}${c.region !== null ? ' → ' + c.region : ''}` : '—';
