@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstring>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -64,18 +65,33 @@ TEST(BaseStationBrowser, ChromiumDrawsTheMapRobotsRegionsAndGoalsOfALiveMission)
   player.publish_mission_records(kNsPerS);
 
   const std::string log_out = dir.file("browser.log");
+  // Everything exec needs is built before fork(): the child of a threaded process may only make
+  // async-signal-safe calls.
+  const std::vector<std::string> args = {node, script, "--url", url, "--out", out_dir, "--tiles", "6", "--robots", "2", "--regions", "3",
+                                         "--visited", "1", "--failed", "1", "--objects", "1",
+                                         // water tile (2, 1) near its centre (off the grid lines); grass in tile (1, 0)
+                                         "--probe", "83,51,40,110,210", "--probe", "57,3,110,190,60",
+                                         // the vehicle block in tile (0, 1): rows 20..27 (north of the tile's south edge), cols 16..27
+                                         "--probe", "11,44,230,40,40",
+                                         // inside each robot's arrow: its colour
+                                         "--robot-probe", "1,255,210,74", "--robot-probe", "2,74,217,255", "--timeout-s", "30"};
+  std::vector<std::string> envs;
+  for (char** e = environ; *e != nullptr; ++e)
+    if (std::strncmp(*e, "AG_CHROMIUM=", 12) != 0) envs.emplace_back(*e);
+  envs.push_back("AG_CHROMIUM=" + chromium);
+  std::vector<char*> argv, envp;
+  for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  for (const auto& e : envs) envp.push_back(const_cast<char*>(e.c_str()));
+  envp.push_back(nullptr);
   const pid_t pid = ::fork();
   ASSERT_GE(pid, 0);
   if (pid == 0) {
     const int fd = ::open(log_out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
     ::dup2(fd, 1);
     ::dup2(fd, 2);
-    ::setenv("AG_CHROMIUM", chromium.c_str(), 1);
-    // water tile (2, 1) near its centre (off the grid lines); grass in tile (1, 0) away from robots and regions; robots' colours
-    ::execl(node.c_str(), node.c_str(), script.c_str(), "--url", url.c_str(), "--out", out_dir.c_str(), "--tiles", "6", "--robots",
-            "2", "--regions", "3", "--visited", "1", "--failed", "1", "--objects", "1", "--probe", "83,51,40,110,210", "--probe", "57,3,110,190,60",
-            "--robot-probe", "1,255,210,74", "--robot-probe", "2,74,217,255", "--timeout-s", "30", static_cast<char*>(nullptr));
-    std::_Exit(127);
+    ::execve(node.c_str(), argv.data(), envp.data());
+    ::_exit(127);
   }
   int status = 0;
   bool exited = false;
