@@ -19,7 +19,10 @@ updated=0
 apt_update() { if [ $updated = 0 ]; then echo "install-deps: apt-get update"; $sudo apt-get update -qq; updated=1; fi; }
 
 missing=()
-for p in $(packages "$here/deps/debian-packages.txt"); do installed "$p" || missing+=("$p"); done
+# provided(): a virtual package satisfied by another installed one (NodeSource's nodejs provides npm and
+# conflicts with Debian's), so an npm already on PATH counts.
+provided() { [ "$1" = npm ] && command -v npm >/dev/null; }
+for p in $(packages "$here/deps/debian-packages.txt"); do installed "$p" || provided "$p" || missing+=("$p"); done
 if [ ${#missing[@]} -gt 0 ]; then
   apt_update
   echo "install-deps: installing ${missing[*]}"
@@ -27,6 +30,9 @@ if [ ${#missing[@]} -gt 0 ]; then
 else
   echo "install-deps: all $(packages "$here/deps/debian-packages.txt" | wc -l) Debian packages present"
 fi
+
+# The browser test's npm package (playwright-core, pinned; it drives Debian's chromium).
+"$here/install-browser-test.sh" || echo "install-deps: the browser test's npm package is missing (the browser test will skip)" >&2
 
 # The cross build: arm64 architecture for apt, then the arm64 -dev packages unpacked into a sysroot
 # folder (several -dev packages are not co-installable with their amd64 twins, so they are not installed).

@@ -2,6 +2,7 @@
 #include "roles.hpp"
 
 #include "airground/comms/stage.hpp"
+#include "airground/base_station/web_stage.hpp"
 
 #include "airground/platform/status_stage.hpp"
 
@@ -13,6 +14,8 @@ constexpr StageSpec kBaseStages[] = {
     {"status", &StatusStage::make, 1.0, 2'000, 10, -1, StatusStage::kParams, "scheduler counters, once a second"},
     {"comms", &comms::CommsStage::make, 20.0, 5'000, 25, -1, comms::CommsStage::kParams,
      "gossip: the team's latest records (poses, map tiles, claims, failures) over the radio mesh"},
+    {"web", &base::WebStage::make, 10.0, 2'000, 5, -1, base::WebStage::kParams,
+     "live page (HTTP + WebSocket on its own thread) and the mission log: map, robots, regions, claims, comms"},
 };
 static_assert(role_table_ok(kBaseStages));
 }  // namespace

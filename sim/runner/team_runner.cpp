@@ -1276,8 +1276,13 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     t.ugvs.push_back(std::move(u));
   }
   {
+    // The base station's page on any free loopback port unless the caller names one (many simulations
+    // run at once; the log names the port).
     std::vector<std::string> base_extra = comms_common;
+    base_extra.emplace_back("web.port=0");
+    base_extra.emplace_back("web.bind=127.0.0.1");
     if (opt.gossip) base_extra.emplace_back("comms.deliver_map_tiles=true");
+    base_extra.emplace_back("web.log_path=" + (t.out / "mission_log.jsonl").string());
     base_extra.insert(base_extra.end(), opt.base_config.begin(), opt.base_config.end());
     auto role = make_role(base_role(), 250, "base", cfgs, base_extra, "base station config");
     if (!role) return role.error();

@@ -1,0 +1,110 @@
+#include "airground/base_station/web_stage.hpp"
+
+#include "airground/platform/log.hpp"
+#include "web_service.hpp"
+
+namespace ag::base {
+
+WebStage::WebStage() = default;
+
+WebStage::~WebStage() { stop(); }
+
+Status WebStage::init(StageContext& ctx) {
+  const SectionView p = ctx.params();
+  tiles_per_step_ = static_cast<std::size_t>(p.integer("tiles_per_step"));
+  auto team = ctx.channels.latest_reader<comms::TeamPosesMsg>("team_poses");
+  if (!team) return team.error();
+  team_ = team.value();
+  auto stats = ctx.channels.latest_reader<comms::CommsStatsMsg>("comms_stats");
+  if (!stats) return stats.error();
+  stats_ = stats.value();
+  auto tiles = ctx.channels.ring_reader<MapTileMsg, kMapTileRing>("map_tiles");
+  if (!tiles) return tiles.error();
+  tiles_ = tiles.value();
+  auto recs = ctx.channels.ring_reader<comms::GossipRecordMsg, comms::kGossipRing>("gossip_in");
+  if (!recs) return recs.error();
+  records_ = recs.value();
+
+  model_ = std::make_unique<MissionModel>();
+  snapshot_ = std::make_unique<LatestValue<MissionModel>>();
+  tiles_to_server_ = std::make_unique<SpscRing<WebTile, kWebTileRing>>();
+  log_to_server_ = std::make_unique<SpscRing<LogItem, kLogRing>>();
+  model_->now = ctx.clock.now();
+
+  WebServiceParams sp;
+  sp.log_path = p.text("log_path");
+  sp.push_hz = p.real("push_hz");
+  sp.client_buffer_bytes = static_cast<std::size_t>(p.integer("client_buffer_kb")) * 1024;
+  service_ = std::make_unique<WebService>(sp, *snapshot_, *tiles_to_server_, *log_to_server_, ctx.clock.now());
+  if (auto st = service_->open_log(); !st) return st.error();
+
+  net::http::HttpServerParams hp;
+  hp.bind = p.text("bind");
+  hp.port = static_cast<int>(p.integer("port"));
+  hp.max_clients = static_cast<std::size_t>(p.integer("max_clients"));
+  hp.client_buffer_bytes = sp.client_buffer_bytes;
+  hp.slow_client_s = p.real("slow_client_s");
+  hp.name = std::string(ctx.stage_name);
+  auto srv = net::http::HttpServer::start(hp, *service_);
+  if (!srv) return srv.error();
+  server_ = std::move(srv).value();
+  if (!sp.log_path.empty()) AG_LOG_INFO(hp.name.c_str(), "mission log %s", sp.log_path.c_str());
+  return ok_status();
+}
+
+void WebStage::step(TimeNs now) noexcept {
+  MissionModel& m = *model_;
+  // Tiles: held in the channel while the server's hand-over is full (nothing is lost).
+  for (std::size_t k = 0; k < tiles_per_step_; ++k) {
+    MapTileMsg* t = tiles_.front();
+    if (t == nullptr) break;
+    if (!tiles_to_server_->try_emplace(*t, now)) {
+      ++m.counters.tiles_held_back;
+      break;
+    }
+    ++m.counters.tiles_in;
+    ++m.seq;
+    tiles_.pop();
+  }
+  while (comms::GossipRecordMsg* r = records_.front()) {
+    DecodeError err = DecodeError::kNone;
+    m.apply_record(*r, now, err);
+    if (!log_to_server_->try_emplace(now, *r)) ++m.counters.log_dropped;
+    records_.pop();
+  }
+  if (team_.fresh()) {
+    const comms::TeamPosesMsg& team = team_.read();
+    for (std::uint32_t i = 0; i < team.count && i < team.robots.size(); ++i) {
+      const comms::TeamPose& p = team.robots[i];
+      const RobotView* r = m.find_robot(p.robot);
+      if (r != nullptr && r->has_pose && p.stamp <= r->pose_stamp) continue;
+      if (!log_to_server_->try_emplace(now, p)) ++m.counters.log_dropped;
+    }
+    m.apply_poses(team, now);
+  }
+  // Comms counters change every step: taken twice a second, so the model is not copied every step for them.
+  if (stats_.fresh() && now - last_comms_ >= kNsPerS / 2) {
+    m.apply_comms(stats_.read());
+    last_comms_ = now;
+  }
+  if (m.seq != published_seq_) {
+    m.now = now;
+    snapshot_->write_slot() = m;
+    snapshot_->publish();
+    published_seq_ = m.seq;
+  }
+}
+
+void WebStage::stop() noexcept {
+  if (server_) {
+    server_->stop();
+    server_.reset();
+  }
+  if (service_) service_->flush();
+}
+
+int WebStage::port() const noexcept { return server_ ? server_->port() : 0; }
+
+const net::http::HttpServerCounters* WebStage::server_counters() const noexcept { return server_ ? &server_->counters() : nullptr; }
+
+}  // namespace ag::base
