@@ -60,6 +60,10 @@ Result<CandumpRecord> parse_candump_line(std::string_view line) {
     id = (id << 4) | static_cast<std::uint32_t>(h);
   }
   rec.frame.extended = hash == 8;
+  if (rec.frame.extended && (id & 0xE0000000U) == 0x20000000U) {  // CAN_ERR_FLAG: an error frame (candump, python-can)
+    rec.error = true;
+    id &= kExtendedIdMask;
+  }
   if (id > (rec.frame.extended ? kExtendedIdMask : kStandardIdMask)) return bad("id beyond its format");
   rec.frame.id = id;
   std::string_view data = fr.substr(hash + 1);
@@ -197,8 +201,18 @@ CanResult CandumpReplayBus::receive(CanFrame& out) noexcept {
     const CanFrame& f = records_[next_].frame;
     const TimeNs at = f.stamp - t0_ + start_;
     if (at > now) return CanResult::kWouldBlock;
+    const bool error_frame = records_[next_].error;
     ++next_;
+    if (error_frame) {  // a recorded error frame: the bus state follows it, nothing is delivered
+      errors_.apply(decode_error_frame(f.id, f.data), c_);
+      ++c_.rx_errors;
+      continue;
+    }
     if (accept_ != nullptr && !accept_(f)) continue;
+    if (!accepts(f)) {
+      ++c_.rx_filtered;
+      continue;
+    }
     out = f;
     out.stamp = at;
     ++c_.rx;

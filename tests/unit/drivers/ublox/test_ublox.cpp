@@ -328,7 +328,7 @@ TEST(SerialPort, PseudoTerminalCarriesTheStream) {
   std::vector<NavPvt> pvt;
   std::vector<std::uint8_t> buf(512);
   int idle = 0;
-  while (idle < 50) {
+  while (idle < 10) {
     if (pos < bytes.size()) {
       const std::size_t n = std::min<std::size_t>(700, bytes.size() - pos);
       const ssize_t w = ::write(master, bytes.data() + pos, n);
