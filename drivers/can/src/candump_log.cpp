@@ -45,7 +45,11 @@ Result<CandumpRecord> parse_candump_line(std::string_view line) {
   rest.remove_prefix(1);
   const std::size_t sp = rest.find(' ');
   if (sp == std::string_view::npos || sp == 0) return bad("expected 'interface id#data'");
-  rec.iface = std::string(rest.substr(0, sp));
+  const std::string_view ifname = rest.substr(0, sp);
+  if (ifname.size() > 15) return bad("interface name longer than 15 characters (IFNAMSIZ)");
+  for (char ch : ifname)
+    if (ch < 0x21 || ch > 0x7E) return bad("interface name has a control or non-ASCII character");
+  rec.iface = std::string(ifname);
   std::string_view fr = rest.substr(sp + 1);
   const std::size_t end = fr.find(' ');  // newer candump may append a direction flag
   if (end != std::string_view::npos) fr = fr.substr(0, end);

@@ -101,6 +101,9 @@ TEST(CandumpPythonCan, ErrorFrameLinesAreErrorFrames) {
   ASSERT_TRUE(r.ok()) << r.error().message;
   EXPECT_TRUE(r.value().error);
   EXPECT_EQ(r.value().frame.id, 0x40u);
+  // Found by fuzz_candump_line: a NUL in the interface name used to cut the formatted line short.
+  EXPECT_FALSE(parse_candump_line(std::string_view("(1.000000) ca\0n0 123#", 21)).ok());
+  EXPECT_FALSE(parse_candump_line("(1.000000) averyveryverylongname0 123#").ok());
 }
 
 }  // namespace
