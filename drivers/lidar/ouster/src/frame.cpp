@@ -2,6 +2,7 @@
 #include "airground/drivers/ouster/frame.hpp"
 
 #include <algorithm>
+#include <cstring>
 #include <utility>
 
 namespace ag::ouster {
@@ -98,6 +99,68 @@ const LidarFrame* FrameAssembler::flush() noexcept {
   if (!have_cur_) return nullptr;
   emit();
   return &done_;
+}
+
+namespace {
+template <typename T>
+void put(std::uint8_t* p, T v) noexcept {
+  std::memcpy(p, &v, sizeof v);
+}
+}  // namespace
+
+std::size_t encode_lidar_packet(const PacketFormat& fmt, const LidarFrame& f, int first_column, std::span<std::uint8_t> out) noexcept {
+  const int cols = fmt.columns_per_packet(), ppc = fmt.pixels_per_column();
+  if (out.size() < fmt.lidar_packet_size() || first_column < 0 || first_column + cols > f.width || ppc > f.height) return 0;
+  const bool legacy = fmt.profile() == UdpProfile::kLegacy;
+  std::uint8_t* p = out.data();
+  std::memset(p, 0, fmt.lidar_packet_size());
+  const std::size_t header = legacy ? 0 : 32, col_header = legacy ? 16 : 12;
+  if (!legacy) {
+    put(p, std::uint16_t{1});
+    put(p + 2, f.frame_id);
+  }
+  for (int c = 0; c < cols; ++c) {
+    const int m = first_column + c;
+    const auto mc = static_cast<std::size_t>(m);
+    std::uint8_t* col = p + header + static_cast<std::size_t>(c) * fmt.column_size();
+    put(col, f.column_timestamp_ns[mc]);
+    put(col + 8, static_cast<std::uint16_t>(m));
+    const bool valid = f.column_valid[mc] != 0;
+    if (legacy) {
+      put(col + 10, f.frame_id);
+      put(col + 12, static_cast<std::uint32_t>(static_cast<std::uint64_t>(m) * 90112u / static_cast<std::uint64_t>(f.width)));
+      put(col + col_header + 12 * static_cast<std::size_t>(ppc), valid ? 0xFFFFFFFFu : 0u);
+    } else {
+      put(col + 10, static_cast<std::uint16_t>(valid ? 1 : 0));
+    }
+    std::uint8_t* px = col + col_header;
+    for (int r = 0; r < ppc; ++r, px += 12) {
+      const std::size_t k = f.index(r, m);
+      if (legacy) {
+        put(px, f.range_mm[k] & 0x000FFFFFu);
+        put(px + 4, f.reflectivity[k]);
+      } else {
+        put(px, f.range_mm[k] & 0x0007FFFFu);
+        px[4] = static_cast<std::uint8_t>(std::min<std::uint16_t>(f.reflectivity[k], 255));
+      }
+      put(px + 6, f.signal[k]);
+      put(px + 8, f.nir[k]);
+    }
+  }
+  return fmt.lidar_packet_size();
+}
+
+std::size_t encode_imu_packet(const ImuSample& s, std::span<std::uint8_t> out) noexcept {
+  if (out.size() < kImuPacketSize) return 0;
+  std::uint8_t* p = out.data();
+  put(p, s.sys_ts_ns);
+  put(p + 8, s.accel_ts_ns);
+  put(p + 16, s.gyro_ts_ns);
+  for (std::size_t i = 0; i < 3; ++i) {
+    put(p + 24 + 4 * i, s.accel_g[i]);
+    put(p + 36 + 4 * i, s.gyro_deg_s[i]);
+  }
+  return kImuPacketSize;
 }
 
 }  // namespace ag::ouster

@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <cstring>
 #include <algorithm>
+#include <array>
 #include <fstream>
 #include <gtest/gtest.h>
 #include <iterator>
@@ -222,6 +223,35 @@ TEST(StreamParser, ResynchronisesOnGarbageAndCorruptionAndCountsIt) {
     EXPECT_EQ(d.pvt[k].lat_e7, clean.pvt[i].lat_e7);
     ++k;
   }
+}
+
+TEST(Ubx, NavPvtEncodesBackToTheReceiversBytes) {
+  auto src = ReplayFile::open(kLog, 4096);
+  ASSERT_TRUE(src.ok());
+  StreamParser parser;
+  std::vector<std::uint8_t> buf(4096);
+  int frames = 0;
+  long n;
+  while ((n = src.value()->read(buf)) > 0) {
+    std::span<const std::uint8_t> in(buf.data(), static_cast<std::size_t>(n));
+    while (!in.empty()) {
+      StreamMessage m;
+      in = in.subspan(parser.feed(in, m));
+      NavPvt p;
+      if (m.kind != StreamMessage::Kind::kUbx || m.cls != kClassNav || m.id != kIdNavPvt || !decode_nav_pvt(m.payload, p)) continue;
+      std::array<std::uint8_t, kNavPvtLength> again{};
+      encode_nav_pvt(p, again);
+      // Bytes 80..83 are reserved (zero from us).
+      for (std::size_t i = 0; i < kNavPvtLength; ++i)
+        if (i < 80 || i > 83) {
+          EXPECT_EQ(again[i], m.payload[i]) << "byte " << i;
+        }
+      std::uint8_t frame[100];
+      ASSERT_EQ(ubx_encode(kClassNav, kIdNavPvt, again, frame), 100u);
+      ++frames;
+    }
+  }
+  EXPECT_GE(frames, 9);
 }
 
 TEST(StreamParser, FalseStartHidesNoFrame) {

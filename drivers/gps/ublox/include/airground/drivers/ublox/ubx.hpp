@@ -47,9 +47,21 @@ struct NavPvt {
   double ground_speed_m_s{0}, heading_motion_deg{0};
   double s_acc_m_s{0}, head_acc_deg{0};
   double pdop{0};
+  // As received, so a frame can be written back unchanged (the simulator's receiver, HIL).
+  std::uint8_t flags_raw{0}, flags2_raw{0};
+  std::uint16_t flags3_raw{0};
+  std::int32_t height_mm{0}, hmsl_mm{0}, vel_ned_mm_s[3]{0, 0, 0}, ground_speed_mm_s{0}, heading_motion_e5{0}, head_veh_e5{0};
+  std::uint32_t h_acc_mm{0}, v_acc_mm{0}, s_acc_mm_s{0}, head_acc_e5{0};
+  std::uint16_t pdop_e2{0};
+  std::int16_t mag_dec_e2{0};
+  std::uint16_t mag_acc_e2{0};
+  std::uint8_t valid_raw{0};
 };
 
 // Decodes a NAV-PVT payload; false when it is not 92 bytes or its fix type is out of range.
 [[nodiscard]] bool decode_nav_pvt(std::span<const std::uint8_t> payload, NavPvt& out) noexcept;
+// The inverse: a 92-byte payload from the integer (as-received) fields; reserved bytes are zero. For a
+// simulated receiver, fill the integer fields (the doubles are ignored).
+void encode_nav_pvt(const NavPvt& p, std::span<std::uint8_t, kNavPvtLength> out) noexcept;
 
 }  // namespace ag::ublox

@@ -56,4 +56,11 @@ class FrameAssembler {
   AssemblerCounters c_;
 };
 
+// The inverse of decode_lidar, for a simulated sensor (HIL) and the tests: the packet carrying columns
+// first_column .. first_column + columns_per_packet - 1 of `f` (stamps from the frame, status valid
+// where the frame has the column; legacy encoder counts at 90112 ticks per turn). Returns the size, 0
+// when `out` is too small or the columns are outside the frame.
+std::size_t encode_lidar_packet(const PacketFormat& fmt, const LidarFrame& f, int first_column, std::span<std::uint8_t> out) noexcept;
+std::size_t encode_imu_packet(const ImuSample& s, std::span<std::uint8_t> out) noexcept;
+
 }  // namespace ag::ouster
