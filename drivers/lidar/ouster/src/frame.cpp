@@ -40,34 +40,17 @@ void FrameAssembler::emit() noexcept {
   have_cur_ = false;
 }
 
-const LidarFrame* FrameAssembler::add(const LidarPacket& p) noexcept {
-  ++c_.packets;
-  bool emitted = false;
+void FrameAssembler::start(std::uint16_t frame_id) noexcept {
+  cur_.clear();
+  cur_.frame_id = frame_id;
+  have_cur_ = true;
+}
+
+void FrameAssembler::fill(const LidarPacket& p) noexcept {
   for (int i = 0; i < p.columns; ++i) {
     const Column& col = p.column[static_cast<std::size_t>(i)];
-    if (!col.valid) {
-      ++c_.columns_invalid;
-      continue;
-    }
-    if (have_cur_ && col.frame_id != cur_.frame_id) {
-      if (have_last_ && col.frame_id == last_emitted_) {
-        ++c_.packets_late;
-        return emitted ? &done_ : nullptr;
-      }
-      if (emitted) return &done_;  // cannot hand out two frames at once: cannot happen for whole packets
-      emit();
-      emitted = true;
-    } else if (!have_cur_ && have_last_ && col.frame_id == last_emitted_) {
-      ++c_.packets_late;
-      return emitted ? &done_ : nullptr;
-    }
-    if (!have_cur_) {
-      cur_.clear();
-      cur_.frame_id = col.frame_id;
-      have_cur_ = true;
-    }
     const int m = col.measurement_id;
-    if (m >= cur_.width) {
+    if (!col.valid || m >= cur_.width) {
       ++c_.columns_invalid;
       continue;
     }
@@ -87,17 +70,65 @@ const LidarFrame* FrameAssembler::add(const LidarPacket& p) noexcept {
       cur_.signal[k] = px.signal;
       cur_.nir[k] = px.nir;
     }
-    if (cur_.complete() && !emitted) {
-      emit();
-      emitted = true;
-    }
   }
-  return emitted ? &done_ : nullptr;
+}
+
+void FrameAssembler::start_pending() noexcept {
+  if (!have_pending_) return;
+  start(pending_.frame_id);
+  fill(pending_);
+  have_pending_ = false;
+}
+
+const LidarFrame* FrameAssembler::add(const LidarPacket& p) noexcept {
+  ++c_.packets;
+  bool any_valid = false;
+  for (int i = 0; i < p.columns; ++i) any_valid = any_valid || p.column[static_cast<std::size_t>(i)].valid;
+  if (!any_valid) {
+    c_.columns_invalid += static_cast<std::uint64_t>(p.columns);
+    return nullptr;
+  }
+  const std::uint16_t fid = p.frame_id;
+  if (have_cur_ && fid == cur_.frame_id) {
+    fill(p);
+    if (!cur_.complete()) return nullptr;
+    emit();
+    start_pending();  // the next frame's early packet begins the new frame
+    return &done_;
+  }
+  if (have_last_ && fid == last_emitted_) {  // a straggler of a frame already handed out
+    ++c_.packets_late;
+    return nullptr;
+  }
+  if (!have_cur_) {
+    start(fid);
+    fill(p);
+    if (!cur_.complete()) return nullptr;
+    emit();
+    return &done_;
+  }
+  // A packet of a newer frame. The first one is held back, so a packet of the current frame that it
+  // overtook still lands; a second one means the current frame is over.
+  if (!have_pending_) {
+    pending_ = p;
+    have_pending_ = true;
+    return nullptr;
+  }
+  emit();
+  start_pending();
+  if (fid == cur_.frame_id) fill(p);
+  else {
+    pending_ = p;
+    have_pending_ = true;
+  }
+  return &done_;
 }
 
 const LidarFrame* FrameAssembler::flush() noexcept {
-  if (!have_cur_) return nullptr;
+  if (!have_cur_ && !have_pending_) return nullptr;
+  if (!have_cur_) start_pending();
   emit();
+  start_pending();
   return &done_;
 }
 

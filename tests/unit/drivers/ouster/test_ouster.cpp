@@ -269,10 +269,13 @@ TEST(OusterAssembly, LostPacketsMakeAnIncompleteFrameThatIsCounted) {
     ASSERT_EQ(fmt.decode_lidar(cap.lidar[i], pkt), DecodeStatus::kOk);
     EXPECT_EQ(a.add(pkt), nullptr);
   }
-  // The next frame's first packet closes this one.
-  auto next = cap.lidar[0];
-  for (int c = 0; c < 16; ++c) next[static_cast<std::size_t>(c) * 788 + 10] = 190;
-  ASSERT_EQ(fmt.decode_lidar(next, pkt), DecodeStatus::kOk);
+  // The next frame's first packet is held back (it may have overtaken one of this frame's); its second
+  // closes this frame.
+  auto next_a = cap.lidar[0], next_b = cap.lidar[1];
+  for (int c = 0; c < 16; ++c) next_a[static_cast<std::size_t>(c) * 788 + 10] = next_b[static_cast<std::size_t>(c) * 788 + 10] = 190;
+  ASSERT_EQ(fmt.decode_lidar(next_a, pkt), DecodeStatus::kOk);
+  EXPECT_EQ(a.add(pkt), nullptr);
+  ASSERT_EQ(fmt.decode_lidar(next_b, pkt), DecodeStatus::kOk);
   const LidarFrame* f = a.add(pkt);
   ASSERT_NE(f, nullptr);
   EXPECT_EQ(f->frame_id, 189);
@@ -286,13 +289,41 @@ TEST(OusterAssembly, LostPacketsMakeAnIncompleteFrameThatIsCounted) {
   EXPECT_EQ(a.add(pkt), nullptr);
   EXPECT_EQ(a.counters().packets_late, 1u);
   // A duplicate is counted, the frame in progress is 190.
-  ASSERT_EQ(fmt.decode_lidar(next, pkt), DecodeStatus::kOk);
+  ASSERT_EQ(fmt.decode_lidar(next_a, pkt), DecodeStatus::kOk);
   EXPECT_EQ(a.add(pkt), nullptr);
   EXPECT_EQ(a.counters().columns_duplicate, 16u);
   const LidarFrame* g = a.flush();
   ASSERT_NE(g, nullptr);
   EXPECT_EQ(g->frame_id, 190);
-  EXPECT_EQ(g->columns_received, 16);
+  EXPECT_EQ(g->columns_received, 32);
+  EXPECT_EQ(a.flush(), nullptr);
+}
+
+TEST(OusterAssembly, APacketOvertakenAcrossTheFrameBoundaryStillLands) {
+  const Capture cap = load_capture();
+  const SensorInfo info = reduced_info();
+  const PacketFormat fmt(info);
+  LidarPacket pkt;
+  FrameAssembler a(info);
+  auto next = cap.lidar;  // the same scene as frame 190
+  for (auto& p : next)
+    for (int c = 0; c < 16; ++c) p[static_cast<std::size_t>(c) * 788 + 10] = 190;
+  std::vector<const std::vector<std::uint8_t>*> order;
+  for (std::size_t i = 0; i + 1 < cap.lidar.size(); ++i) order.push_back(&cap.lidar[i]);
+  order.push_back(&next[0]);          // 190's first packet overtakes
+  order.push_back(&cap.lidar.back()); // 189's last
+  for (std::size_t i = 1; i < next.size(); ++i) order.push_back(&next[i]);
+  std::vector<std::uint16_t> complete;
+  for (const auto* p : order) {
+    ASSERT_EQ(fmt.decode_lidar(*p, pkt), DecodeStatus::kOk);
+    if (const LidarFrame* f = a.add(pkt)) {
+      EXPECT_TRUE(f->complete()) << f->frame_id;
+      complete.push_back(f->frame_id);
+    }
+  }
+  EXPECT_EQ(complete, (std::vector<std::uint16_t>{189, 190}));
+  EXPECT_EQ(a.counters().frames_incomplete, 0u);
+  EXPECT_EQ(a.flush(), nullptr);
 }
 
 TEST(OusterPacket, CorruptPacketsAreRefused) {

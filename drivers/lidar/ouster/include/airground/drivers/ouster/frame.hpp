@@ -1,7 +1,9 @@
 // One lidar frame (a full rotation) assembled from column packets. Images are staggered (as measured:
 // pixel (row, col) is beam `row` at measurement_id `col`), row-major, sized once at construction.
-// The assembler survives lost packets (the frame is emitted incomplete and counted) and packets
-// reordered within a frame; a packet of a frame already emitted is counted late and dropped.
+// The assembler survives lost packets (the frame is emitted incomplete and counted) and reordered
+// packets: any order within a frame, and across a frame boundary the first packet of the next frame is
+// held back so a packet of the current frame it overtook still lands. A packet of a frame already
+// emitted is counted late and dropped.
 #pragma once
 
 #include <cstdint>
@@ -44,14 +46,19 @@ class FrameAssembler {
   // Adds one decoded packet; returns the frame it finished (complete, or incomplete because a newer
   // frame began), valid until the next call, or nullptr. Never allocates.
   const LidarFrame* add(const LidarPacket& p) noexcept;
-  // The frame in progress, emitted as it is (end of a recording); nullptr when none.
+  // The frame in progress, emitted as it is (end of a recording); nullptr when none. Call until nullptr
+  // (a held-back packet of the next frame comes out as a frame of its own).
   const LidarFrame* flush() noexcept;
   [[nodiscard]] const AssemblerCounters& counters() const noexcept { return c_; }
 
  private:
   void emit() noexcept;
+  void start(std::uint16_t frame_id) noexcept;
+  void fill(const LidarPacket& p) noexcept;
+  void start_pending() noexcept;
   LidarFrame cur_, done_;
-  bool have_cur_{false}, have_last_{false};
+  LidarPacket pending_{};
+  bool have_cur_{false}, have_last_{false}, have_pending_{false};
   std::uint16_t last_emitted_{0};
   AssemblerCounters c_;
 };
