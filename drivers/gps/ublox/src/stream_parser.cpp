@@ -17,6 +17,8 @@ void StreamParser::fail() noexcept {
     std::memcpy(pend_.data(), buf_.data() + 1, keep);
     pend_pos_ = 0;
     pend_len_ = keep + rest;
+  } else {
+    c_.garbage_bytes += keep;  // cannot happen (see the bound in the header); counted if it ever does
   }
   ++c_.garbage_bytes;  // the false sync byte
   n_ = 0;

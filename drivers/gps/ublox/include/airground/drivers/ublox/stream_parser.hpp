@@ -44,7 +44,9 @@ class StreamParser {
   std::array<std::uint8_t, kMaxUbxPayload + 8> buf_{};
   std::size_t n_{0}, len_{0};
   std::uint8_t ck_a_{0};
-  std::array<std::uint8_t, kMaxUbxPayload + 8> pend_{};  // bytes to rescan before new input
+  // Bytes to rescan before new input. A failed frame that began in new input leaves nothing else
+  // pending; one that began in pending bytes leaves fewer than were pending: one frame's size bounds it.
+  std::array<std::uint8_t, kMaxUbxPayload + 8> pend_{};
   std::size_t pend_pos_{0}, pend_len_{0};
   StreamCounters c_;
 };
