@@ -71,6 +71,10 @@ fuzz: deps
 	cmake --build build/fuzz
 	mkdir -p build/fuzz/corpus/comms_datagram
 	build/fuzz/fuzz_comms_datagram -max_total_time=$(FUZZ_SECONDS) -print_final_stats=1 build/fuzz/corpus/comms_datagram tests/fuzz/comms/seeds
+	for t in ouster_packet ublox_stream candump_line cannelloni; do \
+	  mkdir -p build/fuzz/corpus/$$t && \
+	  build/fuzz/fuzz_$$t -max_total_time=$(FUZZ_SECONDS) -print_final_stats=1 build/fuzz/corpus/$$t tests/fuzz/drivers/seeds/$$t || exit 1; \
+	done
 
 clean:
 	rm -rf build

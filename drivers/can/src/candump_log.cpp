@@ -45,7 +45,11 @@ Result<CandumpRecord> parse_candump_line(std::string_view line) {
   rest.remove_prefix(1);
   const std::size_t sp = rest.find(' ');
   if (sp == std::string_view::npos || sp == 0) return bad("expected 'interface id#data'");
-  rec.iface = std::string(rest.substr(0, sp));
+  const std::string_view ifname = rest.substr(0, sp);
+  if (ifname.size() > 15) return bad("interface name longer than 15 characters (IFNAMSIZ)");
+  for (char ch : ifname)
+    if (ch < 0x21 || ch > 0x7E) return bad("interface name has a control or non-ASCII character");
+  rec.iface = std::string(ifname);
   std::string_view fr = rest.substr(sp + 1);
   const std::size_t end = fr.find(' ');  // newer candump may append a direction flag
   if (end != std::string_view::npos) fr = fr.substr(0, end);
@@ -60,6 +64,10 @@ Result<CandumpRecord> parse_candump_line(std::string_view line) {
     id = (id << 4) | static_cast<std::uint32_t>(h);
   }
   rec.frame.extended = hash == 8;
+  if (rec.frame.extended && (id & 0xE0000000U) == 0x20000000U) {  // CAN_ERR_FLAG: an error frame (candump, python-can)
+    rec.error = true;
+    id &= kExtendedIdMask;
+  }
   if (id > (rec.frame.extended ? kExtendedIdMask : kStandardIdMask)) return bad("id beyond its format");
   rec.frame.id = id;
   std::string_view data = fr.substr(hash + 1);
@@ -197,8 +205,18 @@ CanResult CandumpReplayBus::receive(CanFrame& out) noexcept {
     const CanFrame& f = records_[next_].frame;
     const TimeNs at = f.stamp - t0_ + start_;
     if (at > now) return CanResult::kWouldBlock;
+    const bool error_frame = records_[next_].error;
     ++next_;
+    if (error_frame) {  // a recorded error frame: the bus state follows it, nothing is delivered
+      errors_.apply(decode_error_frame(f.id, f.data), c_);
+      ++c_.rx_errors;
+      continue;
+    }
     if (accept_ != nullptr && !accept_(f)) continue;
+    if (!accepts(f)) {
+      ++c_.rx_filtered;
+      continue;
+    }
     out = f;
     out.stamp = at;
     ++c_.rx;

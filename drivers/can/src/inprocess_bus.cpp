@@ -29,12 +29,19 @@ CanResult InProcessCanLink::Endpoint::send(const CanFrame& f) noexcept {
 
 CanResult InProcessCanLink::Endpoint::receive(CanFrame& out) noexcept {
   Queue& q = link_.q_[static_cast<std::size_t>(side_)];
-  if (down_ || q.size == 0) return CanResult::kWouldBlock;
-  out = q.frames[q.head];
-  q.head = (q.head + 1) % kCapacity;
-  --q.size;
-  ++c_.rx;
-  return CanResult::kOk;
+  while (!down_ && q.size > 0) {
+    const CanFrame& f = q.frames[q.head];
+    q.head = (q.head + 1) % kCapacity;
+    --q.size;
+    if (!accepts(f)) {
+      ++c_.rx_filtered;
+      continue;
+    }
+    out = f;
+    ++c_.rx;
+    return CanResult::kOk;
+  }
+  return CanResult::kWouldBlock;
 }
 
 namespace {

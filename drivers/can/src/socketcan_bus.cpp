@@ -3,7 +3,10 @@
 
 #include <fcntl.h>
 #include <linux/can.h>
+#include <linux/can/netlink.h>
 #include <linux/can/raw.h>
+#include <linux/netlink.h>
+#include <linux/rtnetlink.h>
 #include <net/if.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
@@ -51,7 +54,7 @@ Result<std::unique_ptr<SocketCanBus>> SocketCanBus::open(const std::string& ifna
   }
   const int err_mask = CAN_ERR_MASK;
   (void)::setsockopt(fd, SOL_CAN_RAW, CAN_RAW_ERR_FILTER, &err_mask, sizeof err_mask);
-  return std::unique_ptr<SocketCanBus>(new SocketCanBus(fd, ifname));
+  return std::unique_ptr<SocketCanBus>(new SocketCanBus(fd, ifname, ifr.ifr_ifindex));
 }
 
 SocketCanBus::~SocketCanBus() {
@@ -78,19 +81,98 @@ CanResult SocketCanBus::receive(CanFrame& out) noexcept {
     can_frame k{};
     const ssize_t n = ::recv(fd_, &k, sizeof k, MSG_DONTWAIT);
     if (n < 0) return errno == EAGAIN ? CanResult::kWouldBlock : CanResult::kDown;  // EWOULDBLOCK == EAGAIN on Linux
-    if (n != static_cast<ssize_t>(sizeof k) || (k.can_id & CAN_ERR_FLAG) != 0 || k.len > 8) {
-      ++c_.rx_errors;  // error frame or truncated read: counted, skipped
+    if (n == static_cast<ssize_t>(sizeof k) && (k.can_id & CAN_ERR_FLAG) != 0) {
+      std::array<std::uint8_t, 8> d{};
+      std::memcpy(d.data(), k.data, 8);
+      errors_.apply(decode_error_frame(k.can_id, d), c_);  // counted by class, state followed
+      ++c_.rx_errors;
       continue;
     }
-    out.extended = (k.can_id & CAN_EFF_FLAG) != 0;
-    out.rtr = (k.can_id & CAN_RTR_FLAG) != 0;
-    out.id = k.can_id & (out.extended ? CAN_EFF_MASK : CAN_SFF_MASK);
-    out.dlc = k.len;
-    std::memcpy(out.data.data(), k.data, 8);
-    out.stamp = monotonic_now();
+    if (n != static_cast<ssize_t>(sizeof k) || k.len > 8) {
+      ++c_.rx_errors;  // truncated read: counted, skipped
+      continue;
+    }
+    CanFrame f;
+    f.extended = (k.can_id & CAN_EFF_FLAG) != 0;
+    f.rtr = (k.can_id & CAN_RTR_FLAG) != 0;
+    f.id = k.can_id & (f.extended ? CAN_EFF_MASK : CAN_SFF_MASK);
+    f.dlc = k.len;
+    std::memcpy(f.data.data(), k.data, 8);
+    f.stamp = monotonic_now();
+    if (!accepts(f)) {
+      ++c_.rx_filtered;
+      continue;
+    }
+    if (errors_.state() == CanBusState::kBusOff) errors_.reset();  // frames flow again: the controller is back
+    out = f;
     ++c_.rx;
     return CanResult::kOk;
   }
+}
+
+bool SocketCanBus::set_filters(std::span<const CanFilter> filters) noexcept {
+  if (!CanBus::set_filters(filters)) return false;
+  std::array<can_filter, kMaxCanFilters> k{};
+  for (std::size_t i = 0; i < filters.size(); ++i) {
+    const CanFilter& f = filters[i];
+    k[i].can_id = (f.id & (f.extended ? CAN_EFF_MASK : CAN_SFF_MASK)) | (f.extended ? CAN_EFF_FLAG : 0U);
+    k[i].can_mask = (f.mask & (f.extended ? CAN_EFF_MASK : CAN_SFF_MASK)) | CAN_EFF_FLAG;  // the format must match
+  }
+  // No filters: one that passes everything (an empty CAN_RAW_FILTER would pass nothing).
+  can_filter all{0, 0};
+  const void* p = filters.empty() ? static_cast<const void*>(&all) : static_cast<const void*>(k.data());
+  const auto len = static_cast<socklen_t>(sizeof(can_filter) * (filters.empty() ? 1 : filters.size()));
+  return ::setsockopt(fd_, SOL_CAN_RAW, CAN_RAW_FILTER, p, len) == 0;
+}
+
+bool SocketCanBus::restart() noexcept {
+  const int nl = ::socket(AF_NETLINK, SOCK_RAW | SOCK_CLOEXEC, NETLINK_ROUTE);
+  if (nl < 0) return false;
+  // RTM_NEWLINK { ifinfomsg, IFLA_LINKINFO { IFLA_INFO_KIND "can", IFLA_INFO_DATA { IFLA_CAN_RESTART u32 1 } } }
+  alignas(nlmsghdr) std::uint8_t buf[256]{};
+  auto* h = reinterpret_cast<nlmsghdr*>(buf);
+  h->nlmsg_type = RTM_NEWLINK;
+  h->nlmsg_flags = NLM_F_REQUEST | NLM_F_ACK;
+  h->nlmsg_seq = 1;
+  auto* ifi = reinterpret_cast<ifinfomsg*>(buf + NLMSG_HDRLEN);
+  ifi->ifi_family = AF_UNSPEC;
+  ifi->ifi_index = ifindex_;
+  std::size_t len = NLMSG_HDRLEN + NLMSG_ALIGN(sizeof(ifinfomsg));
+  auto put = [&](std::uint16_t type, const void* data, std::size_t n) {
+    auto* a = reinterpret_cast<rtattr*>(buf + len);
+    a->rta_type = type;
+    a->rta_len = static_cast<unsigned short>(RTA_LENGTH(n));
+    if (n > 0) std::memcpy(RTA_DATA(a), data, n);
+    len += RTA_ALIGN(a->rta_len);
+    return a;
+  };
+  rtattr* linkinfo = put(IFLA_LINKINFO, nullptr, 0);
+  put(IFLA_INFO_KIND, "can", 3);
+  rtattr* info = put(IFLA_INFO_DATA, nullptr, 0);
+  const std::uint32_t one = 1;
+  put(IFLA_CAN_RESTART, &one, sizeof one);
+  info->rta_len = static_cast<unsigned short>(buf + len - reinterpret_cast<std::uint8_t*>(info));
+  linkinfo->rta_len = static_cast<unsigned short>(buf + len - reinterpret_cast<std::uint8_t*>(linkinfo));
+  h->nlmsg_len = static_cast<std::uint32_t>(len);
+  sockaddr_nl to{};
+  to.nl_family = AF_NETLINK;
+  bool ok = ::sendto(nl, buf, len, 0, reinterpret_cast<sockaddr*>(&to), sizeof to) == static_cast<ssize_t>(len);
+  if (ok) {
+    std::uint8_t reply[512];
+    const ssize_t n = ::recv(nl, reply, sizeof reply, 0);
+    ok = false;
+    if (n >= static_cast<ssize_t>(NLMSG_HDRLEN + sizeof(nlmsgerr))) {
+      const auto* rh = reinterpret_cast<const nlmsghdr*>(reply);
+      if (rh->nlmsg_type == NLMSG_ERROR) {
+        const auto* e = reinterpret_cast<const nlmsgerr*>(reply + NLMSG_HDRLEN);
+        ok = e->error == 0;
+        if (!ok) errno = -e->error;
+      }
+    }
+  }
+  ::close(nl);
+  if (ok) errors_.reset();
+  return ok;
 }
 
 }  // namespace ag::can

@@ -40,8 +40,32 @@ bool led_level(LedPattern p, TimeNs now) noexcept {
     case LedPattern::kOn: return true;
     case LedPattern::kSlowBlink: return (now / (500 * kNsPerMs)) % 2 == 0;
     case LedPattern::kFastBlink: return (now / (125 * kNsPerMs)) % 2 == 0;
+    case LedPattern::kDoubleFlash: {
+      const TimeNs t = ((now % kNsPerS) + kNsPerS) % kNsPerS;
+      return t < 100 * kNsPerMs || (t >= 300 * kNsPerMs && t < 400 * kNsPerMs);
+    }
   }
   return false;
+}
+
+const char* to_string(RoleState s) noexcept {
+  switch (s) {
+    case RoleState::kBooting: return "booting";
+    case RoleState::kLocalizing: return "localizing";
+    case RoleState::kTracking: return "tracking";
+    case RoleState::kFault: return "fault";
+  }
+  return "?";
+}
+
+LedPattern led_pattern_for(RoleState s) noexcept {
+  switch (s) {
+    case RoleState::kBooting: return LedPattern::kSlowBlink;
+    case RoleState::kLocalizing: return LedPattern::kFastBlink;
+    case RoleState::kTracking: return LedPattern::kOn;
+    case RoleState::kFault: return LedPattern::kDoubleFlash;
+  }
+  return LedPattern::kDoubleFlash;
 }
 
 namespace {

@@ -4,7 +4,9 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
+#include <span>
 
 #include "airground/platform/time.hpp"
 
@@ -34,7 +36,23 @@ struct CanBusCounters {
   std::uint64_t tx{0}, rx{0};
   std::uint64_t tx_dropped{0};   // queue full or interface down
   std::uint64_t rx_errors{0};    // error frames, truncated reads, malformed records
+  std::uint64_t rx_filtered{0};  // received but refused by the receive filters (software check)
+  // Error frames by class (can_error.hpp): one error frame may count in several.
+  std::uint64_t error_frames{0}, bus_off{0}, error_passive{0}, error_warning{0}, lost_arbitration{0};
+  std::uint64_t protocol_errors{0}, ack_missing{0}, controller_overflow{0}, tx_timeout{0}, restarted{0};
 };
+
+// A receive filter with SocketCAN's semantics: a frame of the same format (standard/extended) passes
+// when (frame.id & mask) == (id & mask). A bus with no filters passes every frame.
+struct CanFilter {
+  std::uint32_t id{0};
+  std::uint32_t mask{0};
+  bool extended{false};
+};
+inline constexpr std::size_t kMaxCanFilters = 16;
+[[nodiscard]] inline bool matches(const CanFilter& flt, const CanFrame& f) noexcept {
+  return f.extended == flt.extended && (f.id & flt.mask) == (flt.id & flt.mask);
+}
 
 [[nodiscard]] inline bool valid(const CanFrame& f) noexcept {
   return f.dlc <= 8 && (f.extended ? f.id <= kExtendedIdMask : f.id <= kStandardIdMask);
@@ -51,6 +69,26 @@ class CanBus {
   // The next received frame (stamped), kWouldBlock when there is none; never blocks.
   [[nodiscard]] virtual CanResult receive(CanFrame& out) noexcept = 0;
   [[nodiscard]] virtual const CanBusCounters& counters() const noexcept = 0;
+
+  // Sets the receive filters (replacing any before); false when there are more than kMaxCanFilters.
+  // Every backend applies them in receive(); SocketCAN also gives them to the kernel (CAN_RAW_FILTER).
+  [[nodiscard]] virtual bool set_filters(std::span<const CanFilter> filters) noexcept {
+    if (filters.size() > kMaxCanFilters) return false;
+    for (std::size_t i = 0; i < filters.size(); ++i) filters_[i] = filters[i];
+    n_filters_ = filters.size();
+    return true;
+  }
+  [[nodiscard]] bool accepts(const CanFrame& f) const noexcept {
+    if (n_filters_ == 0) return true;
+    for (std::size_t i = 0; i < n_filters_; ++i)
+      if (matches(filters_[i], f)) return true;
+    return false;
+  }
+  [[nodiscard]] std::span<const CanFilter> filters() const noexcept { return {filters_.data(), n_filters_}; }
+
+ private:
+  std::array<CanFilter, kMaxCanFilters> filters_{};
+  std::size_t n_filters_{0};
 };
 
 }  // namespace ag::can

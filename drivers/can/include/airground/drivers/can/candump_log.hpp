@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "airground/drivers/can/can_bus.hpp"
+#include "airground/drivers/can/can_error.hpp"
 #include "airground/platform/clock.hpp"
 #include "airground/platform/result.hpp"
 
@@ -21,6 +22,7 @@ namespace ag::can {
 struct CandumpRecord {
   CanFrame frame;       // frame.stamp: the line's stamp [ns]
   std::string iface;    // "can0"
+  bool error{false};    // an error frame (id with CAN_ERR_FLAG): frame.id holds the error classes
 };
 
 // One line into a record; the error says what is wrong with it.
@@ -63,6 +65,7 @@ class RecordingCanBus final : public CanBus {
   [[nodiscard]] CanResult send(const CanFrame& f) noexcept override;
   [[nodiscard]] CanResult receive(CanFrame& out) noexcept override;
   [[nodiscard]] const CanBusCounters& counters() const noexcept override { return inner_.counters(); }
+  [[nodiscard]] bool set_filters(std::span<const CanFilter> filters) noexcept override { return inner_.set_filters(filters); }
 
  private:
   CanBus& inner_;
@@ -83,6 +86,7 @@ class CandumpReplayBus final : public CanBus {
   [[nodiscard]] bool finished() const noexcept { return next_ >= records_.size(); }
   [[nodiscard]] TimeNs log_start() const noexcept { return t0_; }
   [[nodiscard]] TimeNs log_end() const noexcept { return records_.empty() ? t0_ : records_.back().frame.stamp; }
+  [[nodiscard]] CanBusState state() const noexcept { return errors_.state(); }
 
  private:
   std::vector<CandumpRecord> records_;
@@ -91,6 +95,7 @@ class CandumpReplayBus final : public CanBus {
   Filter accept_{nullptr};
   std::size_t next_{0};
   CanBusCounters c_;
+  CanErrorTracker errors_;
 };
 
 }  // namespace ag::can

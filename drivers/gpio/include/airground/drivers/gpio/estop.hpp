@@ -34,8 +34,15 @@ class EStopLatch {
   std::uint64_t assertions_{0}, line_faults_{0};
 };
 
-enum class LedPattern : std::uint8_t { kOff = 0, kOn = 1, kSlowBlink = 2, kFastBlink = 3 };
-// LED level at time `now` for a pattern (slow: 1 Hz, fast: 4 Hz, 50 % duty).
+enum class LedPattern : std::uint8_t { kOff = 0, kOn = 1, kSlowBlink = 2, kFastBlink = 3, kDoubleFlash = 4 };
+// LED level at time `now` for a pattern (slow: 1 Hz, fast: 4 Hz, 50 % duty; double flash: two 100 ms
+// flashes 200 ms apart every second).
 [[nodiscard]] bool led_level(LedPattern p, TimeNs now) noexcept;
+
+// What a role's status LED shows: booting slow blink, localizing fast blink, tracking steady, fault
+// double flash (distinct at a glance and by duty cycle).
+enum class RoleState : std::uint8_t { kBooting = 0, kLocalizing = 1, kTracking = 2, kFault = 3 };
+const char* to_string(RoleState s) noexcept;
+[[nodiscard]] LedPattern led_pattern_for(RoleState s) noexcept;
 
 }  // namespace ag::gpio

@@ -1,0 +1,104 @@
+// The u-blox stage: bytes to fixes to "gps".
+#include "airground/drivers/ublox/stage.hpp"
+
+#include <cmath>
+#include <string>
+
+#include "airground/drivers/ublox/nmea.hpp"
+#include "airground/drivers/ublox/ubx.hpp"
+
+namespace ag::ublox {
+
+namespace {
+constexpr double kA = 6378137.0, kF = 1.0 / 298.257223563, kE2 = kF * (2.0 - kF);
+constexpr double kDeg = 3.14159265358979323846 / 180.0;
+void ecef(double lat_deg, double lon_deg, double h, double& x, double& y, double& z) noexcept {
+  const double sl = std::sin(lat_deg * kDeg), cl = std::cos(lat_deg * kDeg);
+  const double n = kA / std::sqrt(1.0 - kE2 * sl * sl);
+  x = (n + h) * cl * std::cos(lon_deg * kDeg);
+  y = (n + h) * cl * std::sin(lon_deg * kDeg);
+  z = (n * (1.0 - kE2) + h) * sl;
+}
+}  // namespace
+
+LocalEnu::LocalEnu(double lat0, double lon0, double h0) noexcept
+    : sl_(std::sin(lat0 * kDeg)), cl_(std::cos(lat0 * kDeg)), so_(std::sin(lon0 * kDeg)), co_(std::cos(lon0 * kDeg)) {
+  ecef(lat0, lon0, h0, x0_, y0_, z0_);
+}
+
+void LocalEnu::forward(double lat, double lon, double h, double& e, double& n, double& u) const noexcept {
+  double x, y, z;
+  ecef(lat, lon, h, x, y, z);
+  const double dx = x - x0_, dy = y - y0_, dz = z - z0_;
+  e = -so_ * dx + co_ * dy;
+  n = -sl_ * co_ * dx - sl_ * so_ * dy + cl_ * dz;
+  u = cl_ * co_ * dx + cl_ * so_ * dy + sl_ * dz;
+}
+
+Status UbloxStage::init(StageContext& ctx) {
+  const SectionView v = ctx.params();
+  const std::string where = std::string(ctx.stage_name) + ".";
+  if (v.text("source") == "replay") {
+    auto r = ReplayFile::open(v.text("replay"), 1024);
+    if (!r) return Error::make(r.error().code, where + "replay: " + r.error().message);
+    source_ = std::move(r).value();
+  } else {
+    auto s = SerialPort::open(v.text("device"), static_cast<int>(v.integer("baud")));
+    if (!s) return Error::make(s.error().code, where + "device: " + s.error().message);
+    source_ = std::move(s).value();
+  }
+  enu_ = std::make_unique<LocalEnu>(v.real("datum_lat_deg"), v.real("datum_lon_deg"), v.real("datum_height_m"));
+  max_bytes_ = static_cast<int>(v.integer("max_bytes_per_step"));
+  buf_.assign(1024, 0);
+  auto w = ctx.channels.ring_writer<GpsMsg, kGpsRing>(v.text("gps_channel"));
+  if (!w) return w.error();
+  out_ = w.value();
+  return ok_status();
+}
+
+void UbloxStage::publish(TimeNs now, std::uint8_t fix_type, double lat, double lon, double h, double hacc, double vacc) noexcept {
+  GpsMsg m;
+  m.stamp = now;  // the receiver's time is GPS time, not this clock: the arrival time stands in
+  m.published = now;
+  m.fix_type = fix_type;
+  enu_->forward(lat, lon, h, m.east_m, m.north_m, m.up_m);
+  m.h_accuracy_m = hacc;
+  m.v_accuracy_m = vacc;
+  last_ = m;
+  ++c_.fixes_published;
+  if (out_.push(m) != 0) ++c_.ring_full;
+}
+
+void UbloxStage::step(TimeNs now) noexcept {
+  for (int total = 0; total < max_bytes_;) {
+    const long n = source_->read(buf_);
+    if (n < 0) {
+      if (!source_->at_end()) ++c_.read_errors;
+      break;
+    }
+    if (n == 0) break;
+    total += static_cast<int>(n);
+    std::span<const std::uint8_t> in(buf_.data(), static_cast<std::size_t>(n));
+    while (!in.empty()) {
+      StreamMessage m;
+      in = in.subspan(parser_.feed(in, m));
+      if (m.kind == StreamMessage::Kind::kUbx && m.cls == kClassNav && m.id == kIdNavPvt) {
+        NavPvt p;
+        if (!decode_nav_pvt(m.payload, p)) continue;
+        ++c_.nav_pvt;
+        seen_pvt_ = true;
+        const bool usable = p.gnss_fix_ok && (p.fix_type == FixType::k2D || p.fix_type == FixType::k3D || p.fix_type == FixType::kGnssDeadReckoning);
+        publish(now, usable ? static_cast<std::uint8_t>(p.fix_type == FixType::kGnssDeadReckoning ? 3 : static_cast<int>(p.fix_type)) : 0,
+                p.lat_deg, p.lon_deg, p.height_m, p.h_acc_m, p.v_acc_m);
+      } else if (m.kind == StreamMessage::Kind::kNmea && !seen_pvt_) {
+        GgaFix g;
+        if (!parse_gga(m.sentence, g)) continue;
+        ++c_.gga;
+        // GGA has no accuracies: HDOP times a 2.5 m single-point error (a coarse, documented guess).
+        publish(now, g.quality == 0 ? 0 : 3, g.lat_deg, g.lon_deg, g.alt_msl_m + g.geoid_sep_m, g.hdop * 2.5, g.hdop * 5.0);
+      }
+    }
+  }
+}
+
+}  // namespace ag::ublox
