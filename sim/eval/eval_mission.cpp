@@ -49,6 +49,12 @@ struct Visit {
   int robot{0};
   std::uint32_t region{0};
   double est_x{0}, est_y{0};
+  bool have_goal{false};  // the goal the robot was sent to (a region's goal moves as the map grows)
+  double goal_x{0}, goal_y{0};
+};
+struct Claim {
+  std::uint32_t region{mission::kNoRegion};
+  double goal_x{0}, goal_y{0};
 };
 
 struct StateChange {
@@ -173,6 +179,7 @@ Result<MissionMetrics> run_mission(const MissionOptions& o, const ProgressFn& pr
   std::vector<double> done_at(static_cast<std::size_t>(n), -1.0);
   std::vector<bool> killed(static_cast<std::size_t>(n), false);
   std::vector<Visit> visits;
+  std::vector<Claim> last_claim(static_cast<std::size_t>(n));
   std::map<std::uint32_t, mission::RegionRecord> regions;  // newest record of every region id
   std::vector<double> traffic_t, traffic_kbps;
   std::uint64_t last_bytes = 0;
@@ -218,9 +225,17 @@ Result<MissionMetrics> run_mission(const MissionOptions& o, const ProgressFn& pr
       status[i] = st;
       if (st.done && done_at[i] < 0) done_at[i] = t;
       const mission::VisitedRecord& v = mg.own_visited();
-      for (std::uint16_t k = visits_seen[i]; k < v.count; ++k)
-        visits.push_back(Visit{t, static_cast<int>(i), v.entries[k].region_id, v.entries[k].x, v.entries[k].y});
+      for (std::uint16_t k = visits_seen[i]; k < v.count; ++k) {
+        Visit vis{t, static_cast<int>(i), v.entries[k].region_id, v.entries[k].x, v.entries[k].y};
+        if (last_claim[i].region == vis.region) {
+          vis.have_goal = true;
+          vis.goal_x = last_claim[i].goal_x;
+          vis.goal_y = last_claim[i].goal_y;
+        }
+        visits.push_back(vis);
+      }
       visits_seen[i] = v.count;
+      if (st.state == mission::ClaimState::kGoing && st.region_id != mission::kNoRegion) last_claim[i] = Claim{st.region_id, st.goal_x, st.goal_y};
     }
     if (o.status_period_s > 0 && t >= next_status) {
       next_status += o.status_period_s;
@@ -290,8 +305,8 @@ Result<MissionMetrics> run_mission(const MissionOptions& o, const ProgressFn& pr
   for (std::size_t k = 0; k < visits.size(); ++k) {
     const Visit& v = visits[k];
     const auto it = regions.find(v.region);
-    const double gx = it != regions.end() ? static_cast<double>(it->second.goal_x) : v.est_x;
-    const double gy = it != regions.end() ? static_cast<double>(it->second.goal_y) : v.est_y;
+    const double gx = v.have_goal ? v.goal_x : it != regions.end() ? static_cast<double>(it->second.goal_x) : v.est_x;
+    const double gy = v.have_goal ? v.goal_y : it != regions.end() ? static_cast<double>(it->second.goal_y) : v.est_y;
     double closest = 1e18;
     for (const Sample& s : samples[static_cast<std::size_t>(v.robot)]) closest = std::min(closest, std::hypot(s.truth.x - gx, s.truth.y - gy));
     if (closest > 3.0) {
@@ -440,9 +455,31 @@ Result<MissionMetrics> run_mission(const MissionOptions& o, const ProgressFn& pr
     v << "t_s,robot,region,est_x_m,est_y_m,goal_x_m,goal_y_m,true_visit\n";
     for (std::size_t k = 0; k < visits.size(); ++k) {
       const auto it = regions.find(visits[k].region);
-      v << visits[k].t << ",ugv" << visits[k].robot + 1 << "," << visits[k].region << "," << visits[k].est_x << "," << visits[k].est_y << ","
-        << (it != regions.end() ? it->second.goal_x : 0.0F) << "," << (it != regions.end() ? it->second.goal_y : 0.0F) << "," << (visit_false[k] ? 0 : 1) << "\n";
+      const double gx = visits[k].have_goal ? visits[k].goal_x : it != regions.end() ? static_cast<double>(it->second.goal_x) : 0.0;
+      const double gy = visits[k].have_goal ? visits[k].goal_y : it != regions.end() ? static_cast<double>(it->second.goal_y) : 0.0;
+      v << visits[k].t << ",ugv" << visits[k].robot + 1 << "," << visits[k].region << "," << visits[k].est_x << "," << visits[k].est_y << "," << gx
+        << "," << gy << "," << (visit_false[k] ? 0 : 1) << "\n";
     }
+    std::ofstream rc(out / "regions.csv");
+    rc << "region,cx_m,cy_m,goal_x_m,goal_y_m,cells,goal_valid,visited,target\n";
+    for (const auto& [id, rg] : regions) {
+      int tgt = -1;
+      double best = 10.0;
+      for (std::size_t ti = 0; ti < targets.size(); ++ti) {
+        double dmin = std::hypot(targets[ti].x - static_cast<double>(rg.cx), targets[ti].y - static_cast<double>(rg.cy));
+        for (const Pose2& c : targets[ti].car_poses) dmin = std::min(dmin, std::hypot(c.x - static_cast<double>(rg.cx), c.y - static_cast<double>(rg.cy)));
+        if (dmin <= best) {
+          best = dmin;
+          tgt = targets[ti].id;
+        }
+      }
+      rc << id << "," << rg.cx << "," << rg.cy << "," << rg.goal_x << "," << rg.goal_y << "," << rg.cells << "," << (rg.goal_valid ? 1 : 0) << ","
+         << (region_visited.count(id) ? 1 : 0) << "," << tgt << "\n";
+    }
+    std::ofstream tc(out / "targets.csv");
+    tc << "target,x_m,y_m,cars,visited\n";
+    for (std::size_t ti = 0; ti < targets.size(); ++ti)
+      tc << targets[ti].id << "," << targets[ti].x << "," << targets[ti].y << "," << targets[ti].cars << "," << (target_hit[ti] ? 1 : 0) << "\n";
   }
   std::ofstream j(out / "metrics.json");
   j << "{\n  \"targets_total\": " << m.targets_total << ",\n  \"targets_visited\": " << m.targets_visited
