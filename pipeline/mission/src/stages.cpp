@@ -2,6 +2,8 @@
 #include "airground/mission/stages.hpp"
 
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <string>
 
@@ -114,6 +116,30 @@ void RegionsStage::step(TimeNs now) noexcept {
 }
 
 // ----------------------------------------------------------------------------------------- mission
+Status parse_waypoints(std::string_view text, ManagerParams& p) {
+  p.waypoint_count = 0;
+  std::size_t pos = 0;
+  int item = 0;
+  while (pos < text.size()) {
+    std::size_t end = text.find(';', pos);
+    if (end == std::string_view::npos) end = text.size();
+    const std::string part(text.substr(pos, end - pos));
+    pos = end + 1;
+    ++item;
+    if (part.find_first_not_of(" \t") == std::string::npos) continue;
+    double x = 0, y = 0;
+    char tail = 0;
+    if (std::sscanf(part.c_str(), " %lf , %lf %c", &x, &y, &tail) != 2 || !std::isfinite(x) || !std::isfinite(y))
+      return Error::make(ErrorCode::kConfig, "config error: mission.waypoints item " + std::to_string(item) + " '" + part + "' is not 'x,y'");
+    if (p.waypoint_count == kMaxWaypoints)
+      return Error::make(ErrorCode::kConfig, "config error: mission.waypoints: more than " + std::to_string(kMaxWaypoints) + " waypoints");
+    p.waypoint_x[p.waypoint_count] = x;
+    p.waypoint_y[p.waypoint_count] = y;
+    ++p.waypoint_count;
+  }
+  return ok_status();
+}
+
 Status MissionStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
   ManagerParams p;
@@ -131,6 +157,7 @@ Status MissionStage::init(StageContext& ctx) {
   p.idle_return_s = v.real("idle_return_s");
   p.mission_end_s = v.real("mission_end_s");
   p.republish_s = v.real("republish_s");
+  if (Status st = parse_waypoints(v.text("waypoints"), p); !st.ok()) return st;
   mgr_ = std::make_unique<MissionManager>(p);
   pub_ = std::make_unique<comms::GossipPublishMsg>();
   heard_ = std::make_unique<std::array<TimeNs, 256>>();

@@ -192,6 +192,27 @@ TEST(MissionStage, ATeamPoseKeepsAClaimAliveAndMalformedRecordsAreCounted) {
   EXPECT_EQ(rig.status_r.read().takeovers, 1U);
 }
 
+TEST(MissionStage, WaypointsParameter) {
+  ManagerParams p;
+  ASSERT_TRUE(parse_waypoints("1,2; 3.5 , -4;;", p).ok());
+  ASSERT_EQ(p.waypoint_count, 2U);
+  EXPECT_DOUBLE_EQ(p.waypoint_x[1], 3.5);
+  EXPECT_DOUBLE_EQ(p.waypoint_y[1], -4);
+  ASSERT_TRUE(parse_waypoints("", p).ok());
+  EXPECT_EQ(p.waypoint_count, 0U);
+  const auto bad = parse_waypoints("1,2;3;4,5", p);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.error().message.find("mission.waypoints item 2 '3'"), std::string::npos) << bad.error().message;
+  EXPECT_FALSE(parse_waypoints("1,2,3", p).ok());
+  EXPECT_FALSE(parse_waypoints("a,b", p).ok());
+  // through the config: the stage goes to the first waypoint
+  MissionRig rig(1, 1, {"mission.waypoints=7,8;9,10"});
+  rig.pose(0, 0, 0.5);
+  rig.step();
+  EXPECT_DOUBLE_EQ(rig.goal_r.read().goal.x, 7.0);
+  EXPECT_DOUBLE_EQ(rig.goal_r.read().goal.y, 8.0);
+}
+
 TEST(TargetsStage, ACarInTheScansBecomesAnObjectRecordOnGossip) {
   MissionRig rig(2, 1);
   auto scan = std::make_unique<LidarScanMsg>();

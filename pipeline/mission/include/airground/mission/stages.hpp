@@ -14,6 +14,7 @@
 #include <array>
 #include <memory>
 #include <span>
+#include <string_view>
 
 #include "airground/comms/messages.hpp"
 #include "airground/core/drive_messages.hpp"
@@ -86,7 +87,11 @@ inline constexpr ParamSpec kMissionParams[] = {
     ParamSpec::real("idle_return_s", 60.0, 0.0, 36000.0, "s", "nothing left and no new region this long: return to the start"),
     ParamSpec::real("mission_end_s", 0.0, 0.0, 360000.0, "s", "> 0: return to the start this long after start-up regardless"),
     ParamSpec::real("republish_s", 2.0, 0.1, 600.0, "s", "own claim and visited records are re-sent this often"),
+    ParamSpec::text("waypoints", "", "", "waypoints mission: 'x,y;x,y;...' [m, map frame] driven in order, then back to start; empty = regions"),
 };
+
+// Parses "x,y;x,y;..." (at most kMaxWaypoints) into p; an error names the item.
+Status parse_waypoints(std::string_view text, ManagerParams& p);
 
 struct MissionCounters {
   std::uint64_t records_in{0}, records_bad{0}, records_published{0}, publish_refused{0}, goals_published{0};
