@@ -35,6 +35,8 @@ constexpr StageSpec kUgvStages[] = {
      "local waypoint tracker: obstacles the LiDAR sees, the local goal along the route, the reflex stop"},
     {"mission", &mission::MissionStage::make, 5.0, 2'000, 22, -1, mission::MissionStage::kParams,
      "mission manager: choose, claim and visit regions, resolve clashes by priority, report failures, return to start"},
+    {"targets", &mission::TargetsStage::make, 10.0, 10'000, 21, -1, mission::TargetsStage::kParams,
+     "target mapping: vehicles in the labelled LiDAR points, an EKF per object, on 'objects' (shared by the mission stage)"},
 };
 static_assert(role_table_ok(kUgvStages));
 }  // namespace

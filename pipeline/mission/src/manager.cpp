@@ -301,6 +301,10 @@ void MissionManager::tick(TimeNs now) noexcept {
     idle_since_ = now;
   }
   const bool tracking = have_loc_ && loc_.status == LocalizationStatus::kTracking;
+  if (p_.waypoint_count > 0) {
+    tick_waypoints(now, tracking);
+    return;
+  }
   if (p_.mission_end_s > 0 && now - t0_ >= from_seconds(p_.mission_end_s) && !ended_) {
     ended_ = true;
     if (state_ != ClaimState::kDone) begin_return(now);
@@ -358,6 +362,53 @@ void MissionManager::tick(TimeNs now) noexcept {
   }
   publish_claim(now);
   if (visited_dirty_) publish_visited();
+  update_status(now);
+}
+
+void MissionManager::tick_waypoints(TimeNs now, bool tracking) noexcept {
+  const std::size_t n = std::min(p_.waypoint_count, kMaxWaypoints);
+  const bool over = p_.mission_end_s > 0 && now - t0_ >= from_seconds(p_.mission_end_s);
+  if (state_ == ClaimState::kIdle && tracking) {  // start (or the next waypoint)
+    if (wp_next_ < n && !over) {
+      state_ = ClaimState::kGoing;
+      go_to(p_.waypoint_x[wp_next_], p_.waypoint_y[wp_next_]);
+      progress_at_ = now;
+      best_dist_ = std::hypot(goal_x_ - loc_.pose.x, goal_y_ - loc_.pose.y);
+      claim_dirty_ = true;
+    } else {
+      begin_return(now);
+    }
+  } else if (state_ == ClaimState::kGoing) {
+    const double d = tracking ? std::hypot(goal_x_ - loc_.pose.x, goal_y_ - loc_.pose.y) : best_dist_;
+    bool next = false;
+    if (tracking && d <= p_.visit_radius_m) {
+      ++wp_reached_;
+      next = true;
+    } else {
+      if (tracking && d < best_dist_ - p_.progress_min_m) {
+        best_dist_ = d;
+        progress_at_ = now;
+      }
+      if (no_route_ >= p_.max_no_route || now - progress_at_ > from_seconds(p_.no_progress_timeout_s)) {
+        ++wp_skipped_;
+        ++failed_own_;
+        next = true;
+      }
+    }
+    if (over) {
+      begin_return(now);
+    } else if (next) {
+      ++wp_next_;
+      state_ = ClaimState::kIdle;
+      if (tracking) tick_waypoints(now, tracking);  // straight on to the next one
+    }
+  }
+  if (state_ == ClaimState::kReturning && tracking && std::hypot(p_.start_x - loc_.pose.x, p_.start_y - loc_.pose.y) <= p_.visit_radius_m) {
+    state_ = ClaimState::kDone;
+    cancel_goal();
+    claim_dirty_ = true;
+  }
+  publish_claim(now);
   update_status(now);
 }
 

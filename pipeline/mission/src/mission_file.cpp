@@ -50,11 +50,29 @@ bool get(const Ctx& c, const YAML::Node& parent, const char* key, const std::str
   return true;
 }
 
+void check_keys(const Ctx& c, const YAML::Node& n, const std::string& path, std::initializer_list<const char*> known, Error& err, bool& bad) {
+  if (bad || !n.IsMap()) return;
+  for (const auto& kv : n) {
+    const std::string k = kv.first.as<std::string>();
+    bool ok = false;
+    for (const char* s : known) ok = ok || k == s;
+    if (!ok) {
+      std::string list;
+      for (const char* s : known) list += std::string(list.empty() ? "" : ", ") + s;
+      err = c.err(kv.first, path + k, "unknown key (known: " + list + ")");
+      bad = true;
+      return;
+    }
+  }
+}
 bool get_area(const Ctx& c, const YAML::Node& n, const std::string& path, Area& a, Error& err) {
   if (!n.IsMap()) {
     err = c.err(n, path, "must be a map {x0, y0, x1, y1}");
     return false;
   }
+  bool bad = false;
+  check_keys(c, n, path + ".", {"x0", "y0", "x1", "y1"}, err, bad);
+  if (bad) return false;
   const double L = 1e6;
   if (!get(c, n, "x0", path + ".", a.x0, true, -L, L, err) || !get(c, n, "y0", path + ".", a.y0, true, -L, L, err) ||
       !get(c, n, "x1", path + ".", a.x1, true, -L, L, err) || !get(c, n, "y1", path + ".", a.y1, true, -L, L, err))
@@ -99,21 +117,6 @@ bool get_points(const Ctx& c, const YAML::Node& n, const std::string& path, std:
   return true;
 }
 
-void check_keys(const Ctx& c, const YAML::Node& n, const std::string& path, std::initializer_list<const char*> known, Error& err, bool& bad) {
-  if (bad || !n.IsMap()) return;
-  for (const auto& kv : n) {
-    const std::string k = kv.first.as<std::string>();
-    bool ok = false;
-    for (const char* s : known) ok = ok || k == s;
-    if (!ok) {
-      std::string list;
-      for (const char* s : known) list += std::string(list.empty() ? "" : ", ") + s;
-      err = c.err(kv.first, path + k, "unknown key (known: " + list + ")");
-      bad = true;
-      return;
-    }
-  }
-}
 }  // namespace
 
 double Survey::spacing_m() const noexcept {

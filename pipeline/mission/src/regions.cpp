@@ -13,11 +13,14 @@ constexpr double kBig = 1e20;
 
 RegionExtractor::RegionExtractor(const RegionParams& p, const ClassTable& classes, const plan::MapExtent& extent)
     : p_(p), extent_(extent) {
-  w_ = extent.tiles_x * p.tile_cells;
-  h_ = extent.tiles_y * p.tile_cells;
-  ox_ = extent.tile_x0 * p.tile_cells * p.resolution_m;
-  oy_ = extent.tile_y0 * p.tile_cells * p.resolution_m;
+  fw_ = w_ = extent.tiles_x * p.tile_cells;
+  fh_ = h_ = extent.tiles_y * p.tile_cells;
+  fox_ = ox_ = extent.tile_x0 * p.tile_cells * p.resolution_m;
+  foy_ = oy_ = extent.tile_y0 * p.tile_cells * p.resolution_m;
+  known_ = Box{0, 0, 0, 0};
   const std::size_t n = static_cast<std::size_t>(w_) * static_cast<std::size_t>(h_);
+  store_cls_.assign(n, 255);
+  store_prev_.assign(n, kNoRegionId);
   trav_lut_.assign(256, 0);
   for (int id = 0; id < 256; ++id)
     if (classes.valid_id(static_cast<std::uint8_t>(id)) &&
@@ -61,7 +64,17 @@ bool RegionExtractor::set_tile(std::int32_t tx, std::int32_t ty, std::uint64_t v
   tile_version_[ti] = version;
   const std::int32_t c0 = (tx - extent_.tile_x0) * tc, r0 = (ty - extent_.tile_y0) * tc;
   for (int r = 0; r < tc; ++r)
-    std::copy_n(cls.data() + static_cast<std::size_t>(r) * static_cast<std::size_t>(tc), tc, cls_.data() + idx(c0, r0 + r));
+    std::copy_n(cls.data() + static_cast<std::size_t>(r) * static_cast<std::size_t>(tc), tc,
+                store_cls_.data() + static_cast<std::size_t>(r0 + r) * static_cast<std::size_t>(fw_) + static_cast<std::size_t>(c0));
+  const std::int32_t rx = tx - extent_.tile_x0, ry = ty - extent_.tile_y0;
+  if (known_.tx1 <= known_.tx0) {
+    known_ = Box{rx, ry, rx + 1, ry + 1};
+  } else {
+    known_.tx0 = std::min(known_.tx0, rx);
+    known_.ty0 = std::min(known_.ty0, ry);
+    known_.tx1 = std::max(known_.tx1, rx + 1);
+    known_.ty1 = std::max(known_.ty1, ry + 1);
+  }
   ++stats_.tiles_applied;
   changed_ = true;
   return true;
@@ -92,13 +105,13 @@ bool RegionExtractor::reachable_at(double x, double y) const noexcept {
 
 std::size_t RegionExtractor::memory_bytes() const noexcept {
   const std::size_t n = cls_.size();
-  return n * (4 * sizeof(std::uint8_t) + sizeof(float) + 2 * sizeof(std::int32_t) + sizeof(std::uint32_t)) +
+  return n * (5 * sizeof(std::uint8_t) + sizeof(std::uint32_t) + sizeof(float) + 2 * sizeof(std::int32_t) + sizeof(std::uint32_t)) +
          groups_.size() * (sizeof(Group) + 2 * sizeof(Region) + sizeof(std::uint32_t) + 1);
 }
 
 // Opening with a (2k+1)^2 square: erosion then dilation, each as a row pass and a column pass.
 void RegionExtractor::open_vehicle_mask() noexcept {
-  const std::size_t n = veh_.size();
+  const std::size_t n = static_cast<std::size_t>(w_) * static_cast<std::size_t>(h_);
   const std::uint8_t vc = p_.vehicle_class;
   for (std::size_t i = 0; i < n; ++i) veh_[i] = cls_[i] == vc ? 1 : 0;
   const int k = p_.open_radius_cells;
@@ -202,7 +215,7 @@ void RegionExtractor::squared_distance(const std::uint8_t* feature) noexcept {
     const float* next = row + w;
     for (std::size_t c = 0; c < w; ++c) row[c] = std::min(row[c], next[c] + 1.0f);
   }
-  const std::size_t n = dist_.size();
+  const std::size_t n = static_cast<std::size_t>(w_) * static_cast<std::size_t>(h_);
   for (std::size_t i = 0; i < n; ++i) g[i] = g[i] >= 1e14f ? static_cast<float>(kBig) : g[i] * g[i];
   // rows
   for (std::int32_t r = 0; r < h_; ++r) {
@@ -220,7 +233,7 @@ void RegionExtractor::squared_distance(const std::uint8_t* feature) noexcept {
 
 // reach_: 0 blocked, 1 traversable but in a small (enclosed) component, 2 reachable.
 void RegionExtractor::reachable_components() noexcept {
-  const std::size_t n = reach_.size();
+  const std::size_t n = static_cast<std::size_t>(w_) * static_cast<std::size_t>(h_);
   for (std::size_t i = 0; i < n; ++i) reach_[i] = 0;
   std::size_t qend = 0, best_b = 0, best_e = 0;
   std::int32_t* q = queue_.data();
@@ -256,7 +269,7 @@ void RegionExtractor::reachable_components() noexcept {
 // Groups: 4-connected components of tmp_ (the dilated vehicle mask); labels_ per cell, stats of the
 // vehicle cells (veh_) per group.
 std::uint32_t RegionExtractor::group_components() noexcept {
-  const std::size_t n = labels_.size();
+  const std::size_t n = static_cast<std::size_t>(w_) * static_cast<std::size_t>(h_);
   for (std::size_t i = 0; i < n; ++i) labels_[i] = -1;
   std::int32_t* q = queue_.data();
   std::uint32_t groups = 0;
@@ -340,7 +353,21 @@ std::size_t RegionExtractor::extract() noexcept {
   ++stats_.extractions;
   changed_ = false;
   const double res = p_.resolution_m;
-  const std::size_t n = cls_.size();
+  // 0. the working window: the tiles that hold data, copied out of the storage
+  const int tc = p_.tile_cells;
+  const Box win = known_.tx1 > known_.tx0 ? known_ : Box{0, 0, 1, 1};
+  wc0_ = win.tx0 * tc;
+  wr0_ = win.ty0 * tc;
+  w_ = (win.tx1 - win.tx0) * tc;
+  h_ = (win.ty1 - win.ty0) * tc;
+  ox_ = fox_ + wc0_ * res;
+  oy_ = foy_ + wr0_ * res;
+  const std::size_t n = static_cast<std::size_t>(w_) * static_cast<std::size_t>(h_);
+  for (std::int32_t r = 0; r < h_; ++r) {
+    const std::size_t from = static_cast<std::size_t>(wr0_ + r) * static_cast<std::size_t>(fw_) + static_cast<std::size_t>(wc0_);
+    std::copy_n(store_cls_.data() + from, w_, cls_.data() + idx(0, r));
+    std::copy_n(store_prev_.data() + from, w_, prev_id_.data() + idx(0, r));
+  }
 
   // 1. vehicle mask, opened
   open_vehicle_mask();
@@ -420,6 +447,9 @@ std::size_t RegionExtractor::extract() noexcept {
     const std::int32_t l = labels_[i];
     prev_id_[i] = (l >= 0 && groups_[static_cast<std::size_t>(l)].keep) ? groups_[static_cast<std::size_t>(l)].id : kNoRegionId;
   }
+  for (std::int32_t r = 0; r < h_; ++r)
+    std::copy_n(prev_id_.data() + idx(0, r), w_,
+                store_prev_.data() + static_cast<std::size_t>(wr0_ + r) * static_cast<std::size_t>(fw_) + static_cast<std::size_t>(wc0_));
 
   // 5. goals: clearance over the traversable cells, reachable components
   if (kept > 0) {

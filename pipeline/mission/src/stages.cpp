@@ -2,6 +2,8 @@
 #include "airground/mission/stages.hpp"
 
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <string>
 
@@ -114,6 +116,30 @@ void RegionsStage::step(TimeNs now) noexcept {
 }
 
 // ----------------------------------------------------------------------------------------- mission
+Status parse_waypoints(std::string_view text, ManagerParams& p) {
+  p.waypoint_count = 0;
+  std::size_t pos = 0;
+  int item = 0;
+  while (pos < text.size()) {
+    std::size_t end = text.find(';', pos);
+    if (end == std::string_view::npos) end = text.size();
+    const std::string part(text.substr(pos, end - pos));
+    pos = end + 1;
+    ++item;
+    if (part.find_first_not_of(" \t") == std::string::npos) continue;
+    double x = 0, y = 0;
+    char tail = 0;
+    if (std::sscanf(part.c_str(), " %lf , %lf %c", &x, &y, &tail) != 2 || !std::isfinite(x) || !std::isfinite(y))
+      return Error::make(ErrorCode::kConfig, "config error: mission.waypoints item " + std::to_string(item) + " '" + part + "' is not 'x,y'");
+    if (p.waypoint_count == kMaxWaypoints)
+      return Error::make(ErrorCode::kConfig, "config error: mission.waypoints: more than " + std::to_string(kMaxWaypoints) + " waypoints");
+    p.waypoint_x[p.waypoint_count] = x;
+    p.waypoint_y[p.waypoint_count] = y;
+    ++p.waypoint_count;
+  }
+  return ok_status();
+}
+
 Status MissionStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
   ManagerParams p;
@@ -131,6 +157,7 @@ Status MissionStage::init(StageContext& ctx) {
   p.idle_return_s = v.real("idle_return_s");
   p.mission_end_s = v.real("mission_end_s");
   p.republish_s = v.real("republish_s");
+  if (Status st = parse_waypoints(v.text("waypoints"), p); !st.ok()) return st;
   mgr_ = std::make_unique<MissionManager>(p);
   pub_ = std::make_unique<comms::GossipPublishMsg>();
   heard_ = std::make_unique<std::array<TimeNs, 256>>();
@@ -156,6 +183,14 @@ Status MissionStage::init(StageContext& ctx) {
   auto st = ctx.channels.latest_writer<MissionStatusMsg>("mission_status");
   if (!st) return st.error();
   status_out_ = st.value();
+  auto obj = ctx.channels.latest_reader<ObjectsMsg>("objects");
+  if (!obj) return obj.error();
+  objects_in_ = obj.value();
+  objects_ = std::make_unique<ObjectsMsg>();
+  objects_sent_ = std::make_unique<std::array<ObjectRecord, kMaxObjectsMsg>>();
+  objects_sent_at_ = std::make_unique<std::array<TimeNs, kMaxObjectsMsg>>();
+  objects_sent_at_->fill(-1);
+  republish_ = from_seconds(p.republish_s);
   return ok_status();
 }
 
@@ -202,6 +237,29 @@ void MissionStage::step(TimeNs now) noexcept {
       ++c_.publish_refused;
   }
   m.clear_outbox();
+  // the target mapper's confirmed objects: a record when one changed (at most every republish_s), at
+  // most four per step so the claims keep their room in the ring
+  if (objects_in_.fresh()) *objects_ = objects_in_.read();
+  std::uint32_t sent = 0;
+  for (std::uint32_t i = 0; i < std::min<std::uint32_t>(objects_->count, static_cast<std::uint32_t>(kMaxObjectsMsg)) && sent < 4; ++i) {
+    const ObjectRecord& o = objects_->objects[i];
+    if (!objects_->confirmed[i] || o == (*objects_sent_)[i] || ((*objects_sent_at_)[i] >= 0 && now - (*objects_sent_at_)[i] < republish_))
+      continue;
+    comms::GossipPublishMsg& g = *pub_;
+    g.stamp = now;
+    g.published = now;
+    g.topic = object_topic(o.object_id);
+    g.priority = 0;
+    g.size = static_cast<std::uint32_t>(encode(o, g.payload));
+    if (gossip_out_.push(g) == 0) {
+      ++c_.records_published;
+      (*objects_sent_)[i] = o;
+      (*objects_sent_at_)[i] = now;
+      ++sent;
+    } else {
+      ++c_.publish_refused;
+    }
+  }
   const GoalCommand& gc = m.goal();
   if (gc.id != goal_sent_) {
     goal_sent_ = gc.id;
@@ -217,6 +275,72 @@ void MissionStage::step(TimeNs now) noexcept {
   MissionStatusMsg s = m.status();
   s.published = now;
   status_out_.publish(s);
+}
+
+// ----------------------------------------------------------------------------------------- targets
+Status TargetsStage::init(StageContext& ctx) {
+  const SectionView v = ctx.params();
+  DetectorParams dp;
+  dp.max_range_m = v.real("max_range_m");
+  dp.min_points = static_cast<int>(v.integer("min_points"));
+  dp.sigma0_m = v.real("sigma0_m");
+  dp.sigma_per_m = v.real("sigma_per_m");
+  TrackerParams tp;
+  tp.gate_chi2 = v.real("gate_chi2");
+  tp.min_detections = static_cast<std::uint16_t>(v.integer("min_detections"));
+  tp.max_objects = kMaxObjectsMsg;
+  max_sigma_ = v.real("max_sigma_m");
+  det_ = std::make_unique<VehicleDetector>(dp);
+  trk_ = std::make_unique<ObjectTracker>(tp);
+  msg_ = std::make_unique<ObjectsMsg>();
+  auto sc = ctx.channels.ring_reader<LidarScanMsg, kLidarRing>("lidar_scan");
+  if (!sc) return sc.error();
+  scans_ = sc.value();
+  auto loc = ctx.channels.latest_reader<LocalizationMsg>("localization");
+  if (!loc) return loc.error();
+  loc_ = loc.value();
+  auto out = ctx.channels.latest_writer<ObjectsMsg>("objects");
+  if (!out) return out.error();
+  out_ = out.value();
+  return ok_status();
+}
+
+void TargetsStage::step(TimeNs now) noexcept {
+  if (loc_.fresh()) {
+    pose_ = loc_.read();
+    have_pose_ = true;
+  }
+  bool changed = false;
+  for (LidarScanMsg* s = scans_.front(); s != nullptr; s = scans_.front()) {
+    ++c_.scans;
+    const bool usable = have_pose_ && pose_.status == LocalizationStatus::kTracking && pose_sigma_m(pose_.covariance) <= max_sigma_ &&
+                        s->labels != LabelSource::kNone;
+    if (!usable) {
+      ++c_.scans_skipped_pose;
+    } else {
+      const std::size_t n = std::min<std::size_t>(s->count, s->points.size());
+      for (const Detection& d : det_->detect(std::span<const ScanReturn>(s->points.data(), n), s->sensor_in_body, pose_.pose, pose_.covariance)) {
+        ++c_.detections;
+        (void)trk_->update(d, s->stamp);
+        changed = true;
+      }
+    }
+    scans_.pop();
+  }
+  if (!changed) return;
+  ObjectsMsg& m = *msg_;
+  const auto objs = trk_->objects();
+  m.count = static_cast<std::uint32_t>(std::min(objs.size(), kMaxObjectsMsg));
+  for (std::uint32_t i = 0; i < m.count; ++i) {
+    m.objects[i] = trk_->record(i);
+    m.confirmed[i] = trk_->confirmed(i);
+  }
+  m.scans = c_.scans;
+  m.detections = c_.detections;
+  m.dropped = trk_->dropped();
+  m.stamp = now;
+  m.published = now;
+  out_.publish(m);
 }
 
 }  // namespace ag::mission

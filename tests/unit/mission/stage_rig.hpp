@@ -48,6 +48,7 @@ inline constexpr RoleDescription kUavRole{"uav", "regions rig", kUavStages, {}};
 inline constexpr StageSpec kUgvStages[] = {
     {"mission", &MissionStage::make, 5.0, 2'000, 20, -1, MissionStage::kParams, "mission manager"},
     {"probe", &UgvProbe::make, 1.0, 1'000, 14, -1, {}, "test probe"},
+    {"targets", &TargetsStage::make, 10.0, 20'000, 21, -1, TargetsStage::kParams, "target mapper"},
 };
 inline constexpr RoleDescription kUgvRole{"ugv", "mission rig", kUgvStages, {}};
 
@@ -96,6 +97,8 @@ struct MissionRig {
   LatestWriter<comms::TeamPosesMsg> team_w;
   LatestWriter<LocalizationMsg> loc_w;
   LatestWriter<PlannedPathMsg> path_w;
+  RingWriter<LidarScanMsg, kLidarRing> lidar_w;
+  TargetsStage* targets{nullptr};
   RingReader<comms::GossipPublishMsg, comms::kGossipRing> gossip_r;
   LatestReader<GoalMsg> goal_r;
   LatestReader<MissionStatusMsg> status_r;
@@ -117,6 +120,8 @@ struct MissionRig {
     team_w = ch.latest_writer<comms::TeamPosesMsg>("team_poses").value();
     loc_w = ch.latest_writer<LocalizationMsg>("localization").value();
     path_w = ch.latest_writer<PlannedPathMsg>("planned_path").value();
+    lidar_w = ch.ring_writer<LidarScanMsg, kLidarRing>("lidar_scan").value();
+    targets = static_cast<TargetsStage*>(role->stages()[2].stage.get());
     auto* probe = static_cast<UgvProbe*>(role->stages()[1].stage.get());
     gossip_r = probe->gossip_r;
     goal_r = probe->goal_r;

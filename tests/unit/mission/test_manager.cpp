@@ -3,7 +3,10 @@
 // another robot, waiting for new regions and returning to the start.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <map>
+#include <utility>
+#include <vector>
 #include <set>
 
 #include "team_harness.hpp"
@@ -252,6 +255,43 @@ TEST(Manager, NoClaimBeforeTheRobotIsTracking) {
   t.bots[0].status = LocalizationStatus::kTracking;
   t.step();
   EXPECT_EQ(t.bots[0].m->current_region(), 1U);
+}
+
+TEST(Manager, AWaypointsMissionDrivesThemInOrderSkipsAnUnreachableOneAndReturns) {
+  Team t;
+  ManagerParams p = quick();
+  const double wx[] = {10, 10, 30, 0}, wy[] = {0, 10, 10, 20};
+  for (std::size_t i = 0; i < 4; ++i) {
+    p.waypoint_x[i] = wx[i];
+    p.waypoint_y[i] = wy[i];
+  }
+  p.waypoint_count = 4;
+  t.add(1, 1, 0, 0, p);
+  t.region(9, 5, 5);  // regions are ignored in a waypoints mission
+  t.publish_regions();
+  std::vector<std::pair<double, double>> goals;
+  std::uint32_t last = 0;
+  while (!t.all_done() && t.seconds() < 300) {
+    // the third waypoint cannot be planned to
+    const GoalCommand& g = t.bots[0].m->goal();
+    t.bots[0].no_route = !g.cancel && std::abs(g.x - 30) < 1e-9 && std::abs(g.y - 10) < 1e-9;
+    t.step();
+    if (t.bots[0].m->goal().id != last) {
+      last = t.bots[0].m->goal().id;
+      if (!t.bots[0].m->goal().cancel) goals.emplace_back(t.bots[0].m->goal().x, t.bots[0].m->goal().y);
+    }
+  }
+  ASSERT_TRUE(t.all_done());
+  ASSERT_EQ(goals.size(), 5U) << "four waypoints, then the start";
+  for (std::size_t i = 0; i < 4; ++i) {
+    EXPECT_DOUBLE_EQ(goals[i].first, wx[i]);
+    EXPECT_DOUBLE_EQ(goals[i].second, wy[i]);
+  }
+  EXPECT_DOUBLE_EQ(goals[4].first, 0);
+  EXPECT_EQ(t.bots[0].m->waypoints_reached(), 3U);
+  EXPECT_EQ(t.bots[0].m->waypoints_skipped(), 1U);
+  EXPECT_EQ(t.bots[0].m->own_visited().count, 0);
+  EXPECT_LE(std::hypot(t.bots[0].x, t.bots[0].y), 3.0);
 }
 
 TEST(Manager, MalformedRecordsAreCountedAndIgnored) {

@@ -3,6 +3,7 @@
 // visiting, failing, returning, records and goals out.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <vector>
 
 #include "stage_rig.hpp"
@@ -97,6 +98,40 @@ TEST(NoAllocation, MissionStageStepThroughChoosingVisitingFailingAndReturning) {
   EXPECT_EQ(s.failed_own, 1U);
   EXPECT_TRUE(s.state == ClaimState::kReturning || s.state == ClaimState::kDone);
   EXPECT_GE(out, 3U);
+}
+
+TEST(NoAllocation, TargetsStageStepAndTheMissionStageForwardingObjects) {
+  test::MissionRig rig(2, 1);
+  auto scan = std::make_unique<LidarScanMsg>();
+  scan->labels = LabelSource::kGroundTruth;
+  std::uint32_t n = 0;
+  for (double v = -2.25; v <= 2.25; v += 0.05)
+    for (double z = -0.6; z <= 0.6; z += 0.2) {
+      ScanReturn& r = scan->points[n++];
+      r.x = 9.0f;
+      r.y = static_cast<float>(v);
+      r.z = static_cast<float>(z);
+      r.range = std::sqrt(r.x * r.x + r.y * r.y + r.z * r.z);
+      r.cls = 5;
+    }
+  scan->count = n;
+  std::uint64_t out = 0;
+  {
+    AllocationWindow window;
+    for (int k = 0; k < 8; ++k) {
+      rig.pose(100, 50 + 0.1 * k, 0.3);
+      scan->stamp = rig.clock.now();
+      (void)rig.lidar_w.push(*scan);
+      rig.targets->step(rig.clock.now());
+      rig.step(3.0);
+      for (auto* m = rig.gossip_r.front(); m != nullptr; m = rig.gossip_r.front()) {
+        if (is_object_topic(m->topic)) ++out;
+        rig.gossip_r.pop();
+      }
+    }
+    EXPECT_EQ(window.allocations(), 0U) << "allocations in TargetsStage::step / MissionStage::step";
+  }
+  EXPECT_GE(out, 2U);
 }
 
 }  // namespace

@@ -1,6 +1,7 @@
 // Regions of interest on synthetic class grids: merging by the merge distance, noise, goals, stable ids.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "airground/mission/regions.hpp"
@@ -152,6 +153,35 @@ TEST(Regions, IdsAreStableWhenTheMapGrows) {
   w.load(ex, 3);
   ASSERT_EQ(ex.extract(), 2U);
   for (const Region& r : ex.regions()) EXPECT_NE(r.id, id_b);
+}
+
+TEST(Regions, WorkingOnTheMappedTilesOnlyGivesTheSameRegionsAsTheWholeArea) {
+  // data in tiles (1..2, 1..2) of a 4 x 4 area, unknown elsewhere; cars near the data's edge
+  GridWorld w(4, 4, ClassId::kUnknown);
+  w.rect(32, 32, 96, 96, ClassId::kRoad);
+  w.rect(40, 70, 60, 95, ClassId::kBuilding);
+  w.car(33, 40);
+  w.car(90, 33);
+  w.car(70, 80);
+  RegionExtractor part(params(), ClassTable::builtin(), w.extent());
+  for (int ty = 1; ty <= 2; ++ty)
+    for (int tx = 1; tx <= 2; ++tx) part.set_tile(tx, ty, 1, w.tile(tx, ty));
+  RegionExtractor whole(params(), ClassTable::builtin(), w.extent());
+  std::copy(w.cls.begin(), w.cls.end(), whole.classes().begin());
+  whole.mark_changed();
+  ASSERT_EQ(part.extract(), 3U);
+  ASSERT_EQ(whole.extract(), 3U);
+  for (std::size_t i = 0; i < 3; ++i) {
+    const Region& a = part.regions()[i];
+    const Region& b = whole.regions()[i];
+    EXPECT_EQ(a.cells, b.cells);
+    EXPECT_DOUBLE_EQ(a.cx, b.cx);
+    EXPECT_DOUBLE_EQ(a.cy, b.cy);
+    EXPECT_EQ(a.goal_valid, b.goal_valid);
+    EXPECT_DOUBLE_EQ(a.goal_x, b.goal_x);
+    EXPECT_DOUBLE_EQ(a.goal_y, b.goal_y);
+    EXPECT_DOUBLE_EQ(a.goal_clearance_m, b.goal_clearance_m);
+  }
 }
 
 TEST(Regions, TilesOutsideOrStaleAreRejected) {

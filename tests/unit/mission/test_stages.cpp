@@ -2,6 +2,7 @@
 // stage (gossip records, poses and routes in; goal, records and status out) on real channels.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <vector>
 
 #include "stage_rig.hpp"
@@ -189,6 +190,74 @@ TEST(MissionStage, ATeamPoseKeepsAClaimAliveAndMalformedRecordsAreCounted) {
   }
   EXPECT_EQ(rig.status_r.read().region_id, 4U);
   EXPECT_EQ(rig.status_r.read().takeovers, 1U);
+}
+
+TEST(MissionStage, WaypointsParameter) {
+  ManagerParams p;
+  ASSERT_TRUE(parse_waypoints("1,2; 3.5 , -4;;", p).ok());
+  ASSERT_EQ(p.waypoint_count, 2U);
+  EXPECT_DOUBLE_EQ(p.waypoint_x[1], 3.5);
+  EXPECT_DOUBLE_EQ(p.waypoint_y[1], -4);
+  ASSERT_TRUE(parse_waypoints("", p).ok());
+  EXPECT_EQ(p.waypoint_count, 0U);
+  const auto bad = parse_waypoints("1,2;3;4,5", p);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.error().message.find("mission.waypoints item 2 '3'"), std::string::npos) << bad.error().message;
+  EXPECT_FALSE(parse_waypoints("1,2,3", p).ok());
+  EXPECT_FALSE(parse_waypoints("a,b", p).ok());
+  // through the config: the stage goes to the first waypoint
+  MissionRig rig(1, 1, {"mission.waypoints=7,8;9,10"});
+  rig.pose(0, 0, 0.5);
+  rig.step();
+  EXPECT_DOUBLE_EQ(rig.goal_r.read().goal.x, 7.0);
+  EXPECT_DOUBLE_EQ(rig.goal_r.read().goal.y, 8.0);
+}
+
+TEST(TargetsStage, ACarInTheScansBecomesAnObjectRecordOnGossip) {
+  MissionRig rig(2, 1);
+  auto scan = std::make_unique<LidarScanMsg>();
+  scan->labels = LabelSource::kGroundTruth;
+  scan->sensor_in_body = Pose3{0, 0, 0.8, 0, 0, 0};
+  // a car's long side facing the robot, centre line 10 m east of it: returns on the near side only
+  std::uint32_t n = 0;
+  for (double v = -2.25; v <= 2.25; v += 0.05)
+    for (double z = 0.2; z <= 1.4; z += 0.2) {
+      ScanReturn& r = scan->points[n++];
+      r.x = 9.0f;  // near face at x = 9, the car spans 9..11
+      r.y = static_cast<float>(v);
+      r.z = static_cast<float>(z - 0.8);
+      r.range = std::sqrt(r.x * r.x + r.y * r.y + r.z * r.z);
+      r.cls = 5;
+    }
+  scan->count = n;
+  for (int k = 0; k < 5; ++k) {
+    rig.pose(100, 50, 0.3);  // robot at (100, 50) facing east
+    scan->stamp = rig.clock.now();
+    EXPECT_EQ(rig.lidar_w.push(*scan), 0U);
+    rig.targets->step(rig.clock.now());
+    rig.step();
+  }
+  EXPECT_EQ(rig.targets->counters().detections, 5U);
+  ASSERT_EQ(rig.targets->tracker().objects().size(), 1U);
+  bool object = false;
+  for (comms::GossipPublishMsg* m = rig.gossip_r.front(); m != nullptr; m = rig.gossip_r.front()) {
+    if (is_object_topic(m->topic)) {
+      ObjectRecord o;
+      ASSERT_EQ(decode(std::span<const std::uint8_t>(m->payload.data(), m->size), o), DecodeError::kOk);
+      EXPECT_NEAR(o.x, 109.0, 0.3) << "the visible face";
+      EXPECT_NEAR(o.y, 50.0, 0.3);
+      EXPECT_GE(o.detections, 3);
+      EXPECT_GT(o.cxx, 0.0f);
+      object = true;
+    }
+    rig.gossip_r.pop();
+  }
+  EXPECT_TRUE(object) << "confirmed after min_detections, forwarded by the mission stage";
+  // an uncertain pose: scans are not used
+  rig.pose(100, 50, 3.0);
+  EXPECT_EQ(rig.lidar_w.push(*scan), 0U);
+  rig.targets->step(rig.clock.now());
+  EXPECT_EQ(rig.targets->counters().scans_skipped_pose, 1U);
 }
 
 }  // namespace

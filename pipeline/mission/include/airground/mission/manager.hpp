@@ -22,6 +22,8 @@
 
 namespace ag::mission {
 
+inline constexpr std::size_t kMaxWaypoints = 64;
+
 struct ManagerParams {
   comms::RobotId self{1};
   std::uint8_t priority{1};            // lower number wins a clash
@@ -36,6 +38,11 @@ struct ManagerParams {
   double idle_return_s{60.0};          // nothing left and no new region this long: return to start
   double mission_end_s{0.0};           // > 0: return to start this long after the first tick regardless
   double republish_s{2.0};             // own claim and visited records re-sent this often
+  // Waypoints mission (target mapping): when waypoint_count > 0 the robot drives these in order (each
+  // reached within visit_radius_m while tracking; one it cannot plan to max_no_route times is skipped),
+  // then returns to its start. Regions are not chosen.
+  std::array<double, kMaxWaypoints> waypoint_x{}, waypoint_y{};
+  std::size_t waypoint_count{0};
 };
 
 struct GoalCommand {
@@ -86,6 +93,8 @@ class MissionManager {
   [[nodiscard]] const ManagerParams& params() const noexcept { return p_; }
   [[nodiscard]] bool visited_by_anyone(std::uint32_t region) const noexcept;
   [[nodiscard]] std::size_t regions_known() const noexcept { return n_regions_; }
+  [[nodiscard]] std::size_t waypoints_reached() const noexcept { return wp_reached_; }
+  [[nodiscard]] std::size_t waypoints_skipped() const noexcept { return wp_skipped_; }
 
  private:
   struct KnownRegion {
@@ -120,6 +129,8 @@ class MissionManager {
   void publish_visited() noexcept;
   OutRecord* out_slot() noexcept;
   void update_status(TimeNs now) noexcept;
+  void tick_waypoints(TimeNs now, bool tracking) noexcept;
+  std::size_t wp_next_{0}, wp_reached_{0}, wp_skipped_{0};
 
   ManagerParams p_;
   std::array<RegionBatch, kMaxBatches> batches_{};

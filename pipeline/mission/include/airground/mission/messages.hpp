@@ -43,4 +43,16 @@ struct MissionStatusMsg {
   bool done{false};                    // returned to the start: the mission is over for this robot
 };
 
+inline constexpr std::size_t kMaxObjectsMsg = 64;
+
+// Channel "objects" (latest value, ground robot): the target mapper's objects (EKF estimates).
+struct ObjectsMsg {
+  TimeNs stamp{0};
+  TimeNs published{0};
+  std::uint32_t count{0};
+  std::uint64_t scans{0}, detections{0}, dropped{0};
+  std::array<ObjectRecord, kMaxObjectsMsg> objects{};
+  std::array<bool, kMaxObjectsMsg> confirmed{};  // enough detections to be shared
+};
+
 }  // namespace ag::mission

@@ -13,7 +13,7 @@
 // new id. The region set's version grows whenever ids, cells or goals change.
 //
 // The grid is the mission area in whole tiles (row 0 south, as the planner's Roadmap). All memory is
-// allocated in the constructor (~21 B per cell); set_tile() and extract() never allocate.
+// allocated in the constructor (~26 B per cell); set_tile() and extract() never allocate.
 #pragma once
 
 #include <array>
@@ -70,8 +70,11 @@ class RegionExtractor {
   // Copies one tile (tile_cells^2 class ids, row 0 south); false when outside, wrong size or not newer.
   bool set_tile(std::int32_t tx, std::int32_t ty, std::uint64_t version, std::span<const std::uint8_t> cls) noexcept;
   // Direct access for tests and tools (call mark_changed() after writing).
-  [[nodiscard]] std::span<std::uint8_t> classes() noexcept { return cls_; }
-  void mark_changed() noexcept { changed_ = true; }
+  [[nodiscard]] std::span<std::uint8_t> classes() noexcept { return store_cls_; }
+  void mark_changed() noexcept {
+    changed_ = true;
+    known_ = Box{0, 0, extent_.tiles_x, extent_.tiles_y};
+  }
   [[nodiscard]] bool changed() const noexcept { return changed_; }
 
   // Re-extracts the regions (whether or not anything changed); returns their count.
@@ -80,10 +83,10 @@ class RegionExtractor {
   [[nodiscard]] std::span<const Region> regions() const noexcept { return {regions_.data(), n_regions_}; }
   [[nodiscard]] std::uint32_t version() const noexcept { return version_; }
   [[nodiscard]] const RegionStats& stats() const noexcept { return stats_; }
-  [[nodiscard]] std::int32_t width() const noexcept { return w_; }
-  [[nodiscard]] std::int32_t height() const noexcept { return h_; }
-  [[nodiscard]] double origin_x() const noexcept { return ox_; }
-  [[nodiscard]] double origin_y() const noexcept { return oy_; }
+  [[nodiscard]] std::int32_t width() const noexcept { return fw_; }
+  [[nodiscard]] std::int32_t height() const noexcept { return fh_; }
+  [[nodiscard]] double origin_x() const noexcept { return fox_; }
+  [[nodiscard]] double origin_y() const noexcept { return foy_; }
   [[nodiscard]] const RegionParams& params() const noexcept { return p_; }
   // Clearance [m] of a cell as of the last extraction (0 when blocked or outside).
   [[nodiscard]] double clearance_at(double x, double y) const noexcept;
@@ -103,8 +106,20 @@ class RegionExtractor {
 
   RegionParams p_;
   plan::MapExtent extent_;
-  std::int32_t w_{0}, h_{0};
-  double ox_{0}, oy_{0};
+  // The whole area (storage) and the working window of one extraction: the bounding box of the tiles
+  // that ever held data (everything outside is unknown: no vehicles, not traversable, so the result is
+  // the same as over the whole area, at the cost of the mapped part only).
+  struct Box {
+    std::int32_t tx0{0}, ty0{0}, tx1{0}, ty1{0};  // tiles, [tx0, tx1) x [ty0, ty1) relative to the extent
+  };
+  Box known_{};
+  std::int32_t fw_{0}, fh_{0};
+  double fox_{0}, foy_{0};
+  std::vector<std::uint8_t> store_cls_;
+  std::vector<std::uint32_t> store_prev_;
+  std::int32_t wc0_{0}, wr0_{0};     // working window's first cell in the storage
+  std::int32_t w_{0}, h_{0};         // working window [cells]
+  double ox_{0}, oy_{0};             // working window's south-west corner [m]
   std::vector<std::uint8_t> trav_lut_;     // 256: class id -> traversable
   std::vector<std::uint8_t> cls_, veh_, tmp_, reach_;
   std::vector<float> dist_;

@@ -5,13 +5,16 @@
 //   mission (ground robot): gossip_in (regions, claims, visited, failures), team_poses (liveness),
 //            localization, planned_path (route status) -> MissionManager -> "goal" (GoalMsg for the
 //            planner, on every new goal or cancel), own claim / visited / failure records on
-//            "gossip_out", the state on "mission_status" (MissionStatusMsg).
+//            "gossip_out", the state on "mission_status" (MissionStatusMsg); the target mapper's confirmed
+//            objects ("objects") forwarded as object records (the mission stage is gossip_out's one writer).
+//   targets (ground robot): lidar_scan + localization -> VehicleDetector -> ObjectTracker -> "objects".
 // Everything is allocated in init(); step() never allocates and never blocks.
 #pragma once
 
 #include <array>
 #include <memory>
 #include <span>
+#include <string_view>
 
 #include "airground/comms/messages.hpp"
 #include "airground/core/drive_messages.hpp"
@@ -19,6 +22,7 @@
 #include "airground/mission/manager.hpp"
 #include "airground/mission/messages.hpp"
 #include "airground/mission/regions.hpp"
+#include "airground/mission/targets.hpp"
 #include "airground/platform/stage.hpp"
 
 namespace ag::mission {
@@ -83,7 +87,11 @@ inline constexpr ParamSpec kMissionParams[] = {
     ParamSpec::real("idle_return_s", 60.0, 0.0, 36000.0, "s", "nothing left and no new region this long: return to the start"),
     ParamSpec::real("mission_end_s", 0.0, 0.0, 360000.0, "s", "> 0: return to the start this long after start-up regardless"),
     ParamSpec::real("republish_s", 2.0, 0.1, 600.0, "s", "own claim and visited records are re-sent this often"),
+    ParamSpec::text("waypoints", "", "", "waypoints mission: 'x,y;x,y;...' [m, map frame] driven in order, then back to start; empty = regions"),
 };
+
+// Parses "x,y;x,y;..." (at most kMaxWaypoints) into p; an error names the item.
+Status parse_waypoints(std::string_view text, ManagerParams& p);
 
 struct MissionCounters {
   std::uint64_t records_in{0}, records_bad{0}, records_published{0}, publish_refused{0}, goals_published{0};
@@ -109,8 +117,49 @@ class MissionStage final : public Stage {
   LatestReader<PlannedPathMsg> path_;
   LatestWriter<GoalMsg> goal_out_;
   LatestWriter<MissionStatusMsg> status_out_;
+  LatestReader<ObjectsMsg> objects_in_;
+  std::unique_ptr<ObjectsMsg> objects_;
+  std::unique_ptr<std::array<ObjectRecord, kMaxObjectsMsg>> objects_sent_;
+  std::unique_ptr<std::array<TimeNs, kMaxObjectsMsg>> objects_sent_at_;
   std::uint32_t goal_sent_{0};
+  TimeNs republish_{0};
   MissionCounters c_;
+};
+
+inline constexpr ParamSpec kTargetsParams[] = {
+    ParamSpec::real("max_range_m", 40.0, 5.0, 120.0, "m", "vehicle returns farther than this are not detected"),
+    ParamSpec::integer("min_points", 15, 3, 100000, "points", "a cluster of vehicle returns needs this many points"),
+    ParamSpec::real("sigma0_m", 0.3, 0.01, 10.0, "m", "detection sigma at 0 m (grows by sigma_per_m)"),
+    ParamSpec::real("sigma_per_m", 0.01, 0.0, 1.0, "m/m", "detection sigma growth per metre of range"),
+    ParamSpec::real("gate_chi2", 9.21, 1.0, 100.0, "", "association gate on the squared Mahalanobis distance (9.21: 99 %, 2 dof)"),
+    ParamSpec::integer("min_detections", 3, 1, 1000, "", "an object is shared after this many detections"),
+    ParamSpec::real("max_sigma_m", 1.5, 0.1, 50.0, "m", "scans taken with a pose sigma above this are not used"),
+};
+
+struct TargetsCounters {
+  std::uint64_t scans{0}, scans_skipped_pose{0}, detections{0};
+};
+
+class TargetsStage final : public Stage {
+ public:
+  static constexpr std::span<const ParamSpec> kParams{kTargetsParams};
+  static std::unique_ptr<Stage> make() { return std::make_unique<TargetsStage>(); }
+  Status init(StageContext& ctx) override;
+  void step(TimeNs now) noexcept override;
+  [[nodiscard]] const ObjectTracker& tracker() const noexcept { return *trk_; }
+  [[nodiscard]] const TargetsCounters& counters() const noexcept { return c_; }
+
+ private:
+  std::unique_ptr<VehicleDetector> det_;
+  std::unique_ptr<ObjectTracker> trk_;
+  std::unique_ptr<ObjectsMsg> msg_;
+  RingReader<LidarScanMsg, kLidarRing> scans_;
+  LatestReader<LocalizationMsg> loc_;
+  LatestWriter<ObjectsMsg> out_;
+  LocalizationMsg pose_{};
+  bool have_pose_{false};
+  double max_sigma_{1.5};
+  TargetsCounters c_;
 };
 
 }  // namespace ag::mission
