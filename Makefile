@@ -13,7 +13,7 @@ help:
 	@echo "make test     native tests, the aarch64 cross build with its unit tests under qemu, the ring stress under TSan"
 	@echo "make bench    ring throughput/latency vs moodycamel, scheduler wake-up lateness"
 	@echo "make package  .deb per role for amd64 and arm64 in build/*/packages"
-	@echo "make demo     the default simulated mission (1 quadrotor, 3 ground robots) and its report in build/demo"
+	@echo "make demo     the default simulated mission (1 quadrotor, 3 ground robots, region investigation) and its report in build/demo"
 	@echo "make fuzz     build the libFuzzer targets with clang and run each FUZZ_SECONDS (default 60)"
 
 deps:
@@ -59,10 +59,10 @@ package: build cross
 	@ls -1 build/native/packages/*.deb build/xavier-nx/packages/*.deb
 
 DEMO_OUT ?= build/demo
-DEMO_DURATION ?= 120
+DEMO_ARGS ?=
 demo: build
-	build/native/sim/airground-sim run --world default --ugvs 3 --seed 1 --duration $(DEMO_DURATION) --out $(DEMO_OUT)
-	@echo "make demo: report in $(DEMO_OUT)/report.md (trajectories.png, summary.yaml, recordings)"
+	build/native/sim/airground-sim mission --world default --ugvs 3 --seed 1 --verbose 120 --out $(DEMO_OUT) $(DEMO_ARGS)
+	@echo "make demo: report in $(DEMO_OUT)/report.md (metrics.json, mission_map.png, pose_error.png, claims_timeline.png, maps/)"
 
 # libFuzzer targets (Debian's clang): build them apart from the main tree and run each FUZZ_SECONDS.
 FUZZ_SECONDS ?= 60

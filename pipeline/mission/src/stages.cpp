@@ -171,6 +171,9 @@ Status MissionStage::init(StageContext& ctx) {
   auto team = ctx.channels.latest_reader<comms::TeamPosesMsg>("team_poses");
   if (!team) return team.error();
   team_ = team.value();
+  auto cs = ctx.channels.latest_reader<comms::CommsStatsMsg>("comms_stats");
+  if (!cs) return cs.error();
+  comms_stats_ = cs.value();
   auto loc = ctx.channels.latest_reader<LocalizationMsg>("localization");
   if (!loc) return loc.error();
   loc_ = loc.value();
@@ -214,6 +217,13 @@ void MissionStage::step(TimeNs now) noexcept {
         (*heard_)[tp.robot] = tp.stamp;
         m.on_peer_heard(tp.robot, now);
       }
+    }
+  }
+  if (comms_stats_.fresh()) {  // map tiles delivered: the quadrotor is still mapping, keep waiting for regions
+    const std::uint64_t tiles = comms_stats_.read().tiles_in;
+    if (tiles != tiles_seen_) {
+      tiles_seen_ = tiles;
+      m.on_map_data(now);
     }
   }
   if (loc_.fresh()) m.on_localization(loc_.read());

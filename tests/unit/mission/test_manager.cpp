@@ -244,17 +244,41 @@ TEST(Manager, MissionEndSendsEveryoneHome) {
   EXPECT_EQ(t.bots[0].m->own_visited().count, 0);
 }
 
-TEST(Manager, NoClaimBeforeTheRobotIsTracking) {
+// The localizer converges only while the robot moves: a converging robot claims and drives (slowly, the
+// drive stage's limit), but marks nothing before it tracks; without a map or lost it does not claim.
+TEST(Manager, AConvergingRobotClaimsButMarksAVisitOnlyOnceTracking) {
   Team t;
   t.add(1, 1, 0, 0, quick());
-  t.bots[0].status = LocalizationStatus::kInitialising;
+  t.bots[0].status = LocalizationStatus::kNoMap;
   t.region(1, 20, 0);
   t.publish_regions();
   for (int i = 0; i < 20; ++i) t.step();
-  EXPECT_EQ(t.bots[0].m->current_region(), kNoRegion);
+  EXPECT_EQ(t.bots[0].m->current_region(), kNoRegion) << "no map: no claim";
+  t.bots[0].status = LocalizationStatus::kInitialising;
+  t.step();
+  EXPECT_EQ(t.bots[0].m->current_region(), 1U) << "converging: it claims and goes";
+  for (int i = 0; i < 5 * 30; ++i) t.step();  // long at the goal, still converging
+  EXPECT_LT(std::hypot(t.bots[0].x - 20, t.bots[0].y), 1.0);
+  EXPECT_EQ(t.bots[0].m->own_visited().count, 0) << "not tracking: not marked";
   t.bots[0].status = LocalizationStatus::kTracking;
   t.step();
-  EXPECT_EQ(t.bots[0].m->current_region(), 1U);
+  EXPECT_EQ(t.bots[0].m->own_visited().count, 1);
+}
+
+TEST(Manager, MapDataStillArrivingKeepsTheRobotWaiting) {
+  Team t;
+  t.add(1, 1, 5, 5, quick());  // idle_return_s = 10
+  t.region(1, 25, 5);
+  t.publish_regions();
+  for (int i = 0; i < 5 * 12; ++i) t.step();
+  ASSERT_EQ(t.bots[0].m->own_visited().count, 1);
+  for (int i = 0; i < 5 * 30; ++i) {  // 30 s of map tiles, one every 2 s, no new region
+    if (i % 10 == 0) t.bots[0].m->on_map_data(t.now);
+    t.step();
+  }
+  EXPECT_EQ(t.bots[0].m->state(), ClaimState::kIdle) << "the quadrotor is still mapping: wait";
+  for (int i = 0; i < 5 * 12; ++i) t.step();  // the tiles stop
+  EXPECT_NE(t.bots[0].m->state(), ClaimState::kIdle) << "idle_return_s after the last tile: home";
 }
 
 TEST(Manager, AWaypointsMissionDrivesThemInOrderSkipsAnUnreachableOneAndReturns) {

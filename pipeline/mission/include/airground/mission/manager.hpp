@@ -77,6 +77,8 @@ class MissionManager {
   DecodeError on_record(comms::RobotId origin, comms::Topic topic, std::span<const std::uint8_t> payload, TimeNs now) noexcept;
   // The robot was heard (a newer pose on team_poses).
   void on_peer_heard(comms::RobotId robot, TimeNs now) noexcept;
+  // New map data arrived (a tile): the quadrotor is still mapping, so waiting for regions starts again.
+  void on_map_data(TimeNs now) noexcept { idle_since_ = now; }
   void on_localization(const LocalizationMsg& m) noexcept;
   void on_route(std::uint32_t goal_id, std::uint32_t seq, RouteStatus status) noexcept;
   void tick(TimeNs now) noexcept;

@@ -84,7 +84,7 @@ inline constexpr ParamSpec kMissionParams[] = {
     ParamSpec::real("progress_min_m", 2.0, 0.1, 50.0, "m", "what counts as progress"),
     ParamSpec::real("retry_after_s", 120.0, 0.0, 36000.0, "s", "a region this robot failed is not chosen by it again for this long"),
     ParamSpec::real("claim_timeout_s", 20.0, 1.0, 3600.0, "s", "a robot not heard this long: its claim is void, others take over"),
-    ParamSpec::real("idle_return_s", 60.0, 0.0, 36000.0, "s", "nothing left and no new region this long: return to the start"),
+    ParamSpec::real("idle_return_s", 60.0, 0.0, 36000.0, "s", "nothing left and no new region or map tile this long: return to the start"),
     ParamSpec::real("mission_end_s", 0.0, 0.0, 360000.0, "s", "> 0: return to the start this long after start-up regardless"),
     ParamSpec::real("republish_s", 2.0, 0.1, 600.0, "s", "own claim and visited records are re-sent this often"),
     ParamSpec::text("waypoints", "", "", "waypoints mission: 'x,y;x,y;...' [m, map frame] driven in order, then back to start; empty = regions"),
@@ -113,6 +113,8 @@ class MissionStage final : public Stage {
   RingReader<comms::GossipRecordMsg, comms::kGossipRing> gossip_in_;
   RingWriter<comms::GossipPublishMsg, comms::kGossipRing> gossip_out_;
   LatestReader<comms::TeamPosesMsg> team_;
+  LatestReader<comms::CommsStatsMsg> comms_stats_;  // tiles_in: map data still arriving
+  std::uint64_t tiles_seen_{0};
   LatestReader<LocalizationMsg> loc_;
   LatestReader<PlannedPathMsg> path_;
   LatestWriter<GoalMsg> goal_out_;
