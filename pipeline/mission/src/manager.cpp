@@ -216,6 +216,9 @@ bool MissionManager::choose(TimeNs now) noexcept {
     for (std::size_t k = 0; k < n_failures_ && !failed_recently; ++k)
       failed_recently = failures_[k].origin == p_.self && failures_[k].region == r.id && now - failures_[k].at < from_seconds(p_.retry_after_s);
     if (failed_recently) continue;
+    bool deferred = false;
+    for (const Deferred& df : deferred_) deferred = deferred || (df.region == r.id && now < df.until);
+    if (deferred) continue;
     const double d = std::hypot(r.x - loc_.pose.x, r.y - loc_.pose.y);
     if (d < best_d) {
       best_d = d;
@@ -339,8 +342,19 @@ void MissionManager::tick(TimeNs now) noexcept {
         best_dist_ = d;
         progress_at_ = now;
       }
-      if (no_route_ >= p_.max_no_route)
+      if (no_route_ >= p_.max_no_route && last_map_data_ >= 0 && now - last_map_data_ <= from_seconds(p_.map_growing_s)) {
+        // The map is still growing: the way there may not be mapped yet. Not a failure; try others.
+        Deferred* slot = &deferred_[0];
+        for (Deferred& df : deferred_)
+          if (df.until < slot->until) slot = &df;
+        *slot = Deferred{region_, now + from_seconds(p_.defer_s)};
+        ++c_.deferred_no_route;
+        no_route_ = 0;
+        cancel_goal();
+        release(ClaimState::kIdle, now);
+      } else if (no_route_ >= p_.max_no_route) {
         fail(FailureReason::kNoRoute, now);
+      }
       else if (now - progress_at_ > from_seconds(p_.no_progress_timeout_s))
         fail(!tracking || d <= p_.visit_radius_m ? FailureReason::kLostLocalization : FailureReason::kNoProgress, now);
     }

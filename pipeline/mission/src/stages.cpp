@@ -157,6 +157,8 @@ Status MissionStage::init(StageContext& ctx) {
   p.idle_return_s = v.real("idle_return_s");
   p.mission_end_s = v.real("mission_end_s");
   p.republish_s = v.real("republish_s");
+  p.map_growing_s = v.real("map_growing_s");
+  p.defer_s = v.real("defer_s");
   if (Status st = parse_waypoints(v.text("waypoints"), p); !st.ok()) return st;
   mgr_ = std::make_unique<MissionManager>(p);
   pub_ = std::make_unique<comms::GossipPublishMsg>();

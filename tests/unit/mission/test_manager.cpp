@@ -265,6 +265,25 @@ TEST(Manager, AConvergingRobotClaimsButMarksAVisitOnlyOnceTracking) {
   EXPECT_EQ(t.bots[0].m->own_visited().count, 1);
 }
 
+// No route while the quadrotor is still mapping is not a failure (the way may be unmapped yet); once the
+// map has stopped growing it is.
+TEST(Manager, NoRouteWhileTheMapGrowsDefersTheRegionInsteadOfFailingIt) {
+  Team t;
+  t.add(1, 1, 0, 0, quick());
+  t.bots[0].no_route = true;
+  t.region(1, 40, 0);
+  t.publish_regions();
+  for (int i = 0; i < 5 * 4; ++i) {
+    t.bots[0].m->on_map_data(t.now);
+    t.step();
+  }
+  EXPECT_EQ(t.bots[0].m->status().failed_own, 0U) << "the map is still growing";
+  EXPECT_GE(t.bots[0].m->counters().deferred_no_route, 1U);
+  EXPECT_NE(t.bots[0].m->current_region(), 1U) << "dropped for defer_s";
+  for (int i = 0; i < 5 * 60; ++i) t.step();  // the map stopped growing 60 s ago; the deferral ran out
+  EXPECT_GE(t.bots[0].m->status().failed_own, 1U) << "now no route is a failure the others hear of";
+}
+
 TEST(Manager, MapDataStillArrivingKeepsTheRobotWaiting) {
   Team t;
   t.add(1, 1, 5, 5, quick());  // idle_return_s = 10

@@ -38,6 +38,11 @@ struct ManagerParams {
   double idle_return_s{60.0};          // nothing left and no new region this long: return to start
   double mission_end_s{0.0};           // > 0: return to start this long after the first tick regardless
   double republish_s{2.0};             // own claim and visited records re-sent this often
+  // No route while the map is still growing (a tile within map_growing_s) is not a failure: the unknown
+  // ground between here and there may still be mapped. The region is dropped quietly and not chosen by
+  // this robot again for defer_s.
+  double map_growing_s{20.0};
+  double defer_s{20.0};
   // Waypoints mission (target mapping): when waypoint_count > 0 the robot drives these in order (each
   // reached within visit_radius_m while tracking; one it cannot plan to max_no_route times is skipped),
   // then returns to its start. Regions are not chosen.
@@ -60,6 +65,7 @@ struct OutRecord {
 struct ManagerCounters {
   std::uint64_t records_in{0}, records_bad{0}, records_ignored{0};
   std::uint64_t regions_overflow{0}, failures_overflow{0}, visited_overflow{0};
+  std::uint64_t deferred_no_route{0};  // no route while the map still grows: dropped for defer_s, not failed
 };
 
 class MissionManager {
@@ -78,7 +84,10 @@ class MissionManager {
   // The robot was heard (a newer pose on team_poses).
   void on_peer_heard(comms::RobotId robot, TimeNs now) noexcept;
   // New map data arrived (a tile): the quadrotor is still mapping, so waiting for regions starts again.
-  void on_map_data(TimeNs now) noexcept { idle_since_ = now; }
+  void on_map_data(TimeNs now) noexcept {
+    idle_since_ = now;
+    last_map_data_ = now;
+  }
   void on_localization(const LocalizationMsg& m) noexcept;
   void on_route(std::uint32_t goal_id, std::uint32_t seq, RouteStatus status) noexcept;
   void tick(TimeNs now) noexcept;
@@ -160,6 +169,12 @@ class MissionManager {
   std::uint32_t last_route_seq_{0};
   double best_dist_{0};
   TimeNs progress_at_{0}, idle_since_{0}, t0_{0}, last_claim_pub_{0};
+  TimeNs last_map_data_{-1};
+  struct Deferred {
+    std::uint32_t region{kNoRegion};
+    TimeNs until{0};
+  };
+  std::array<Deferred, 16> deferred_{};
   bool started_{false}, claim_dirty_{true}, ended_{false};
   std::uint32_t failed_own_{0}, clashes_lost_{0}, takeovers_{0}, refused_visits_{0};
   ClaimRecord last_claim_{};
