@@ -42,6 +42,7 @@ struct Sample {
   Pose2 truth, odom;
   bool tracking{false};
   double err{-1};
+  const char* loc{"none"};  // localization status
 };
 
 struct Visit {
@@ -193,6 +194,8 @@ Result<MissionMetrics> run_mission(const MissionOptions& o, const ProgressFn& pr
     x.t = to_seconds(s.now);
     x.truth = s.truth;
     x.odom = s.odometry_in_map;
+    static constexpr const char* kLoc[] = {"no-map", "converging", "tracking", "lost"};
+    if (s.localization_received) x.loc = kLoc[static_cast<int>(s.localization->status) & 3];
     if (s.localization_received && s.localization->status == LocalizationStatus::kTracking) {
       x.tracking = true;
       x.err = std::hypot(s.localization->pose.x - s.truth_at_localization.x, s.localization->pose.y - s.truth_at_localization.y);
@@ -246,7 +249,7 @@ Result<MissionMetrics> run_mission(const MissionOptions& o, const ProgressFn& pr
         const Sample& x = last_sample[i];
         std::fprintf(stderr, "  ugv%zu %-10s region %-10d goal (%.0f, %.0f) at (%.0f, %.0f) loc %s err %.1f m sigma %.1f m visited %u failed %u regions %u%s\n", i + 1,
                      mission::to_string(status[i].state), status[i].region_id == mission::kNoRegion ? -1 : static_cast<int>(status[i].region_id), status[i].goal_x,
-                     status[i].goal_y, x.truth.x, x.truth.y, x.tracking ? "tracking" : "not tracking", x.err, status[i].pose_sigma_m, status[i].visited_own,
+                     status[i].goal_y, x.truth.x, x.truth.y, x.loc, x.err, status[i].pose_sigma_m, status[i].visited_own,
                      status[i].failed_own, status[i].regions_known, killed[i] ? " (off)" : "");
       }
     }

@@ -23,6 +23,7 @@ Status PlannerStage::init(StageContext& ctx) {
   replan_period_ = from_seconds(v.real("replan_period_s"));
   snap_ = v.real("snap_radius_m");
   plan_initialising_ = v.boolean("plan_while_initialising");
+  initialising_snap_ = v.real("initialising_snap_m");
   auto tiles = ctx.channels.ring_reader<MapTileMsg, kMapTileRing>("map_tiles");
   if (!tiles) return tiles.error();
   tiles_ = tiles.value();
@@ -42,7 +43,15 @@ void PlannerStage::plan_now(TimeNs now) noexcept {
   ++c_.plans;
   last_plan_ = now;
   map_changed_ = false;
-  map_->plan(Point2{pose_.pose.x, pose_.pose.y}, Point2{goal_.goal.x, goal_.goal.y}, *path_, snap_);
+  // While the localizer converges its estimate may be metres off, even inside a building: the start
+  // snaps to a free cell within twice its sigma (at most initialising_snap_m), so the robot still moves
+  // (the filter converges only with motion) and the route is re-planned once it tracks.
+  double snap = snap_;
+  if (pose_.status != LocalizationStatus::kTracking) {
+    const double sigma = std::sqrt(std::max(0.0, std::max(pose_.covariance[0], pose_.covariance[4])));
+    snap = std::min(initialising_snap_, std::max(snap_, 2.0 * sigma));
+  }
+  map_->plan(Point2{pose_.pose.x, pose_.pose.y}, Point2{goal_.goal.x, goal_.goal.y}, *path_, snap);
   PlannedPathMsg& m = *msg_;
   m.stamp = pose_.stamp;
   m.published = now;

@@ -42,6 +42,7 @@ inline constexpr ParamSpec kPlannerOwnParams[] = {
     ParamSpec::real("snap_radius_m", 2.0, 0.0, 10.0, "m", "a start or goal off the free cells snaps to one within this"),
     ParamSpec::boolean("plan_while_initialising", true,
                        "plan from the localizer's best estimate while it is still converging (it converges by driving)"),
+    ParamSpec::real("initialising_snap_m", 20.0, 0.0, 100.0, "m", "... and snap its start to a free cell within 2 sigma, at most this far"),
 };
 inline constexpr auto kPlannerParamArray = detail::concat(kPlannerOwnParams, kRoadmapParamSpecs);
 
@@ -76,6 +77,7 @@ class PlannerStage final : public Stage {
   TimeNs replan_period_{0};
   std::size_t tiles_per_step_{2};
   double snap_{2.0};
+  double initialising_snap_{20.0};
   std::uint32_t seq_{0};
   PlannerCounters c_;
 };
