@@ -240,6 +240,7 @@ Result<MissionMetrics> run_mission(const MissionOptions& o, const ProgressFn& pr
       visits_seen[i] = v.count;
       if (st.state == mission::ClaimState::kGoing && st.region_id != mission::kNoRegion) last_claim[i] = Claim{st.region_id, st.goal_x, st.goal_y};
     }
+    if (o.during) o.during(t);
     if (o.status_period_s > 0 && t >= next_status) {
       next_status += o.status_period_s;
       const auto* rs = find_stage<mission::RegionsStage>(uav);

@@ -2,8 +2,14 @@
 // finds them; two GPS-denied ground robots start with guesses up to 16 m off, get the map and each other's
 // claims only over the simulated radio's gossip, claim, drive and visit through their real stages. Mid
 // mission the base station is powered off, and then ground robot 2 while it drives to its claimed region:
-// ground robot 1 must take that region over and the mission must still reach every target.
+// ground robot 1 must take that region over and the mission must still reach every target. While it runs,
+// headless chromium loads the base station's live page (the browser test of issue 8).
 #include <gtest/gtest.h>
+
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <cstdlib>
 #include <filesystem>
@@ -25,6 +31,32 @@ constexpr double kLocErrorBoundM = 1.5;
 // When the kills happen [s] (this seed: robot 2 claims its first region at ~105 s and reaches it at ~200 s).
 constexpr double kBaseOffS = 60;
 constexpr double kUgv2OffS = 150;
+
+// A TCP port free on loopback now (the base station's page binds it a moment later).
+int free_port() {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t len = sizeof a;
+  int port = 0;
+  if (fd >= 0 && ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 && ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0)
+    port = ntohs(a.sin_port);
+  if (fd >= 0) ::close(fd);
+  return port;
+}
+
+std::string in_path(const std::string& exe) {
+  const char* p = std::getenv("PATH");
+  std::string path = p != nullptr ? p : "/usr/bin:/bin";
+  for (std::size_t i = 0; i <= path.size();) {
+    const std::size_t j = std::min(path.find(':', i), path.size());
+    const fs::path c = fs::path(path.substr(i, j - i)) / exe;
+    if (!c.empty() && ::access(c.c_str(), X_OK) == 0) return c.string();
+    i = j + 1;
+  }
+  return {};
+}
 
 fs::path out_root() {
   const char* b = std::getenv("AG_BINARY_DIR");
@@ -59,6 +91,22 @@ class TeamMission : public testing::Test {
     o.threads = 2;
     o.progress = false;
     o.kills = {{-1, kBaseOffS}, {1, kUgv2OffS}};
+    // The browser test during the mission: at 40 s (the base station is still on) headless chromium loads
+    // the base station's live page and checks that the map and both robots are drawn.
+    const char* src = std::getenv("AG_SOURCE_DIR");
+    const std::string node = in_path("node"), chromium = in_path("chromium");
+    const std::string script = std::string(src != nullptr ? src : AG_TEST_SOURCE_DIR) + "/tests/browser/check_base_page.mjs";
+    if (node.empty() || chromium.empty() || !fs::exists(fs::path(script).parent_path() / "node_modules" / "playwright-core" / "package.json")) {
+      browser_skip_ = "node, chromium or playwright-core missing (tools/install-deps.sh installs them)";
+    } else {
+      o.web_port = free_port();
+      o.during = [&, node, script](double t) {
+        if (browser_rc_ != -100 || t < 40) return;
+        const std::string cmd = "AG_CHROMIUM=" + chromium + " " + node + " " + script + " --url http://127.0.0.1:" + std::to_string(o.web_port) +
+                                "/ --out " + (root / "browser").string() + " --tiles 20 --robots 2 --timeout-s 60 > " + (root / "browser.log").string() + " 2>&1";
+        browser_rc_ = std::system(cmd.c_str());
+      };
+    }
     auto m = run_mission(o);
     ASSERT_TRUE(m.ok()) << m.error().message;
     metrics_ = new MissionMetrics(std::move(m).value());
@@ -73,6 +121,8 @@ class TeamMission : public testing::Test {
   }
   static inline MissionMetrics* metrics_{nullptr};
   static inline std::string out_;
+  static inline int browser_rc_{-100};  // the page check's exit status (-100: not run)
+  static inline std::string browser_skip_;
 };
 
 TEST_F(TeamMission, EveryTargetIsReachedWithoutAFalseVisit) {
@@ -108,6 +158,16 @@ TEST_F(TeamMission, WithTheBaseStationOffAndRobot2OffRobot1TakesOverItsRegion) {
   EXPECT_GE(m.takeovers, 1U) << "robot 1 should claim the region robot 2 held when it fell silent";
   EXPECT_EQ(m.targets_visited, m.targets_total) << "and nothing is lost with the base station off";
   EXPECT_GE(m.robots[0].visited, 2U);
+}
+
+TEST_F(TeamMission, ChromiumDrewTheMapAndBothRobotsOnTheBaseStationsPageDuringTheMission) {
+  if (!browser_skip_.empty()) GTEST_SKIP() << browser_skip_;
+  ASSERT_NE(browser_rc_, -100) << "the mission never reached 40 s";
+  std::ifstream log(out_root() / "browser.log");
+  std::stringstream ss;
+  ss << log.rdbuf();
+  EXPECT_EQ(browser_rc_, 0) << ss.str();
+  EXPECT_TRUE(fs::exists(out_root() / "browser" / "base_station_page.png")) << "the screenshot is kept as an artefact";
 }
 
 TEST_F(TeamMission, TheReportFolderHoldsTheFiguresMapsAndPlots) {

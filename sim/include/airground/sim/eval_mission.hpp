@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -33,6 +34,7 @@ struct MissionOptions {
   std::vector<std::string> ugv_config{}, uav_config{};
   int web_port{0};                 // > 0: the base station serves its page on this port during the run
   double web_pace{0};              // > 0: hold the simulation to this many times real time (to watch it)
+  std::function<void(double t_s)> during{};  // called at 5 Hz of simulated time while the mission runs (tests)
 };
 
 struct MissionRobot {
