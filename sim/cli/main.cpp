@@ -567,7 +567,6 @@ int mission_cmd(const Args& a) {
   else if (rec == "light") o.record = RecordLevel::kLight;
   else if (rec == "full") o.record = RecordLevel::kFull;
   else usage_error("--record must be none, light or full");
-  if (!o.mission_file.empty()) usage_error("--mission: mission files are read by the mission library; this build runs the region investigation only");
   const bool tty = isatty(2) != 0;
   const bool show = !a.has("quiet");
   double last_print = -1;

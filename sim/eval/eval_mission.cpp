@@ -11,11 +11,13 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <thread>
 
 #include "airground/aerial_mapping/stages.hpp"
 #include "airground/comms/stage.hpp"
 #include "airground/core/messages.hpp"
+#include "airground/mission/mission_file.hpp"
 #include "airground/mission/stages.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "airground/sim/generator.hpp"
@@ -111,7 +113,23 @@ double class_accuracy(const World& w, const mapping::MapRaster& r) {
 
 }  // namespace
 
-Result<MissionMetrics> run_mission(const MissionOptions& o, const ProgressFn& progress) {
+Result<MissionMetrics> run_mission(const MissionOptions& options, const ProgressFn& progress) {
+  MissionOptions o = options;
+  // A mission file: the team (starts, guesses, priorities, waypoints), the parameters and the survey.
+  std::optional<mission::MissionFile> mf;
+  if (!o.mission_file.empty()) {
+    auto f = mission::load_mission_file(o.mission_file);
+    if (!f) return f.error();
+    mf = std::move(f).value();
+    if (mf->team.empty()) return Error::make(ErrorCode::kConfig, o.mission_file + ": the team has no ground robot");
+    o.ugvs = static_cast<int>(mf->team.size());
+    if (mf->params.comm_range_m > 0 && o.comm_range_m <= 0) o.comm_range_m = mf->params.comm_range_m;
+    o.uav_altitude_m = mf->survey.altitude_m;
+    for (std::size_t i = 0; i < mf->team.size(); ++i)
+      if (mf->team[i].id != static_cast<int>(i) + 1)
+        std::fprintf(stderr, "airground-sim mission: %s: team member %zu has id %d; the simulator numbers ground robots 1..N in file order\n",
+                     o.mission_file.c_str(), i + 1, mf->team[i].id);
+  }
   if (o.ugvs < 1 || o.ugvs > 32) return Error::make(ErrorCode::kInvalidArgument, "--ugvs must be 1..32");
   if (!(o.max_duration_s > 0)) return Error::make(ErrorCode::kInvalidArgument, "--max-duration must be positive");
   auto world = resolve_world(o.world);
@@ -163,13 +181,54 @@ Result<MissionMetrics> run_mission(const MissionOptions& o, const ProgressFn& pr
   r.uav_config = {kv("regions.area_x0_m", ax0), kv("regions.area_y0_m", ay0), kv("regions.area_x1_m", ax1), kv("regions.area_y1_m", ay1)};
   r.uav_config.insert(r.uav_config.end(), o.uav_config.begin(), o.uav_config.end());
   r.ugv_config = o.ugv_config;
-  r.ugv_config_for = [](int i, const Pose2& start) {
+  r.ugv_config_for = [&mf](int i, const Pose2& start) {
     char b[3][96];
-    std::snprintf(b[0], sizeof b[0], "mission.priority=%d", i + 1);
+    const mission::TeamMember* tm = mf ? &mf->team[static_cast<std::size_t>(i)] : nullptr;
+    std::snprintf(b[0], sizeof b[0], "mission.priority=%d", tm != nullptr ? tm->priority : i + 1);
     std::snprintf(b[1], sizeof b[1], "mission.start_x_m=%.3f", start.x);
     std::snprintf(b[2], sizeof b[2], "mission.start_y_m=%.3f", start.y);
-    return std::vector<std::string>{b[0], b[1], b[2]};
+    std::vector<std::string> out{b[0], b[1], b[2]};
+    if (tm != nullptr && mf->type == mission::MissionType::kWaypoints && !tm->waypoints.empty()) {
+      std::string wp = "mission.waypoints=";
+      for (std::size_t k = 0; k < tm->waypoints.size(); ++k) {
+        char p[64];
+        std::snprintf(p, sizeof p, "%s%.3f,%.3f", k ? ";" : "", tm->waypoints[k].x, tm->waypoints[k].y);
+        wp += p;
+      }
+      out.push_back(wp);
+    }
+    return out;
   };
+  if (mf) {
+    for (const mission::TeamMember& tm : mf->team) {
+      RunOptions::UgvStart st;
+      st.has_start = true;
+      st.start = Pose2{tm.start_x, tm.start_y, tm.start_yaw};
+      st.has_guess = true;
+      st.guess = Pose2{tm.guess_x, tm.guess_y, tm.guess_yaw};
+      st.guess_sigma_m = tm.guess_sigma_m;
+      r.ugv_starts.push_back(st);
+    }
+    const mission::MissionParameters& mp = mf->params;
+    for (const std::string& s : {kv("mission.visit_radius_m", mp.visit_radius_m), kv("mission.max_sigma_m", mp.max_sigma_m),
+                                 kv("mission.claim_timeout_s", mp.claim_timeout_s), kv("mission.idle_return_s", mp.idle_return_s),
+                                 kv("mission.mission_end_s", mp.mission_end_s)})
+      r.ugv_config.insert(r.ugv_config.begin(), s);  // the command line's --set still wins
+    r.uav_config.insert(r.uav_config.begin(), kv("regions.merge_distance_m", mp.merge_distance_m));
+    r.uav_config.insert(r.uav_config.begin(), "regions.min_region_cells=" + std::to_string(mp.min_region_cells));
+    r.uav_speed_mps = mf->survey.speed_mps;
+    r.survey_overlap = mf->survey.overlap;
+    const mission::Area& sa = mf->survey.area;
+    if (sa.x1 > sa.x0 && sa.y1 > sa.y0) {
+      r.survey_x0 = sa.x0;
+      r.survey_y0 = sa.y0;
+      r.survey_x1 = sa.x1;
+      r.survey_y1 = sa.y1;
+    }
+    if (mf->survey.line_spacing_m > 0 || mf->survey.heading_deg != 0.0 || mf->survey.pattern != "lawnmower")
+      std::fprintf(stderr, "airground-sim mission: %s: the simulated quadrotor flies an east-west lawnmower spaced by its overlap; "
+                   "line_spacing_m / heading_deg / pattern are for the robot\n", o.mission_file.c_str());
+  }
   if (o.web_port > 0) r.base_config = {"web.port=" + std::to_string(o.web_port)};
 
   // What the mission looks like as it runs.

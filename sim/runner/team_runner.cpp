@@ -1112,8 +1112,10 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     SurveyOptions so;
     so.speed_mps = opt.uav_speed_mps;
     const double hfov = 2.0 * std::atan(0.5 * cam_model.width / cam_model.fx);
-    auto route = survey_lawnmower(g.origin_x + margin, g.origin_y - g.size_y() + margin, g.origin_x + g.size_x() - margin,
-                                  g.origin_y - margin, opt.uav_altitude_m, opt.survey_overlap, hfov, so);
+    const bool own_area = opt.survey_x1 > opt.survey_x0 && opt.survey_y1 > opt.survey_y0;
+    auto route = own_area ? survey_lawnmower(opt.survey_x0, opt.survey_y0, opt.survey_x1, opt.survey_y1, opt.uav_altitude_m, opt.survey_overlap, hfov, so)
+                          : survey_lawnmower(g.origin_x + margin, g.origin_y - g.size_y() + margin, g.origin_x + g.size_x() - margin,
+                                             g.origin_y - margin, opt.uav_altitude_m, opt.survey_overlap, hfov, so);
     if (!route) return route.error();
     u->vehicle.set_waypoints(std::move(route).value());
     if (rec) {
@@ -1192,6 +1194,12 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     const double off = (i - (opt.ugvs - 1) / 2.0) * 2.5;
     start.x += -std::sin(staging.yaw) * off;
     start.y += std::cos(staging.yaw) * off;
+    const RunOptions::UgvStart* given = static_cast<std::size_t>(i) < opt.ugv_starts.size() ? &opt.ugv_starts[static_cast<std::size_t>(i)] : nullptr;
+    if (given != nullptr && given->has_start) {
+      start = given->start;
+      if (!w.grid().contains(w.grid().col(start.x), w.grid().row(start.y)))
+        return Error::make(ErrorCode::kInvalidArgument, "ground robot " + std::to_string(i + 1) + ": its start pose is outside the world");
+    }
     const bool scripted = static_cast<std::size_t>(i) < opt.ugv_routes.size() && !opt.ugv_routes[static_cast<std::size_t>(i)].empty();
     if (scripted) {  // at the route's first point, facing the first point a few metres along it
       const auto& r = opt.ugv_routes[static_cast<std::size_t>(i)];
@@ -1258,6 +1266,10 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
       u->init_pose.pose = Pose2{start.x + dist * std::cos(dir), start.y + dist * std::sin(dir), wrap_angle(start.yaw + yaw_err)};
       u->init_pose.sigma_xy_m = std::max(opt.init_error_m, 0.5);
       u->init_pose.sigma_yaw_rad = std::max(opt.init_yaw_error_deg, 2.0) * kPi / 180.0;
+      if (given != nullptr && given->has_guess) {
+        u->init_pose.pose = given->guess;
+        u->init_pose.sigma_xy_m = std::max(given->guess_sigma_m, 0.5);
+      }
     }
     if (opt.ugv_map == UgvMapSource::kGroundTruth) u->gt_order = gt_tile_order(w, start);
     if (scripted) {

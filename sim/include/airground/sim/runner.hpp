@@ -129,7 +129,19 @@ struct RunOptions {
   // Per ground robot (0-based) with its true start pose: more "section.key=value" (its priority, its start).
   std::function<std::vector<std::string>(int ugv, const Pose2& start)> ugv_config_for{};
   std::vector<std::string> base_config{};  // "section.key=value" set on the base station's role config
-  bool init_error_uniform{false};  // the initial guess is U(0, init_error_m) off (per robot), not exactly init_error_m
+  bool init_error_uniform{false};
+  // Per ground robot (0-based), from a mission file: its true start pose (else the staging-pad lineup) and
+  // the initial guess given to its localizer with that sigma (else from init_error_m).
+  struct UgvStart {
+    bool has_start{false};
+    Pose2 start;
+    bool has_guess{false};
+    Pose2 guess;
+    double guess_sigma_m{16};
+  };
+  std::vector<UgvStart> ugv_starts{};
+  // The quadrotor's survey area [m, map frame] (x0 < x1 and y0 < y1; else the world minus survey_margin_m).
+  double survey_x0{0}, survey_y0{0}, survey_x1{0}, survey_y1{0};  // the initial guess is U(0, init_error_m) off (per robot), not exactly init_error_m
 
   // --- scripted ground robots
   // Per ground robot (index 0-based), a road route to drive once (a polyline in the map frame, e.g. from
