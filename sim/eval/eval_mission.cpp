@@ -285,7 +285,9 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
       if (changes[i].empty() || changes[i].back().state != st.state || changes[i].back().region != st.region_id)
         changes[i].push_back(StateChange{t, st.state, st.region_id});
       status[i] = st;
+      // Back at its start with nothing left; a new region can still send it out again.
       if (st.done && done_at[i] < 0) done_at[i] = t;
+      if (!st.done) done_at[i] = -1;
       const mission::VisitedRecord& v = mg.own_visited();
       for (std::uint16_t k = visits_seen[i]; k < v.count; ++k) {
         Visit vis{t, static_cast<int>(i), v.entries[k].region_id, v.entries[k].x, v.entries[k].y};
@@ -320,7 +322,10 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
       last_traffic_t = t;
     }
   };
-  r.stop_when = [&](TimeNs) {
+  // The mission is over when the quadrotor has flown its survey (no region can appear any more) and
+  // every robot still running is back at its start.
+  r.stop_when = [&](TimeNs, bool survey_done) {
+    if (!survey_done) return false;
     for (int i = 0; i < n; ++i)
       if (!killed[static_cast<std::size_t>(i)] && done_at[static_cast<std::size_t>(i)] < 0) return false;
     return true;

@@ -1333,7 +1333,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
       ended = tt;
       break;
     }
-    if (opt.stop_when && opt.stop_when(tt)) {
+    if (opt.stop_when && opt.stop_when(tt, !t.uav || t.uav->vehicle.finished())) {
       ended = tt;
       break;
     }

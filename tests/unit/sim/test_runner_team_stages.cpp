@@ -97,7 +97,7 @@ TEST_F(TeamStages, TheRobotsOwnPlannerAndDriveStageTakeItToAGoal) {
     closest = std::min(closest, std::hypot(s.truth.x - goal.x(), s.truth.y - goal.y()));
     last = s.truth;
   };
-  o.stop_when = [&](TimeNs) { return closest < 1.0; };
+  o.stop_when = [&](TimeNs, bool) { return closest < 1.0; };
   auto r = run_team(o);
   ASSERT_TRUE(r.ok()) << r.error().message;
   const RobotSummary& u = r.value().ugvs.at(0);

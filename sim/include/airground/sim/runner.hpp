@@ -179,7 +179,7 @@ struct RunOptions {
   };
   std::vector<Kill> kills{};
   // Checked every simulated second; true ends the run (duration_s caps it).
-  std::function<bool(TimeNs now)> stop_when{};
+  std::function<bool(TimeNs now, bool survey_done)> stop_when{};  // survey_done: the quadrotor flew its whole survey (or there is none)
   // Called at sample_hz at the start of a physics step (what the roles did up to the step before): a
   // read-only look at every role, e.g. for mission logs. ugvs[i] is nullptr never; base may be nullptr.
   std::function<void(TimeNs now, RoleInstance* uav, const std::vector<RoleInstance*>& ugvs, RoleInstance* base)> observe{};
