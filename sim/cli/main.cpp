@@ -136,6 +136,8 @@ constexpr const char* kEvalPlanningHelp =
     "  --min-distance M         pairs at least M metres apart (40)\n"
     "  --speed V                top driving speed (1.2 m/s)\n"
     "  --no-drive               plan and check only\n"
+    "  --pose truth|localizer   drive with the true pose (truth), or with the robot's own stages in the\n"
+    "                           lockstep runner: its localizer's pose, planner, tracker, drive (localizer)\n"
     "  --set SECTION.KEY=VALUE  a planner.* or drive.* parameter (repeatable)\n"
     "  --quiet                  no progress line\n";
 
@@ -861,6 +863,9 @@ int eval_planning_cmd(const Args& a) {
   o.min_pair_distance_m = number(a, "min-distance", o.min_pair_distance_m);
   o.speed_mps = number(a, "speed", o.speed_mps);
   o.drive = !a.has("no-drive");
+  const std::string pose = a.get("pose", "truth");
+  if (pose != "truth" && pose != "localizer") usage_error("--pose must be truth or localizer");
+  o.localizer_pose = pose == "localizer";
   o.quiet = a.has("quiet");
   if (a.has("set")) o.set = a.opt.at("set");
   for (const auto& s : o.set)
@@ -882,7 +887,8 @@ int eval_planning_cmd(const Args& a) {
               r.query_ms_max);
   std::printf("path_length_ratio_mean %.3f  path_length_ratio_max %.3f  min_clearance_ratio_mean %.2f (min %.2f)  through blocked %d  too close %d\n",
               r.path_length_ratio_mean, r.path_length_ratio_max, r.min_clearance_ratio_mean, r.min_clearance_ratio_min, r.through_blocked, r.too_close);
-  if (o.drive) std::printf("reached %d / %d  collisions %llu  failures %d\n", r.reached, r.pairs, static_cast<unsigned long long>(r.collisions), r.failures);
+  if (o.drive) std::printf("reached %d / %d  collisions %llu  failures %d  (%s pose)\n", r.reached, r.pairs, static_cast<unsigned long long>(r.collisions), r.failures,
+                           o.localizer_pose ? "localizer" : "true");
   else std::printf("failures %d (not driven)\n", r.failures);
   std::printf("metrics: %s/metrics.json\n", o.out_dir.c_str());
   return 0;

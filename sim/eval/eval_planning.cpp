@@ -172,7 +172,56 @@ Result<PlanningMetrics> eval_planning(const EvalPlanningOptions& o, const std::f
       out.through_blocked += res.through_blocked ? 1 : 0;
       out.too_close += res.too_close ? 1 : 0;
     }
-    if (res.planned && o.drive) {
+    if (res.planned && o.drive && o.localizer_pose) {
+      // Drive it with the robot's own stages: the lockstep runner, its localizer's pose, the planner
+      // re-planning from it, the tracker and the drive stage commanding the simulated wheels.
+      const plan::Point2 p1 = path->points[1];
+      RunOptions r;
+      r.world = o.world;
+      r.out_dir = (fs::path(o.out_dir) / ("drive_" + std::to_string(out.results.size()))).string();
+      r.ugvs = 1;
+      r.uav = false;
+      r.seed = o.seed * 1000 + out.results.size();
+      r.ugv_map = UgvMapSource::kGroundTruth;
+      r.drive_by_stages = true;
+      r.lidar_columns = 512;
+      r.record = RecordLevel::kNone;
+      r.progress = false;
+      RunOptions::UgvStart st;
+      st.has_start = true;
+      st.start = Pose2{a.x, a.y, std::atan2(p1.y - a.y, p1.x - a.x)};
+      st.has_guess = true;
+      st.guess = st.start;
+      st.guess_sigma_m = 1.0;
+      r.ugv_starts = {st};
+      r.ugv_goals = {Eigen::Vector2d(b.x, b.y)};
+      r.ugv_config = o.set;
+      r.duration_s = 60.0 + 3.0 * path->length_m / std::max(0.1, dp.max_speed_mps);
+      r.sample_hz = 5;
+      double closest = 1e18, err_sum = 0;
+      std::uint64_t err_n = 0;
+      TimeNs reached_at = -1;
+      r.sample = [&](const UgvSample& s) {
+        const double d = std::hypot(s.truth.x - b.x, s.truth.y - b.y);
+        closest = std::min(closest, d);
+        if (d <= 1.0 && reached_at < 0) reached_at = s.now;
+        if (s.localization_received && s.localization->status == LocalizationStatus::kTracking) {
+          err_sum += std::hypot(s.localization->pose.x - s.truth_at_localization.x, s.localization->pose.y - s.truth_at_localization.y);
+          ++err_n;
+        }
+      };
+      r.stop_when = [&](TimeNs, bool) { return reached_at >= 0; };
+      auto run = run_team(r);
+      if (!run) return run.error();
+      fs::remove_all(r.out_dir, ec);
+      res.drive_time_s = reached_at >= 0 ? to_seconds(reached_at) : run.value().sim_s;
+      res.final_error_m = closest;
+      res.collisions = run.value().ugvs.at(0).collisions;
+      res.reached = reached_at >= 0;
+      res.loc_error_mean_m = err_n ? err_sum / static_cast<double>(err_n) : -1;
+      out.collisions += res.collisions;
+      out.reached += res.reached ? 1 : 0;
+    } else if (res.planned && o.drive) {
       // Drive it: ground-truth pose, the drive controller at 20 Hz, the vehicle model at 100 Hz.
       const plan::Point2 p1 = path->points[1];
       DiffDriveRobot robot(dd, Pose2{a.x, a.y, std::atan2(p1.y - a.y, p1.x - a.x)});
@@ -216,11 +265,11 @@ Result<PlanningMetrics> eval_planning(const EvalPlanningOptions& o, const std::f
                 "  \"min_clearance_ratio_mean\": %.4f,\n  \"min_clearance_ratio_min\": %.4f,\n  \"reached\": %d,\n  \"collisions\": %llu,\n"
                 "  \"failures\": %d,\n  \"through_blocked\": %d,\n  \"too_close\": %d,\n  \"min_clearance_m\": %.3f,\n"
                 "  \"build_ms\": %.1f,\n  \"query_ms_mean\": %.3f,\n  \"query_ms_max\": %.3f,\n  \"nodes\": %u,\n  \"edges\": %u,\n"
-                "  \"driven\": %s,\n",
+                "  \"driven\": %s,\n  \"pose\": \"%s\",\n",
                 json_escape(o.world).c_str(), static_cast<unsigned long long>(o.seed), n, out.path_length_ratio_mean, out.path_length_ratio_max,
                 out.min_clearance_ratio_mean, out.min_clearance_ratio_min, out.reached, static_cast<unsigned long long>(out.collisions),
                 out.failures, out.through_blocked, out.too_close, rp.min_clearance_m, out.build_ms, out.query_ms_mean, out.query_ms_max, out.nodes,
-                out.edges, o.drive ? "true" : "false");
+                out.edges, o.drive ? "true" : "false", o.localizer_pose ? "localizer" : "ground truth");
   js << buf << "  \"pair_results\": [\n";
   for (std::size_t k = 0; k < out.results.size(); ++k) {
     const auto& r = out.results[k];

@@ -21,6 +21,9 @@ struct EvalPlanningOptions {
   std::string out_dir{"eval-planning"};
   double min_pair_distance_m{40};   // pairs at least this far apart (straight line)
   bool drive{true};                 // drive every route (ground-truth pose)
+  // Drive every pair with the robot's own stages in the lockstep runner instead: its localizer's pose
+  // (LiDAR against the true class map, starting from the true start), planner -> tracker -> drive -> wheels.
+  bool localizer_pose{false};
   double speed_mps{1.2};
   std::vector<std::string> set{};   // "planner.key=value" / "drive.key=value" overrides of the ugv role config
   bool quiet{false};
@@ -37,6 +40,7 @@ struct PlanningPairResult {
   bool reached{false};
   std::uint64_t collisions{0};
   double drive_time_s{0}, final_error_m{0};
+  double loc_error_mean_m{-1};  // localizer_pose: its error while driving
 };
 
 struct PlanningMetrics {
