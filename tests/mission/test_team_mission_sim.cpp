@@ -103,7 +103,7 @@ struct MissionRun {
       o.during = [&, node, script](double t) {
         if (browser_rc_ != -100 || t < 40) return;
         const std::string cmd = "AG_CHROMIUM=" + chromium + " " + node + " " + script + " --url http://127.0.0.1:" + std::to_string(o.web_port) +
-                                "/ --out " + (root / "browser").string() + " --tiles 20 --robots 2 --timeout-s 60 > " + (root / "browser.log").string() + " 2>&1";
+                                "/ --out " + (root / "browser").string() + " --tiles 10 --robots 2 --timeout-s 60 > " + (root / "browser.log").string() + " 2>&1";
         browser_rc_ = std::system(cmd.c_str());
       };
     }
