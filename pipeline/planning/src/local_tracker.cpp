@@ -12,6 +12,7 @@ namespace ag::plan {
 namespace {
 constexpr std::uint8_t kUnknown = 0, kFree = 1, kObstacle = 2;
 constexpr float kClearCap = 3.0F;
+constexpr double kResumeMinM = 1.0;  // [m] a forward goal nearer than this does not end a back-up
 }  // namespace
 
 const char* to_string(TrackState s) noexcept {
@@ -305,6 +306,14 @@ LocalGoal LocalTracker::local_goal(const Pose2& robot, TimeNs now) noexcept {
   for (const double dist : {p_.goal_distance_m, 0.5 * p_.goal_distance_m, std::min(1.5, p_.goal_distance_m)})
     // Cells nearer the target than half the way there: a goal that makes progress.
     if (pick_goal(ahead(dist), std::min(p_.goal_search_m, 0.5 * dist), out)) {
+      // Hysteresis: once backing up, a forward goal less than kResumeMinM ahead (the cell just in front
+      // of the obstacle that stopped us) does not end the back-up; the robot would flip between the two
+      // and never fail the route.
+      if (state_ == TrackState::kBackingUp && std::hypot(out.goal.x - robot.x, out.goal.y - robot.y) < kResumeMinM) {
+        out = LocalGoal{};
+        out.reflex_stop = reflex_;
+        continue;
+      }
       state_ = TrackState::kTracking;
       prev_goal_ = out.goal;
       have_prev_ = true;

@@ -90,7 +90,7 @@ TEST(TrackerDrive, ABoxTheMapMissedOnTheRouteStopsTheRobotBeforeIt) {
   Rig rig;
   const std::vector<test::Box> boxes{{10, 11, -0.8, 0.8, 1.0}};
   double closest = 1e9;
-  for (int k = 0; k < 240; ++k) {  // 12 s: up to the box at 1.2 m/s, then standing
+  for (int k = 0; k < 300; ++k) {  // 15 s: up to the box at 1.2 m/s, backing up for 3 s, then standing
     rig.tick(k, boxes);
     const double dx = std::max({10.0 - rig.pose.x, 0.0, rig.pose.x - 11.0}), dy = std::max({-0.8 - rig.pose.y, 0.0, rig.pose.y - 0.8});
     closest = std::min(closest, std::hypot(dx, dy));
