@@ -2,6 +2,7 @@
 #include "roles.hpp"
 
 #include "airground/comms/stage.hpp"
+#include "airground/drivers/base/base_stage.hpp"
 
 #include "airground/localization/stage.hpp"
 #include "airground/mission/stages.hpp"
@@ -30,6 +31,10 @@ constexpr StageSpec kUgvStages[] = {
      "semantic roadmap over the aerial map: a route from the robot's pose to the goal on 'planned_path'"},
     {"drive", &DriveStage::make, 20.0, 1'000, 50, -1, DriveStage::kParams,
      "path follower with acceleration limits: wheel speeds on 'wheel_command'"},
+    // The wheels: e-stop first, then the newest wheel command to the two ODrives over CAN (SocketCAN,
+    // the cannelloni bridge or a replayed candump log), their encoders to 'wheel_odometry'.
+    {"base", &base::BaseStage::make, 50.0, 1'000, 55, -1, base::BaseStage::kParams,
+     "e-stop, wheel commands to the motor controllers over CAN, wheel odometry, status LED"},
     // One LiDAR revolution into the local grid and the local goal: ~1-3 ms at 1024 columns.
     {"tracker", &TrackerStage::make, 10.0, 15'000, 45, -1, TrackerStage::kParams,
      "local waypoint tracker: obstacles the LiDAR sees, the local goal along the route, the reflex stop"},

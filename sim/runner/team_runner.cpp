@@ -1155,8 +1155,11 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   // Always: the probe also scores every robot's localization for the summary.
   const bool probe = opt.ugvs > 0;
   if (probe) {
-    for (const StageSpec& st : ugv_desc.stages)  // the runner's goals replace the mission manager's
-      if (opt.ugv_goals.empty() || std::string_view(st.name) != "mission") t.ugv_stages.push_back(st);
+    for (const StageSpec& st : ugv_desc.stages) {
+      if (!opt.ugv_goals.empty() && std::string_view(st.name) == "mission") continue;  // the runner's goals replace the mission manager's
+      if (std::string_view(st.name) == "base") continue;  // the simulator is the base: it moves the vehicle by 'wheel_command'
+      t.ugv_stages.push_back(st);
+    }
     const double hz = opt.physics_hz;
     t.ugv_stages.push_back(StageSpec{"sim_probe", &SimProbeStage::make, hz, static_cast<std::uint32_t>(0.9e6 / hz), 1, -1,
                                      SimProbeStage::kParams, "simulator: reads the robot's channels for tests and evaluations"});

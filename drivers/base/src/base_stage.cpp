@@ -1,14 +1,32 @@
 // The base stage: e-stop, wheel commands, the CAN driver, odometry, status, LED.
 #include "airground/drivers/base/base_stage.hpp"
 
+#include <cerrno>
 #include <cmath>
+#include <cstdlib>
+#include <cstring>
 #include <string>
 
+#include "airground/drivers/base/odrive_can_simple.hpp"
+#include "airground/drivers/can/cannelloni.hpp"
 #include "airground/drivers/can/inprocess_bus.hpp"
 #include "airground/drivers/can/socketcan_bus.hpp"
 #include "airground/platform/log.hpp"
 
 namespace ag::base {
+
+namespace {
+constexpr std::size_t kOdomLogBuffer = 64 * 1024;  // one write(2) per ~1,000 samples
+}  // namespace
+
+bool frame_from_controller(const can::CanFrame& f) noexcept {
+  const std::uint8_t c = odrive::cmd_of(f.id);
+  return c == static_cast<std::uint8_t>(odrive::Cmd::kHeartbeat) || c == static_cast<std::uint8_t>(odrive::Cmd::kGetEncoderEstimates);
+}
+
+BaseStage::~BaseStage() {
+  if (odom_log_ != nullptr) std::fclose(odom_log_);
+}
 
 Status BaseStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
@@ -16,17 +34,71 @@ Status BaseStage::init(StageContext& ctx) {
   const BaseParams bp = load_base_params(v);
   if (bp.left_node == bp.right_node)
     return Error::make(ErrorCode::kConfig, "config error: " + where + "left_node_id and right_node_id must differ");
-  if (v.text("can_backend") == "inprocess") {
+  const std::string can_backend = v.text("can_backend");
+  if (can_backend == "inprocess") {
     can::InProcessCanLink* link = can::find_inprocess_link(ctx.instance);
     if (link == nullptr)
       return Error::make(ErrorCode::kConfig, "config error: " + where + "can_backend is inprocess but the simulator gave robot '" +
                                                  std::string(ctx.instance) + "' no CAN link");
     bus_ = &link->robot();
-  } else {
-    auto b = can::SocketCanBus::open(v.text("can_interface"));
-    if (!b) return Error::make(b.error().code, where + "can_interface: " + b.error().message);
+  } else if (can_backend == "replay") {
+    const std::string path = v.text("can_replay_path");
+    if (path.empty()) return Error::make(ErrorCode::kConfig, "config error: " + where + "can_backend is replay but can_replay_path is empty");
+    auto log = can::read_candump_file(path);
+    if (!log) return Error::make(log.error().code, where + "can_replay_path: " + log.error().message);
+    if (log.value().records.empty())
+      return Error::make(ErrorCode::kConfig, "config error: " + where + "can_replay_path: " + path + " holds no frames" +
+                                                 (log.value().first_error.empty() ? "" : " (" + log.value().first_error + ")"));
+    if (log.value().bad_lines > 0)
+      AG_LOG_WARN("base", "%s: %zu bad lines skipped, first: %s", path.c_str(), log.value().bad_lines, log.value().first_error.c_str());
+    const std::size_t n = log.value().records.size();
+    // Only what the controllers said: the driver's own recorded commands are not fed back to it.
+    auto r = std::make_unique<can::CandumpReplayBus>(std::move(log).value().records, ctx.clock, ctx.clock.now(), &frame_from_controller);
+    AG_LOG_INFO("base", "replaying %zu frames (%.1f s) from %s", n, to_seconds(r->log_end() - r->log_start()), path.c_str());
+    replay_ = r.get();
+    owned_bus_ = std::move(r);
+    bus_ = owned_bus_.get();
+  } else if (can_backend == "cannelloni") {
+    can::CannelloniConfig cc;
+    cc.local_port = static_cast<std::uint16_t>(v.integer("can_bridge_port"));
+    const std::string remote = v.text("can_bridge_remote");
+    const auto colon = remote.rfind(':');
+    char* end = nullptr;
+    const long port = colon == std::string::npos ? -1 : std::strtol(remote.c_str() + colon + 1, &end, 10);
+    if (colon == std::string::npos || colon == 0 || end == nullptr || *end != '\0' || port <= 0 || port > 65535)
+      return Error::make(ErrorCode::kConfig, "config error: " + where + "can_bridge_remote '" + remote + "' is not HOST:PORT");
+    cc.remote_address = remote.substr(0, colon);
+    cc.remote_port = static_cast<std::uint16_t>(port);
+    auto b = can::CannelloniBus::open(cc);
+    if (!b) return Error::make(b.error().code, where + "can_bridge_port: " + b.error().message);
     owned_bus_ = std::move(b).value();
     bus_ = owned_bus_.get();
+  } else {
+    auto b = can::SocketCanBus::open(v.text("can_interface"));
+    if (b) {
+      owned_bus_ = std::move(b).value();
+    } else {
+      // The robot keeps localizing and relaying; its wheels stay stopped and base_status says why.
+      AG_LOG_ERROR("base", "%scan_interface: %s; the wheels stay stopped until the service restarts with the interface up", where.c_str(),
+                   b.error().message.c_str());
+      ++c_.device_errors;
+      owned_bus_ = std::make_unique<can::AbsentCanBus>();
+    }
+    bus_ = owned_bus_.get();
+  }
+  if (const std::string rec = v.text("can_record_path"); !rec.empty()) {
+    auto w = can::CandumpWriter::create(rec, can_backend == "socketcan" ? v.text("can_interface") : "can0");
+    if (!w) return Error::make(w.error().code, where + "can_record_path: " + w.error().message);
+    recorder_ = std::move(w).value();
+    recording_bus_ = std::make_unique<can::RecordingCanBus>(*bus_, *recorder_, ctx.clock);
+    bus_ = recording_bus_.get();
+  }
+  if (const std::string odo = v.text("odometry_log_path"); !odo.empty()) {
+    odom_log_ = std::fopen(odo.c_str(), "w");
+    if (odom_log_ == nullptr) return Error::make(ErrorCode::kIo, where + "odometry_log_path: cannot write " + odo + ": " + std::strerror(errno));
+    odom_log_buf_ = std::make_unique<char[]>(kOdomLogBuffer);
+    (void)std::setvbuf(odom_log_, odom_log_buf_.get(), _IOFBF, kOdomLogBuffer);
+    std::fputs("stamp_ns,x_m,y_m,yaw_rad,v_mps,w_radps\n", odom_log_);
   }
   base_ = std::make_unique<DiffDriveBase>(bp, *bus_);
   auto open_line = [&](const std::string& backend, const char* name, const std::string& chip, std::int64_t line, bool active_low,
@@ -41,7 +113,13 @@ Status BaseStage::init(StageContext& ctx) {
       return ok_status();
     }
     auto l = gpio::open_gpiod_line(chip, static_cast<unsigned>(line), dir, active_low, "airground-" + std::string(name));
-    if (!l) return Error::make(l.error().code, where + name + ": " + l.error().message);
+    if (!l) {  // logged and counted; a missing e-stop reads as unreadable, so the wheels stay stopped
+      AG_LOG_ERROR("base", "%s%s: %s%s", where.c_str(), name, l.error().message.c_str(),
+                   dir == gpio::Direction::kInput ? "; the e-stop reads as unreadable: the wheels stay stopped" : "; no status LED");
+      ++c_.device_errors;
+      if (dir == gpio::Direction::kInput) estop_missing_ = true;
+      return ok_status();
+    }
     owned = std::move(l).value();
     out = owned.get();
     return ok_status();
@@ -92,7 +170,7 @@ void BaseStage::step(TimeNs now) noexcept {
   }
   // The e-stop first: it acts in this very step.
   bool asserted = false;
-  const bool line_ok = estop_line_ == nullptr || estop_line_->get(asserted) == gpio::LineResult::kOk;
+  const bool line_ok = !estop_missing_ && (estop_line_ == nullptr || estop_line_->get(asserted) == gpio::LineResult::kOk);
   const gpio::EStopState before = latch_.state();
   const bool stopped = latch_.update(line_ok, estop_line_ != nullptr && asserted, rearm);
   if (latch_.state() != before) AG_LOG_WARN("base", "e-stop %s", gpio::to_string(latch_.state()));
@@ -106,11 +184,22 @@ void BaseStage::step(TimeNs now) noexcept {
     }
   }
   base_->set_inhibit(stopped);
-  base_->step(now);
+  if (replay_ != nullptr) {  // the recorded controllers talk; the driver listens (nothing to arm or command)
+    base_->receive_only(now);
+    if (replay_->finished() && !replay_end_logged_) {
+      replay_end_logged_ = true;
+      AG_LOG_INFO("base", "replay finished: %llu frames", static_cast<unsigned long long>(replay_->counters().rx));
+    }
+  } else {
+    base_->step(now);
+  }
   WheelOdometryMsg o;
   while (base_->take_odometry(o)) {
     o.published = now;
     if (odom_out_.push(o) != 0) ++c_.odometry_ring_full;
+    if (odom_log_ != nullptr)
+      std::fprintf(odom_log_, "%lld,%.17g,%.17g,%.17g,%.17g,%.17g\n", static_cast<long long>(o.stamp), o.pose.x, o.pose.y, o.pose.yaw, o.v_mps,
+                   o.w_radps);
   }
   if (led_ != nullptr) {
     const BaseState s = base_->status().state;
@@ -139,6 +228,8 @@ void BaseStage::step(TimeNs now) noexcept {
 void BaseStage::stop() noexcept {
   if (base_ != nullptr) base_->disarm(0);
   if (led_ != nullptr) (void)led_->set(false);
+  if (recorder_ != nullptr) recorder_->flush();
+  if (odom_log_ != nullptr) std::fflush(odom_log_);
 }
 
 }  // namespace ag::base

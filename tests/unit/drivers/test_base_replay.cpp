@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "airground/drivers/base/base_stage.hpp"
 #include "airground/drivers/base/diff_drive_base.hpp"
 #include "airground/drivers/can/candump_log.hpp"
 
@@ -35,11 +36,6 @@ std::vector<OdomRow> read_csv(const std::string& path) {
   return rows;
 }
 
-bool from_controller(const can::CanFrame& f) {
-  const std::uint8_t c = odrive::cmd_of(f.id);
-  return c == static_cast<std::uint8_t>(odrive::Cmd::kHeartbeat) || c == static_cast<std::uint8_t>(odrive::Cmd::kGetEncoderEstimates);
-}
-
 TEST(BaseReplay, TheRecordedLogReproducesTheLoggedOdometry) {
   const std::string dir = std::string(AG_TEST_DATA_DIR) + "/can";
   auto log = can::read_candump_file(dir + "/base-run.log");
@@ -53,7 +49,7 @@ TEST(BaseReplay, TheRecordedLogReproducesTheLoggedOdometry) {
 
   const TimeNs t0 = log.value().records.front().frame.stamp;
   SimClock clock(t0);
-  can::CandumpReplayBus bus(log.value().records, clock, t0, &from_controller);
+  can::CandumpReplayBus bus(log.value().records, clock, t0, &frame_from_controller);
   DiffDriveBase base(BaseParams{}, bus);
   std::vector<WheelOdometryMsg> got;
   for (TimeNs t = t0; t <= bus.log_end() + 10 * kNsPerMs; t += 10 * kNsPerMs) {

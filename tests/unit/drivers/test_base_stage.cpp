@@ -161,7 +161,7 @@ TEST(BaseStage, AStalledDriveStageStopsTheWheelsWithin200ms) {
   EXPECT_FALSE(rig.wheels_zero()) << "the drive stage is back";
 }
 
-TEST(BaseStage, MissingSimulatorDevicesAndEqualNodeIdsAreConfigErrors) {
+TEST(BaseStage, MissingSimulatorDevicesEqualNodeIdsAndBadReplayOrBridgeSettingsAreConfigErrors) {
   static const std::vector<ParamSection> schema = role_schema(kRole);
   SimClock clock(0);
   Config cfg = Config::defaults(schema);
@@ -169,16 +169,51 @@ TEST(BaseStage, MissingSimulatorDevicesAndEqualNodeIdsAreConfigErrors) {
   auto r = RoleInstance::create(kRole, cfg, clock, "ugv9");
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.error().message.find("ugv9"), std::string::npos) << r.error().message;
-  Config c2 = Config::defaults(schema);
-  ASSERT_TRUE(c2.set("base.can_interface=agnocan0").ok());
-  auto r2 = RoleInstance::create(kRole, c2, clock, "ugv9");
-  ASSERT_FALSE(r2.ok());
-  EXPECT_NE(r2.error().message.find("agnocan0"), std::string::npos) << r2.error().message;
   Config c3 = Config::defaults(schema);
   ASSERT_TRUE(c3.set("base.right_node_id=0").ok());
   auto r3 = RoleInstance::create(kRole, c3, clock, "ugv9");
   ASSERT_FALSE(r3.ok());
   EXPECT_NE(r3.error().message.find("left_node_id and right_node_id"), std::string::npos) << r3.error().message;
+  Config c4 = Config::defaults(schema);
+  ASSERT_TRUE(c4.set("base.can_backend=replay").ok());
+  auto r4 = RoleInstance::create(kRole, c4, clock, "ugv9");
+  ASSERT_FALSE(r4.ok());
+  EXPECT_NE(r4.error().message.find("can_replay_path is empty"), std::string::npos) << r4.error().message;
+  Config c5 = Config::defaults(schema);
+  ASSERT_TRUE(c5.set("base.can_backend=cannelloni").ok());
+  ASSERT_TRUE(c5.set("base.can_bridge_remote=localhost").ok());
+  auto r5 = RoleInstance::create(kRole, c5, clock, "ugv9");
+  ASSERT_FALSE(r5.ok());
+  EXPECT_NE(r5.error().message.find("not HOST:PORT"), std::string::npos) << r5.error().message;
+}
+
+// A robot whose CAN interface and GPIO chip are missing still starts (it localizes and relays for the
+// team); the missing devices are counted, the bus faults at arming and the wheels get nothing.
+TEST(BaseStage, AMissingCanInterfaceAndGpioChipLeaveTheWheelsStoppedNotTheRobotDown) {
+  static const std::vector<ParamSection> schema = role_schema(kRole);
+  SimClock clock(0);
+  Config c2 = Config::defaults(schema);
+  ASSERT_TRUE(c2.set("base.can_interface=agnocan0").ok());
+  ASSERT_TRUE(c2.set("base.estop_chip=/dev/agnochip").ok());
+  ASSERT_TRUE(c2.set("base.led_chip=/dev/agnochip").ok());
+  ASSERT_TRUE(c2.set("base.start_armed=true").ok());
+  auto r2 = RoleInstance::create(kRole, c2, clock, "ugv9");
+  ASSERT_TRUE(r2.ok()) << r2.error().message;
+  BaseStage* b = nullptr;
+  for (auto& slot : r2.value()->stages())
+    if (auto* p = dynamic_cast<BaseStage*>(slot.stage.get())) b = p;
+  ASSERT_NE(b, nullptr);
+  EXPECT_EQ(b->counters().device_errors, 3U) << "CAN interface, e-stop line, LED line";
+  for (int k = 0; k < 10; ++k) {
+    clock.set(k * 10 * kNsPerMs);
+    b->step(clock.now());
+  }
+  EXPECT_EQ(b->base().status().state, BaseState::kFault);
+  EXPECT_EQ(b->base().status().fault, BaseFault::kBusDown);
+  EXPECT_EQ(b->bus().counters().tx, 0U) << "nothing reached a bus";
+  EXPECT_GT(b->bus().counters().tx_dropped, 0U);
+  EXPECT_EQ(b->published().state, static_cast<std::uint8_t>(BaseState::kFault));
+  EXPECT_EQ(b->estop().state(), gpio::EStopState::kLineFault) << "a missing e-stop line reads as unreadable";
 }
 
 }  // namespace

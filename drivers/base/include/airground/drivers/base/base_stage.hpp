@@ -3,16 +3,25 @@
 // "base_arm"), takes the newest "wheel_command", runs the CAN driver (watchdog: zero velocity when no
 // fresh command arrived within command_timeout_s), publishes the wheel odometry and "base_status", and
 // drives the status LED (on: running, slow blink: fault, fast blink: e-stop).
-// Backends: CAN over SocketCAN or the simulator's in-process link; e-stop and LED over libgpiod, the
-// simulator's fake lines, or none.
+// Backends: CAN over SocketCAN, the cannelloni CAN-over-UDP bridge, a recorded candump log (replay:
+// the controllers' frames are handed out at their recorded times and the driver only listens, so the
+// odometry of the recorded run is reproduced), or the simulator's in-process link; e-stop and LED over
+// libgpiod, the simulator's fake lines, or none. Any backend's traffic can be recorded as a candump log
+// (can_record_path) and the odometry written as CSV (odometry_log_path).
+// A CAN interface or GPIO chip that is missing at start-up does not stop the robot: it is logged,
+// counted (device_errors), the wheels stay stopped (base_status: fault "CAN bus refused to send", or
+// the e-stop unreadable), and localization and the radio relay keep running. A replay log that cannot
+// be read is a configuration error.
 #pragma once
 
 #include <array>
+#include <cstdio>
 #include <memory>
 #include <span>
 
 #include "airground/core/drive_messages.hpp"
 #include "airground/core/messages.hpp"
+#include "airground/drivers/can/candump_log.hpp"
 #include "airground/drivers/base/diff_drive_base.hpp"
 #include "airground/drivers/gpio/estop.hpp"
 #include "airground/drivers/gpio/gpio_line.hpp"
@@ -30,9 +39,19 @@ constexpr auto concat(const ParamSpec (&... parts)[N]) {
 }
 }  // namespace detail
 
+// What the motor controllers send (heartbeats, encoder estimates), not the driver's own commands: what
+// a replayed log feeds back to the driver.
+[[nodiscard]] bool frame_from_controller(const can::CanFrame& f) noexcept;
+
 inline constexpr ParamSpec kBaseStageOwnParams[] = {
-    ParamSpec::text("can_backend", "socketcan", "socketcan|inprocess", "CAN bus: SocketCAN (the robot) or the simulator's in-process link"),
+    ParamSpec::text("can_backend", "socketcan", "socketcan|cannelloni|replay|inprocess",
+                    "CAN bus: SocketCAN (the robot), the cannelloni UDP bridge, a recorded candump log, or the simulator's in-process link"),
     ParamSpec::text("can_interface", "can0", "", "SocketCAN interface of the motor controllers"),
+    ParamSpec::text("can_replay_path", "", "", "candump log replayed when can_backend is replay"),
+    ParamSpec::integer("can_bridge_port", 20000, 0, 65535, "", "local UDP port of the cannelloni bridge"),
+    ParamSpec::text("can_bridge_remote", "127.0.0.1:20000", "", "HOST:PORT of the bridge's other end (cannelloni)"),
+    ParamSpec::text("can_record_path", "", "", "record every frame sent and received as a candump log (empty: off)"),
+    ParamSpec::text("odometry_log_path", "", "", "write the wheel odometry as CSV (stamp_ns,x_m,y_m,yaw_rad,v_mps,w_radps; empty: off)"),
     ParamSpec::text("estop_backend", "gpiod", "gpiod|fake|none", "e-stop input: libgpiod, the simulator's fake line, or none"),
     ParamSpec::text("estop_chip", "gpiochip0", "", "GPIO chip of the e-stop input (name, path or number)"),
     ParamSpec::integer("estop_line", 17, 0, 1023, "", "line offset of the e-stop input"),
@@ -51,6 +70,7 @@ struct BaseStageCounters {
   std::uint64_t arm_requests{0};
   std::uint64_t led_errors{0};
   std::uint64_t odometry_ring_full{0};
+  std::uint64_t device_errors{0};  // a CAN interface or GPIO line that could not be opened at start-up
 };
 
 class BaseStage final : public Stage {
@@ -58,6 +78,8 @@ class BaseStage final : public Stage {
   static constexpr std::span<const ParamSpec> kParams{kBaseStageParamArray};
   static std::unique_ptr<Stage> make() { return std::make_unique<BaseStage>(); }
 
+  BaseStage() = default;
+  ~BaseStage() override;
   Status init(StageContext& ctx) override;
   void step(TimeNs now) noexcept override;
   void stop() noexcept override;
@@ -66,13 +88,22 @@ class BaseStage final : public Stage {
   [[nodiscard]] const gpio::EStopLatch& estop() const noexcept { return latch_; }
   [[nodiscard]] const BaseStatusMsg& published() const noexcept { return status_; }
   [[nodiscard]] const BaseStageCounters& counters() const noexcept { return c_; }
+  [[nodiscard]] const can::CanBus& bus() const noexcept { return *bus_; }
+  [[nodiscard]] bool replaying() const noexcept { return replay_ != nullptr; }
+  [[nodiscard]] bool replay_finished() const noexcept { return replay_ != nullptr && replay_->finished(); }
 
  private:
-  std::unique_ptr<can::CanBus> owned_bus_;
+  std::unique_ptr<can::CanBus> owned_bus_, recording_bus_;
   can::CanBus* bus_{nullptr};
+  can::CandumpReplayBus* replay_{nullptr};
+  std::unique_ptr<can::CandumpWriter> recorder_;
+  std::FILE* odom_log_{nullptr};
+  std::unique_ptr<char[]> odom_log_buf_;
+  bool replay_end_logged_{false};
   std::unique_ptr<DiffDriveBase> base_;
   std::unique_ptr<gpio::DigitalLine> owned_estop_, owned_led_;
   gpio::DigitalLine* estop_line_{nullptr};
+  bool estop_missing_{false};  // the e-stop line could not be opened: read as unreadable (stopped)
   gpio::DigitalLine* led_{nullptr};
   gpio::EStopLatch latch_{false};
   LatestReader<WheelCommandMsg> cmd_;

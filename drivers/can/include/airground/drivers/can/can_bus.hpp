@@ -91,4 +91,19 @@ class CanBus {
   std::size_t n_filters_{0};
 };
 
+// A bus whose interface could not be opened: every send is refused (kDown, counted as dropped) and
+// nothing is received. The driver above it faults "bus down" and keeps the wheels stopped.
+class AbsentCanBus final : public CanBus {
+ public:
+  [[nodiscard]] CanResult send(const CanFrame&) noexcept override {
+    ++c_.tx_dropped;
+    return CanResult::kDown;
+  }
+  [[nodiscard]] CanResult receive(CanFrame&) noexcept override { return CanResult::kWouldBlock; }
+  [[nodiscard]] const CanBusCounters& counters() const noexcept override { return c_; }
+
+ private:
+  CanBusCounters c_;
+};
+
 }  // namespace ag::can
