@@ -31,14 +31,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-template <typename S>
-const S* find_stage(RoleInstance* role) {
-  if (role == nullptr) return nullptr;
-  for (auto& slot : role->stages())
-    if (auto* s = dynamic_cast<const S*>(slot.stage.get())) return s;
-  return nullptr;
-}
-
 struct Sample {
   double t{0};
   Pose2 truth, odom;
@@ -265,20 +257,20 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
   };
   r.observe = [&](TimeNs now, RoleInstance* uav, const std::vector<RoleInstance*>& ugvs, RoleInstance* base) {
     const double t = to_seconds(now);
-    if (const auto* rs = find_stage<mission::RegionsStage>(uav)) {
+    if (const auto* rs = find_stage<const mission::RegionsStage>(uav)) {
       const mission::RegionsMsg& m = rs->published();
       for (std::uint32_t k = 0; k < std::min<std::uint32_t>(m.count, static_cast<std::uint32_t>(m.regions.size())); ++k) regions[m.regions[k].id] = m.regions[k];
     }
-    if (ortho == nullptr) ortho = find_stage<mapping::OrthoMapStage>(uav);
+    if (ortho == nullptr) ortho = find_stage<const mapping::OrthoMapStage>(uav);
     std::uint64_t bytes = 0;
     auto add_bytes = [&](RoleInstance* role) {
-      if (const auto* c = find_stage<comms::CommsStage>(role)) bytes += c->stats().bytes_out;
+      if (const auto* c = find_stage<const comms::CommsStage>(role)) bytes += c->stats().bytes_out;
     };
     add_bytes(uav);
     add_bytes(base);
     for (std::size_t i = 0; i < ugvs.size(); ++i) {
       add_bytes(ugvs[i]);
-      const auto* ms = find_stage<mission::MissionStage>(ugvs[i]);
+      const auto* ms = find_stage<const mission::MissionStage>(ugvs[i]);
       if (ms == nullptr) continue;
       const mission::MissionManager& mg = ms->manager();
       const mission::MissionStatusMsg& st = mg.status();
@@ -304,7 +296,7 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
     if (o.during) o.during(t);
     if (o.status_period_s > 0 && t >= next_status) {
       next_status += o.status_period_s;
-      const auto* rs = find_stage<mission::RegionsStage>(uav);
+      const auto* rs = find_stage<const mission::RegionsStage>(uav);
       std::fprintf(stderr, "t=%.0f s: quadrotor: %zu regions, %llu map tiles in, %llu extractions\n", t, regions.size(),
                    rs ? static_cast<unsigned long long>(rs->counters().tiles_in) : 0ULL, rs ? static_cast<unsigned long long>(rs->counters().extractions) : 0ULL);
       for (std::size_t i = 0; i < ugvs.size(); ++i) {
@@ -332,7 +324,7 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
   };
   mapping::MapRaster raster;
   r.inspect = [&](const RunInspection& in) -> Status {
-    if (const auto* om = find_stage<mapping::OrthoMapStage>(in.uav)) raster = om->map().raster();
+    if (const auto* om = find_stage<const mapping::OrthoMapStage>(in.uav)) raster = om->map().raster();
     return ok_status();
   };
   const auto wall0 = std::chrono::steady_clock::now();

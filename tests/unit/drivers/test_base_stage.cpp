@@ -199,9 +199,7 @@ TEST(BaseStage, AMissingCanInterfaceAndGpioChipLeaveTheWheelsStoppedNotTheRobotD
   ASSERT_TRUE(c2.set("base.start_armed=true").ok());
   auto r2 = RoleInstance::create(kRole, c2, clock, "ugv9");
   ASSERT_TRUE(r2.ok()) << r2.error().message;
-  BaseStage* b = nullptr;
-  for (auto& slot : r2.value()->stages())
-    if (auto* p = dynamic_cast<BaseStage*>(slot.stage.get())) b = p;
+  BaseStage* b = find_stage<BaseStage>(r2.value().get());
   ASSERT_NE(b, nullptr);
   EXPECT_EQ(b->counters().device_errors, 3U) << "CAN interface, e-stop line, LED line";
   for (int k = 0; k < 10; ++k) {

@@ -12,6 +12,7 @@
 #include "airground/platform/role_instance.hpp"
 #include "airground/sim/generator.hpp"
 #include "airground/sim/runner.hpp"
+#include "saved_world.hpp"
 #include "airground/sim/scripted_driver.hpp"
 
 namespace ag::sim {
@@ -19,32 +20,18 @@ namespace {
 
 namespace fs = std::filesystem;
 
-template <typename S>
-const S* find_stage(RoleInstance* role) {
-  if (role == nullptr) return nullptr;
-  for (auto& slot : role->stages())
-    if (auto* s = dynamic_cast<const S*>(slot.stage.get())) return s;
-  return nullptr;
-}
-
 class TeamStages : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ = (fs::path(::testing::TempDir()) / ("team_stages_world_" + std::to_string(::getpid()))).string();
-    GeneratorOptions g;
-    g.seed = 5;
-    g.size_m = 300;
-    g.targets = 2;
-    auto w = generate_world(g);
-    ASSERT_TRUE(w.ok()) << w.error().message;
-    world_ = new World(std::move(w).value());
-    ASSERT_TRUE(save_world(*world_, dir_).ok());
+    saved_ = new test::SavedWorld("team_stages");
+    ASSERT_TRUE(saved_->ok()) << saved_->error();
+    dir_ = saved_->dir();
+    world_ = saved_->world();
   }
   static void TearDownTestSuite() {
-    delete world_;
+    delete saved_;
+    saved_ = nullptr;
     world_ = nullptr;
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
   }
   static RunOptions options(const std::string& out) {
     RunOptions o;
@@ -60,7 +47,8 @@ class TeamStages : public ::testing::Test {
     return o;
   }
   static inline std::string dir_;
-  static inline World* world_{nullptr};
+  static inline const World* world_{nullptr};
+  static inline test::SavedWorld* saved_{nullptr};
 };
 
 // A drivable goal 30-60 m by road from the staging pad (the first robot starts there).
@@ -134,8 +122,8 @@ TEST_F(TeamStages, GossipCarriesPosesOverTheRadioOnlyWithinRange) {
     std::uint32_t heard_by_1 = 0, heard_by_2 = 0;
     o.inspect = [&](const RunInspection&) { return ok_status(); };
     o.observe = [&](TimeNs, RoleInstance*, const std::vector<RoleInstance*>& ugvs, RoleInstance*) {
-      const auto* c1 = find_stage<comms::CommsStage>(ugvs.at(0));
-      const auto* c2 = find_stage<comms::CommsStage>(ugvs.at(1));
+      const auto* c1 = find_stage<const comms::CommsStage>(ugvs.at(0));
+      const auto* c2 = find_stage<const comms::CommsStage>(ugvs.at(1));
       if (c1 == nullptr || c2 == nullptr) {
         ADD_FAILURE() << "no comms stage";
         return;
@@ -167,7 +155,7 @@ TEST_F(TeamStages, APoweredOffRobotStopsAndFallsSilent) {
   o.ugv_config = {"comms.pose_period_s=0.5", "comms.digest_period_s=0.25"};
   TimeNs last_heard_from_2 = 0;
   o.observe = [&](TimeNs, RoleInstance*, const std::vector<RoleInstance*>& ugvs, RoleInstance*) {
-    const auto* c1 = find_stage<comms::CommsStage>(ugvs.at(0));
+    const auto* c1 = find_stage<const comms::CommsStage>(ugvs.at(0));
     if (c1 == nullptr) return;
     for (std::uint32_t k = 0; k < c1->team().count; ++k)
       if (c1->team().robots[k].robot == 2) last_heard_from_2 = std::max(last_heard_from_2, c1->team().robots[k].stamp);

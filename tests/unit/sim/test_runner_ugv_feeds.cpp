@@ -15,6 +15,7 @@
 #include "airground/platform/role_instance.hpp"
 #include "airground/sim/generator.hpp"
 #include "airground/sim/runner.hpp"
+#include "saved_world.hpp"
 #include "airground/sim/scripted_driver.hpp"
 
 namespace ag::sim {
@@ -48,22 +49,15 @@ std::vector<Eigen::Vector2d> out_and_back(const World& w) {
 class UgvFeeds : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    // Per process: ctest runs each test of this suite in its own process, possibly at the same time.
-    dir_ = (fs::path(::testing::TempDir()) / ("ugv_feeds_world_" + std::to_string(::getpid()))).string();
-    GeneratorOptions g;
-    g.seed = 5;
-    g.size_m = 300;
-    g.targets = 2;
-    auto w = generate_world(g);
-    ASSERT_TRUE(w.ok()) << w.error().message;
-    world_ = new World(std::move(w).value());
-    ASSERT_TRUE(save_world(*world_, dir_).ok());
+    saved_ = new test::SavedWorld("ugv_feeds");
+    ASSERT_TRUE(saved_->ok()) << saved_->error();
+    dir_ = saved_->dir();
+    world_ = saved_->world();
   }
   static void TearDownTestSuite() {
-    delete world_;
+    delete saved_;
+    saved_ = nullptr;
     world_ = nullptr;
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
   }
   static RunOptions options(const std::string& out) {
     RunOptions o;
@@ -80,7 +74,8 @@ class UgvFeeds : public ::testing::Test {
     return o;
   }
   static inline std::string dir_;
-  static inline World* world_{nullptr};
+  static inline const World* world_{nullptr};
+  static inline test::SavedWorld* saved_{nullptr};
 };
 
 TEST_F(UgvFeeds, ScansOdometryInitialPoseAndGroundTruthTilesArrive) {

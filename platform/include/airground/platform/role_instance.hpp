@@ -47,4 +47,14 @@ class RoleInstance {
   bool stopped_{false};
 };
 
+// The first stage of type S in a robot's table (tests, evaluations, the simulator's observers); null
+// when the role is null or has none.
+template <class S>
+S* find_stage(RoleInstance* role) noexcept {
+  if (role == nullptr) return nullptr;
+  for (auto& slot : role->stages())
+    if (auto* s = dynamic_cast<S*>(slot.stage.get())) return s;
+  return nullptr;
+}
+
 }  // namespace ag
