@@ -6,6 +6,7 @@
 #include "airground/comms/stage.hpp"
 
 #include "airground/aerial_mapping/stages.hpp"
+#include "airground/drivers/ublox/stage.hpp"
 #include "airground/mission/stages.hpp"
 #include "airground/platform/status_stage.hpp"
 #include "airground/segmentation/stage.hpp"
@@ -19,6 +20,8 @@ using mapping::PoseGraphStage;
 // name, factory, rate [Hz], budget [µs], SCHED_FIFO priority, CPU (-1 any), parameters, what it does
 constexpr StageSpec kUavStages[] = {
     {"status", &StatusStage::make, 1.0, 2'000, 10, -1, StatusStage::kParams, "scheduler counters, once a second"},
+    {"gps", &ublox::UbloxStage::make, 10.0, 2'000, 35, -1, ublox::UbloxStage::kParams,
+     "u-blox GNSS: UBX NAV-PVT (NMEA GGA fallback) from the serial port or a recording, on 'gps' in the map frame"},
     {"pose_graph", &PoseGraphStage::make, 5.0, 150'000, 30, -1, PoseGraphStage::kParams,
      "odometry + GPS pose graph (Ceres), keyframes every 2 m, keyframe poses after each solve"},
     {"segmentation", &seg::SegmentationStage::make, 2.5, 300'000, 24, -1, seg::SegmentationStage::kParams,

@@ -3,6 +3,7 @@
 
 #include "airground/comms/stage.hpp"
 #include "airground/drivers/base/base_stage.hpp"
+#include "airground/drivers/ouster/stage.hpp"
 
 #include "airground/localization/stage.hpp"
 #include "airground/mission/stages.hpp"
@@ -22,6 +23,10 @@ using plan::TrackerStage;
 // name, factory, rate [Hz], budget [µs], SCHED_FIFO priority, CPU (-1 any), parameters, what it does
 constexpr StageSpec kUgvStages[] = {
     {"status", &StatusStage::make, 1.0, 2'000, 10, -1, StatusStage::kParams, "scheduler counters, once a second"},
+    // The Ouster OS-1: UDP packets (or a pcap) into revolutions on 'lidar_scan'; a 1024x10 sensor sends
+    // 640 packets/s, drained at 20 Hz (~1 ms a step: decode, assemble, the XYZ table).
+    {"lidar", &ouster::OusterStage::make, 20.0, 5'000, 48, -1, ouster::OusterStage::kParams,
+     "Ouster LiDAR: UDP packets (or a pcap replay) assembled into revolutions on 'lidar_scan'"},
     {"localization", &LocalizationStage::make, 10.0, 70'000, 40, -1, LocalizationStage::kParams,
      "LiDAR scans matched against the aerial map (particle filter), fused with wheel odometry: the robot's pose"},
     {"comms", &comms::CommsStage::make, 20.0, 5'000, 25, -1, comms::CommsStage::kParams,

@@ -57,6 +57,11 @@ Result<std::shared_ptr<const World>> resolve_world(const std::string& world_arg)
 
 namespace {
 
+// The role stages that talk to devices; in lockstep the simulator writes their channels instead.
+bool is_simulated_driver(std::string_view stage) noexcept {
+  return stage == "base" || stage == "lidar" || stage == "gps" || stage == "camera";
+}
+
 namespace fs = std::filesystem;
 
 // Optional model overrides from --config-dir: <dir>/<name> when it exists. The file holds the model's
@@ -212,6 +217,7 @@ struct Uav {
 struct Team {
   // The ground robots' table in simulation (their role plus the probe stage); outlives the role instances.
   std::vector<StageSpec> ugv_stages;
+  std::vector<StageSpec> uav_stages;  // the quadrotor's table without its device drivers
   RunOptions opt;
   std::shared_ptr<const World> world;
   std::shared_ptr<const HeightfieldRaycaster> raycaster;
@@ -1127,7 +1133,12 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     std::vector<std::string> uav_extra = comms_common;
     if (opt.gossip) uav_extra.emplace_back("comms.send_map_tiles=true");
     uav_extra.insert(uav_extra.end(), opt.uav_config.begin(), opt.uav_config.end());
-    auto role = make_role(uav_role(), 0, "uav", cfgs, uav_extra, "quadrotor config override");
+    // The simulator is the quadrotor's camera (and its VO) and its GNSS receiver: it writes their channels.
+    RoleDescription uav_desc = uav_role();
+    for (const StageSpec& st : uav_desc.stages)
+      if (!is_simulated_driver(st.name)) t.uav_stages.push_back(st);
+    uav_desc.stages = t.uav_stages;
+    auto role = make_role(uav_desc, 0, "uav", cfgs, uav_extra, "quadrotor config override");
     if (!role) return role.error();
     u->role = std::move(role).value();
     auto cam_w = u->role->channels().ring_writer<CameraImageMsg, kCameraRing>("camera");
@@ -1157,7 +1168,8 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   if (probe) {
     for (const StageSpec& st : ugv_desc.stages) {
       if (!opt.ugv_goals.empty() && std::string_view(st.name) == "mission") continue;  // the runner's goals replace the mission manager's
-      if (std::string_view(st.name) == "base") continue;  // the simulator is the base: it moves the vehicle by 'wheel_command'
+      // The simulator is the base (it moves the vehicle by 'wheel_command') and the LiDAR (it writes 'lidar_scan').
+      if (is_simulated_driver(st.name)) continue;
       t.ugv_stages.push_back(st);
     }
     const double hz = opt.physics_hz;

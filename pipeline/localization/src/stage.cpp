@@ -55,6 +55,10 @@ Status LocalizationStage::init(StageContext& ctx) {
   if (!out) return out.error();
   out_ = out.value();
   msg_ = LocalizationMsg{};
+  config_init_pending_ = v.boolean("set_initial_pose");
+  config_init_.pose = Pose2{v.real("initial_x_m"), v.real("initial_y_m"), v.real("initial_yaw_rad")};
+  config_init_.sigma_xy_m = v.real("initial_sigma_m");
+  config_init_.sigma_yaw_rad = v.real("initial_sigma_yaw_rad");
   return ok_status();
 }
 
@@ -84,6 +88,15 @@ void LocalizationStage::take_tiles() noexcept {
 }
 
 void LocalizationStage::take_initial_pose() noexcept {
+  if (config_init_pending_ && have_odom_) {  // once odometry gives the filter a time base
+    config_init_pending_ = false;
+    const InitialPoseMsg& m = config_init_;
+    ++c_.initial_poses;
+    have_init_ = true;
+    loc_->initialise_gaussian(m.pose, m.sigma_xy_m, m.sigma_yaw_rad, last_odom_stamp_);
+    AG_LOG_INFO("localization", "initial pose from the configuration (%.1f, %.1f, %.2f rad) sigma %.1f m %.2f rad", m.pose.x, m.pose.y,
+                m.pose.yaw, m.sigma_xy_m, m.sigma_yaw_rad);
+  }
   if (!init_.fresh()) return;
   const InitialPoseMsg& m = init_.read();
   if (m.stamp == init_stamp_) return;

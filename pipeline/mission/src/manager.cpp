@@ -382,7 +382,9 @@ void MissionManager::tick(TimeNs now) noexcept {
 void MissionManager::tick_waypoints(TimeNs now, bool tracking) noexcept {
   const std::size_t n = std::min(p_.waypoint_count, kMaxWaypoints);
   const bool over = p_.mission_end_s > 0 && now - t0_ >= from_seconds(p_.mission_end_s);
-  if (state_ == ClaimState::kIdle && tracking) {  // start (or the next waypoint)
+  // The first waypoint also while the localizer converges (as choose() does): it needs the robot to move.
+  const bool converging = have_loc_ && loc_.status == LocalizationStatus::kInitialising && wp_next_ == 0;
+  if (state_ == ClaimState::kIdle && (tracking || converging)) {  // start (or the next waypoint)
     if (wp_next_ < n && !over) {
       state_ = ClaimState::kGoing;
       go_to(p_.waypoint_x[wp_next_], p_.waypoint_y[wp_next_]);
@@ -403,7 +405,12 @@ void MissionManager::tick_waypoints(TimeNs now, bool tracking) noexcept {
         best_dist_ = d;
         progress_at_ = now;
       }
-      if (no_route_ >= p_.max_no_route || now - progress_at_ > from_seconds(p_.no_progress_timeout_s)) {
+      const bool map_growing = last_map_data_ >= 0 && now - last_map_data_ <= from_seconds(p_.map_growing_s);
+      if (no_route_ >= p_.max_no_route && map_growing) {
+        // The way there may not be mapped yet (as for regions): not a failure; the planner keeps trying.
+        ++c_.deferred_no_route;
+        no_route_ = 0;
+      } else if (no_route_ >= p_.max_no_route || now - progress_at_ > from_seconds(p_.no_progress_timeout_s)) {
         ++wp_skipped_;
         ++failed_own_;
         next = true;

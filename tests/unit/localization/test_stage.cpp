@@ -67,6 +67,27 @@ TEST(LocalizationStage, ConvergesThroughItsChannelsFromAGuess10mOff) {
   EXPECT_EQ(rig->stage->fields().pending_tiles(), 0U);
 }
 
+// A robot started from its YAML alone: the guess comes from localization.set_initial_pose and the
+// initial_* keys, applied once odometry flows; the filter converges from it as from a message.
+TEST(LocalizationStage, TheConfiguredInitialPoseStartsTheFilter) {
+  Drive d;
+  const Pose2& t0 = d.truth[0].pose;
+  auto rig = test::StageRig::make(d.w, {"localization.set_initial_pose=true", "localization.initial_x_m=" + std::to_string(t0.x + 6.0),
+                                        "localization.initial_y_m=" + std::to_string(t0.y - 4.0),
+                                        "localization.initial_yaw_rad=" + std::to_string(t0.yaw + 0.2), "localization.initial_sigma_m=8"});
+  ASSERT_NE(rig, nullptr);
+  rig->push_world(d.w, 0);
+  rig->step(0);
+  EXPECT_EQ(rig->stage->counters().initial_poses, 0U) << "no odometry yet: the guess waits";
+  std::vector<ScanPoint> scan;
+  drive(*rig, d, 0, d.truth.size(), scan);
+  EXPECT_EQ(rig->stage->counters().initial_poses, 1U);
+  const LocalizationMsg& m = rig->latest();
+  const Pose2& t = d.truth.back().pose;
+  EXPECT_EQ(m.status, LocalizationStatus::kTracking);
+  EXPECT_LT(std::hypot(m.pose.x - t.x, m.pose.y - t.y), 1.0);
+}
+
 TEST(LocalizationStage, BadInputIsCountedAndTrackingSurvives) {
   Drive d;
   auto rig = test::StageRig::make(d.w);

@@ -337,6 +337,50 @@ TEST(Manager, AWaypointsMissionDrivesThemInOrderSkipsAnUnreachableOneAndReturns)
   EXPECT_LE(std::hypot(t.bots[0].x, t.bots[0].y), 3.0);
 }
 
+// A waypoints mission starts from a standing robot whose localizer is still converging (it converges
+// only while the robot moves); the waypoint counts as reached only once it tracks.
+TEST(Manager, AWaypointsMissionStartsWhileTheLocalizerConverges) {
+  Team t;
+  ManagerParams p = quick();
+  p.waypoint_x[0] = 15;
+  p.waypoint_y[0] = 0;
+  p.waypoint_count = 1;
+  t.add(1, 1, 0, 0, p);
+  t.bots[0].status = LocalizationStatus::kNoMap;
+  for (int i = 0; i < 20; ++i) t.step();
+  EXPECT_EQ(t.bots[0].m->state(), ClaimState::kIdle) << "no map: it waits";
+  t.bots[0].status = LocalizationStatus::kInitialising;
+  t.step();
+  EXPECT_EQ(t.bots[0].m->state(), ClaimState::kGoing) << "converging: it goes";
+  EXPECT_DOUBLE_EQ(t.bots[0].m->goal().x, 15);
+  for (int i = 0; i < 5 * 30; ++i) t.step();
+  EXPECT_EQ(t.bots[0].m->waypoints_reached(), 0U) << "not tracking: not reached";
+  t.bots[0].status = LocalizationStatus::kTracking;
+  t.step();
+  EXPECT_EQ(t.bots[0].m->waypoints_reached(), 1U);
+}
+
+// No route to a waypoint while map tiles still arrive is not a reason to skip it: the way may be unmapped.
+TEST(Manager, AWaypointIsNotSkippedForNoRouteWhileTheMapGrows) {
+  Team t;
+  ManagerParams p = quick();
+  p.waypoint_x[0] = 15;
+  p.waypoint_y[0] = 0;
+  p.waypoint_count = 1;
+  t.add(1, 1, 0, 0, p);
+  t.bots[0].no_route = true;
+  for (int i = 0; i < 5 * 15; ++i) {
+    if (i % 10 == 0) t.bots[0].m->on_map_data(t.now);
+    t.step();
+  }
+  EXPECT_EQ(t.bots[0].m->waypoints_skipped(), 0U) << "the map is growing";
+  EXPECT_EQ(t.bots[0].m->state(), ClaimState::kGoing);
+  t.bots[0].no_route = false;
+  for (int i = 0; i < 5 * 30 && t.bots[0].m->waypoints_reached() == 0; ++i) t.step();
+  EXPECT_EQ(t.bots[0].m->waypoints_reached(), 1U);
+  EXPECT_EQ(t.bots[0].m->waypoints_skipped(), 0U);
+}
+
 TEST(Manager, MalformedRecordsAreCountedAndIgnored) {
   ManagerParams p = quick();
   MissionManager m(p);

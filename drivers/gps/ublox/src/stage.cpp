@@ -1,6 +1,8 @@
 // The u-blox stage: bytes to fixes to "gps".
 #include "airground/drivers/ublox/stage.hpp"
 
+#include "airground/platform/log.hpp"
+
 #include <cmath>
 #include <string>
 
@@ -35,24 +37,35 @@ void LocalEnu::forward(double lat, double lon, double h, double& e, double& n, d
   u = cl_ * co_ * dx + cl_ * so_ * dy + sl_ * dz;
 }
 
+// A receiver that is absent (no device, a recording missing) does not stop the robot: the stage logs
+// why, counts it and publishes nothing (the pose graph then holds its priors), like the base stage.
 Status UbloxStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
   const std::string where = std::string(ctx.stage_name) + ".";
-  if (v.text("source") == "replay") {
-    auto r = ReplayFile::open(v.text("replay"), 1024);
-    if (!r) return Error::make(r.error().code, where + "replay: " + r.error().message);
-    source_ = std::move(r).value();
-  } else {
-    auto s = SerialPort::open(v.text("device"), static_cast<int>(v.integer("baud")));
-    if (!s) return Error::make(s.error().code, where + "device: " + s.error().message);
-    source_ = std::move(s).value();
-  }
-  enu_ = std::make_unique<LocalEnu>(v.real("datum_lat_deg"), v.real("datum_lon_deg"), v.real("datum_height_m"));
-  max_bytes_ = static_cast<int>(v.integer("max_bytes_per_step"));
-  buf_.assign(1024, 0);
   auto w = ctx.channels.ring_writer<GpsMsg, kGpsRing>(v.text("gps_channel"));
   if (!w) return w.error();
   out_ = w.value();
+  const std::string& src = v.text("source");
+  if (src != "serial" && src != "replay" && src != "none")
+    return Error::make(ErrorCode::kConfig, "config error: " + where + "source must be serial, replay or none, got '" + src + "'");
+  enu_ = std::make_unique<LocalEnu>(v.real("datum_lat_deg"), v.real("datum_lon_deg"), v.real("datum_height_m"));
+  max_bytes_ = static_cast<int>(v.integer("max_bytes_per_step"));
+  buf_.assign(1024, 0);
+  if (src == "none") return ok_status();
+  auto absent = [&](const std::string& why) {
+    ++c_.device_errors;
+    AG_LOG_ERROR("gps", "%s; no fixes from this receiver (the robot keeps running)", why.c_str());
+    return ok_status();
+  };
+  if (src == "replay") {
+    auto r = ReplayFile::open(v.text("replay"), 1024);
+    if (!r) return absent(where + "replay: " + r.error().message);
+    source_ = std::move(r).value();
+  } else {
+    auto s = SerialPort::open(v.text("device"), static_cast<int>(v.integer("baud")));
+    if (!s) return absent(where + "device: " + s.error().message);
+    source_ = std::move(s).value();
+  }
   return ok_status();
 }
 
@@ -70,6 +83,7 @@ void UbloxStage::publish(TimeNs now, std::uint8_t fix_type, double lat, double l
 }
 
 void UbloxStage::step(TimeNs now) noexcept {
+  if (!source_) return;
   for (int total = 0; total < max_bytes_;) {
     const long n = source_->read(buf_);
     if (n < 0) {

@@ -4,21 +4,41 @@
 #include <cmath>
 #include <string>
 
+#include "airground/platform/log.hpp"
+
 namespace ag::ouster {
 
+// A sensor that is absent (no metadata, a port taken, a capture missing) does not stop the robot: the
+// stage logs why, counts it and publishes nothing, like the base stage with no CAN interface.
 Status OusterStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
   const std::string where = std::string(ctx.stage_name) + ".";
-  if (v.text("metadata").empty())
-    return Error::make(ErrorCode::kConfig, "config error: " + where + "metadata must name the sensor's metadata JSON");
+  auto w = ctx.channels.ring_writer<LidarScanMsg, kLidarRing>(v.text("scan_channel"));
+  if (!w) return w.error();
+  out_ = w.value();
+  const std::string& cls = v.text("classes");
+  if (cls != "none" && cls != "reflectivity")
+    return Error::make(ErrorCode::kConfig, "config error: " + where + "classes must be none or reflectivity, got '" + cls + "'");
+  classes_from_reflectivity_ = cls == "reflectivity";
+  const std::string& src = v.text("source");
+  if (src != "udp" && src != "pcap" && src != "none")
+    return Error::make(ErrorCode::kConfig, "config error: " + where + "source must be udp, pcap or none, got '" + src + "'");
+  if (src == "none") return ok_status();
+  auto absent = [&](const std::string& why) {
+    ++c_.device_errors;
+    AG_LOG_ERROR("lidar", "%s; no scans from this sensor (the robot keeps running)", why.c_str());
+    source_.reset();
+    return ok_status();
+  };
+  if (v.text("metadata").empty()) return absent(where + "metadata names no sensor metadata JSON");
   auto info = read_metadata_file(v.text("metadata"));
-  if (!info) return Error::make(info.error().code, where + "metadata: " + info.error().message);
+  if (!info) return absent(where + "metadata: " + info.error().message);
   const SensorInfo& s = info.value();
   const auto lidar_port = static_cast<std::uint16_t>(v.integer("lidar_port") != 0 ? v.integer("lidar_port") : s.udp_port_lidar);
   const auto imu_port = static_cast<std::uint16_t>(v.integer("imu_port") != 0 ? v.integer("imu_port") : s.udp_port_imu);
   if (v.text("source") == "pcap") {
     auto p = PcapPacketSource::open(v.text("pcap"), lidar_port, imu_port);
-    if (!p) return Error::make(p.error().code, where + "pcap: " + p.error().message);
+    if (!p) return absent(where + "pcap: " + p.error().message);
     source_ = std::move(p).value();
   } else {
     UdpSourceConfig u;
@@ -26,7 +46,7 @@ Status OusterStage::init(StageContext& ctx) {
     u.lidar_port = lidar_port;
     u.imu_port = imu_port;
     auto p = UdpPacketSource::open(u);
-    if (!p) return Error::make(p.error().code, where + "udp: " + p.error().message);
+    if (!p) return absent(where + "udp: " + p.error().message);
     source_ = std::move(p).value();
   }
   if (static_cast<std::size_t>(s.mode.columns) * s.beam_altitude_deg.size() > kMaxScanPoints)
@@ -41,9 +61,6 @@ Status OusterStage::init(StageContext& ctx) {
   buf_.assign(kMaxPacketSize, 0);
   mount_ = Pose3{v.real("mount_x_m"), v.real("mount_y_m"), v.real("mount_z_m"), 0, 0, v.real("mount_yaw_rad")};
   max_packets_ = static_cast<int>(v.integer("max_packets_per_step"));
-  auto w = ctx.channels.ring_writer<LidarScanMsg, kLidarRing>(v.text("scan_channel"));
-  if (!w) return w.error();
-  out_ = w.value();
   return ok_status();
 }
 
@@ -56,7 +73,7 @@ void OusterStage::publish(const LidarFrame& f, TimeNs now) noexcept {
   ++m.seq;
   m.rings = static_cast<std::uint16_t>(f.height);
   m.columns = static_cast<std::uint16_t>(f.width);
-  m.labels = LabelSource::kNone;
+  m.labels = classes_from_reflectivity_ ? LabelSource::kGroundTruth : LabelSource::kNone;
   m.sensor_in_body = mount_;
   std::uint32_t n = 0;
   for (int r = 0; r < f.height; ++r)
@@ -68,7 +85,7 @@ void OusterStage::publish(const LidarFrame& f, TimeNs now) noexcept {
       p.y = xyz_[3 * k + 1];
       p.z = xyz_[3 * k + 2];
       p.range = static_cast<float>(f.range_mm[k]) * 1e-3f;
-      p.cls = 255;
+      p.cls = classes_from_reflectivity_ ? static_cast<std::uint8_t>(f.reflectivity[k]) : std::uint8_t{255};
       p.ring = static_cast<std::uint16_t>(r);
       p.col = static_cast<std::uint16_t>(col);
     }
@@ -79,6 +96,7 @@ void OusterStage::publish(const LidarFrame& f, TimeNs now) noexcept {
 }
 
 void OusterStage::step(TimeNs now) noexcept {
+  if (!source_) return;
   for (int i = 0; i < max_packets_; ++i) {
     std::size_t n = 0;
     TimeNs t = 0;

@@ -81,17 +81,32 @@ TEST(OusterStage, ReplayPublishesTheRevolution) {
   EXPECT_EQ(stage->counters().source_errors, 0u);
 }
 
-TEST(OusterStage, ConfigErrorsNameTheKey) {
+// A sensor that is absent (no metadata, a capture missing, bad metadata) leaves the robot running with
+// no scans and the fault counted; only a wrong key value is a configuration error.
+TEST(OusterStage, AnAbsentSensorIsCountedNotFatalAndBadValuesNameTheKey) {
   SimClock clock(0);
-  auto a = make_role(clock, {"ouster.source=pcap"});
-  ASSERT_FALSE(a.ok());
-  EXPECT_NE(a.error().message.find("ouster.metadata"), std::string::npos) << a.error().message;
-  auto b = make_role(clock, {"ouster.source=pcap", "ouster.metadata=" + kDir + "os1-64_legacy_metadata.json", "ouster.pcap=/nonexistent.pcap"});
-  ASSERT_FALSE(b.ok());
-  EXPECT_NE(b.error().message.find("ouster.pcap"), std::string::npos) << b.error().message;
-  auto c = make_role(clock, {"ouster.source=pcap", "ouster.metadata=" + kDir + "LICENSE"});
-  ASSERT_FALSE(c.ok());
-  EXPECT_NE(c.error().message.find("not valid JSON"), std::string::npos) << c.error().message;
+  for (const std::vector<std::string>& sets :
+       {std::vector<std::string>{"ouster.source=pcap"},
+        {"ouster.source=pcap", "ouster.metadata=" + kDir + "os1-64_legacy_metadata.json", "ouster.pcap=/nonexistent.pcap"},
+        {"ouster.source=pcap", "ouster.metadata=" + kDir + "LICENSE"}}) {
+    auto r = make_role(clock, sets);
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    auto* stage = dynamic_cast<OusterStage*>(r.value()->stages().front().stage.get());
+    ASSERT_NE(stage, nullptr);
+    EXPECT_FALSE(stage->active());
+    EXPECT_EQ(stage->counters().device_errors, 1u) << sets.back();
+    stage->step(kNsPerS);
+    EXPECT_EQ(stage->counters().packets, 0u);
+  }
+  auto none = make_role(clock, {"ouster.source=none"});
+  ASSERT_TRUE(none.ok()) << none.error().message;
+  EXPECT_EQ(dynamic_cast<OusterStage*>(none.value()->stages().front().stage.get())->counters().device_errors, 0u);
+  Config cfg = Config::defaults(role_schema(kRole));
+  for (const char* bad : {"ouster.source=usb", "ouster.classes=rgb"}) {
+    const Status st = cfg.set(bad);
+    ASSERT_FALSE(st.ok()) << bad;
+    EXPECT_NE(st.error().message.find(std::string(bad).substr(0, std::string(bad).find('='))), std::string::npos) << st.error().message;
+  }
 }
 
 }  // namespace

@@ -83,9 +83,19 @@ TEST(UbloxStage, NmeaFallbackAndConfigErrors) {
   EXPECT_NEAR(stage->last_fix().east_m, 0.0, 1e-3);
   EXPECT_NEAR(stage->last_fix().up_m, 0.0, 1e-3);
   EXPECT_NEAR(stage->last_fix().h_accuracy_m, 0.9 * 2.5, 1e-9);
-  auto bad = make_role(clock, {"gps.source=serial", "gps.device=/dev/nonexistent-tty"});
-  ASSERT_FALSE(bad.ok());
-  EXPECT_NE(bad.error().message.find("gps.device"), std::string::npos) << bad.error().message;
+  // An absent receiver is not a configuration error: the robot runs without fixes, counted.
+  auto absent = make_role(clock, {"gps.source=serial", "gps.device=/dev/nonexistent-tty"});
+  ASSERT_TRUE(absent.ok()) << absent.error().message;
+  auto* a = dynamic_cast<UbloxStage*>(absent.value()->stages().front().stage.get());
+  ASSERT_NE(a, nullptr);
+  EXPECT_FALSE(a->active());
+  EXPECT_EQ(a->counters().device_errors, 1u);
+  a->step(kNsPerS);
+  EXPECT_EQ(a->counters().fixes_published, 0u);
+  Config cfg = Config::defaults(role_schema(kRole));
+  const Status st = cfg.set("gps.source=usb");
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.error().message.find("gps.source"), std::string::npos) << st.error().message;
 }
 
 }  // namespace

@@ -43,6 +43,14 @@ inline constexpr ParamSpec kLocalizationStageOwnParams[] = {
     ParamSpec::real("area_y1_m", 500.0, -1e6, 1e6, "m", "mission area: north edge"),
     ParamSpec::integer("field_tiles_per_step", 2, 1, 1024, "tiles", "changed map tiles folded into the distance fields per step"),
     ParamSpec::integer("seed", 0, 0, 1'000'000'000, "", "particle filter seed; 0 = from the robot's name"),
+    // A robot started from its YAML alone (no operator, no simulator) gets its guess here, like nav2
+    // amcl's set_initial_pose; a later message on "initial_pose" replaces it.
+    ParamSpec::boolean("set_initial_pose", false, "start from the initial_* guess below instead of waiting for an initial_pose message"),
+    ParamSpec::real("initial_x_m", 0.0, -1e6, 1e6, "m", "initial guess (map frame): east"),
+    ParamSpec::real("initial_y_m", 0.0, -1e6, 1e6, "m", "initial guess: north"),
+    ParamSpec::real("initial_yaw_rad", 0.0, -6.3, 6.3, "rad", "initial guess: heading (0 = east, counter-clockwise)"),
+    ParamSpec::real("initial_sigma_m", 16.0, 0.5, 1000.0, "m", "how far off the initial guess may be"),
+    ParamSpec::real("initial_sigma_yaw_rad", 0.5, 0.02, 3.2, "rad", "how far off its heading may be"),
 };
 // The stage's section: its own keys, then every localizer parameter.
 inline constexpr auto kLocalizationStageParams =
@@ -86,6 +94,8 @@ class LocalizationStage final : public Stage {
   bool have_map_{false}, have_init_{false}, have_odom_{false};
   TimeNs last_odom_stamp_{0};
   TimeNs init_stamp_{-1};
+  bool config_init_pending_{false};
+  InitialPoseMsg config_init_{};
   LocalizationStageCounters c_;
 };
 

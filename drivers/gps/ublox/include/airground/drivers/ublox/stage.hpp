@@ -26,7 +26,7 @@ class LocalEnu {
 };
 
 inline constexpr ParamSpec kUbloxStageParams[] = {
-    ParamSpec::text("source", "serial", "serial|replay", "bytes from the receiver (serial port) or a recording (replay)"),
+    ParamSpec::text("source", "serial", "serial|replay|none", "bytes from the receiver (serial port), a recording (replay), or no receiver"),
     ParamSpec::text("device", "/dev/ttyACM0", "", "serial device of the receiver"),
     ParamSpec::integer("baud", 115200, 9600, 921600, "Bd", "serial speed"),
     ParamSpec::text("replay", "", "", "recorded stream to replay when source is replay"),
@@ -42,6 +42,7 @@ struct UbloxStageCounters {
   std::uint64_t fixes_published{0};
   std::uint64_t read_errors{0};
   std::uint64_t ring_full{0};
+  std::uint64_t device_errors{0};  // no device or recording: the stage publishes nothing
 };
 
 class UbloxStage final : public Stage {
@@ -55,6 +56,7 @@ class UbloxStage final : public Stage {
   [[nodiscard]] const UbloxStageCounters& counters() const noexcept { return c_; }
   [[nodiscard]] const StreamCounters& stream_counters() const noexcept { return parser_.counters(); }
   [[nodiscard]] const GpsMsg& last_fix() const noexcept { return last_; }
+  [[nodiscard]] bool active() const noexcept { return source_ != nullptr; }
 
  private:
   void publish(TimeNs now, std::uint8_t fix_type, double lat, double lon, double h, double hacc, double vacc) noexcept;

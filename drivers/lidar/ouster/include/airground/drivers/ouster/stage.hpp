@@ -17,7 +17,7 @@
 namespace ag::ouster {
 
 inline constexpr ParamSpec kOusterStageParams[] = {
-    ParamSpec::text("source", "udp", "udp|pcap", "packets from the sensor (UDP) or a capture (pcap replay)"),
+    ParamSpec::text("source", "udp", "udp|pcap|none", "packets from the sensor (UDP), a capture (pcap replay), or no lidar"),
     ParamSpec::text("metadata", "", "", "the sensor's metadata JSON (get_metadata / the SDK's .json)"),
     ParamSpec::text("pcap", "", "", "capture to replay when source is pcap"),
     ParamSpec::text("bind_address", "0.0.0.0", "", "IPv4 address the UDP sockets bind"),
@@ -29,6 +29,8 @@ inline constexpr ParamSpec kOusterStageParams[] = {
     ParamSpec::real("mount_z_m", 0.5, -5.0, 5.0, "m", "sensor origin in the body frame, up"),
     ParamSpec::real("mount_yaw_rad", 0.0, -3.15, 3.15, "rad", "sensor yaw in the body frame"),
     ParamSpec::text("scan_channel", "lidar_scan", "", "ring channel the scans are published on"),
+    ParamSpec::text("classes", "none", "none|reflectivity",
+                    "point classes: none (255), or the reflectivity byte as a class id (the simulator's HIL mode codes ground truth there)"),
 };
 
 struct OusterStageCounters {
@@ -37,6 +39,7 @@ struct OusterStageCounters {
   std::uint64_t source_errors{0};
   std::uint64_t scans{0}, scans_incomplete{0};
   std::uint64_t ring_full{0};
+  std::uint64_t device_errors{0};      // no metadata, no socket, no capture: the stage publishes nothing
 };
 
 class OusterStage final : public Stage {
@@ -52,6 +55,7 @@ class OusterStage final : public Stage {
   [[nodiscard]] const ImuSample& last_imu() const noexcept { return imu_; }
   [[nodiscard]] const LidarScanMsg& last_scan() const noexcept { return *scan_; }
   [[nodiscard]] PacketSource& source() noexcept { return *source_; }
+  [[nodiscard]] bool active() const noexcept { return source_ != nullptr; }
 
  private:
   void publish(const LidarFrame& f, TimeNs now) noexcept;
@@ -66,6 +70,7 @@ class OusterStage final : public Stage {
   RingWriter<LidarScanMsg, kLidarRing> out_;
   Pose3 mount_{};
   int max_packets_{256};
+  bool classes_from_reflectivity_{false};
   ImuSample imu_{};
   OusterStageCounters c_;
 };
