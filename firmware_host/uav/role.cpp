@@ -6,6 +6,7 @@
 #include "airground/comms/stage.hpp"
 
 #include "airground/aerial_mapping/stages.hpp"
+#include "airground/drivers/camera/camera_stage.hpp"
 #include "airground/drivers/ublox/stage.hpp"
 #include "airground/mission/stages.hpp"
 #include "airground/platform/status_stage.hpp"
@@ -20,7 +21,11 @@ using mapping::PoseGraphStage;
 // name, factory, rate [Hz], budget [µs], SCHED_FIFO priority, CPU (-1 any), parameters, what it does
 constexpr StageSpec kUavStages[] = {
     {"status", &StatusStage::make, 1.0, 2'000, 10, -1, StatusStage::kParams, "scheduler counters, once a second"},
-    {"gps", &ublox::UbloxStage::make, 10.0, 2'000, 35, -1, ublox::UbloxStage::kParams,
+    // The nadir camera: V4L2 frames converted and resampled to 640x400 (~5 ms at 1280x800), or a
+    // frame-stream recording / FIFO with its visual odometry (the simulator's HIL mode).
+    {"camera", &camera::CameraStage::make, 20.0, 15'000, 40, -1, camera::CameraStage::kParams,
+     "nadir camera: V4L2 capture (or a frame-stream replay with its VO) on 'camera' and 'visual_odometry'"},
+    {"gps", &ublox::UbloxStage::make, 20.0, 2'000, 35, -1, ublox::UbloxStage::kParams,
      "u-blox GNSS: UBX NAV-PVT (NMEA GGA fallback) from the serial port or a recording, on 'gps' in the map frame"},
     {"pose_graph", &PoseGraphStage::make, 5.0, 150'000, 30, -1, PoseGraphStage::kParams,
      "odometry + GPS pose graph (Ceres), keyframes every 2 m, keyframe poses after each solve"},

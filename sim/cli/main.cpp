@@ -33,6 +33,7 @@
 #include "airground/sim/raycast.hpp"
 #include "airground/sim/runner.hpp"
 #include "airground/sim/eval_mission.hpp"
+#include "airground/sim/hil.hpp"
 #include "airground/sim/world_png.hpp"
 
 namespace fs = std::filesystem;
@@ -58,6 +59,7 @@ constexpr const char* kUsage =
     "                                  (see eval localization --help)\n"
     "  airground-sim eval planning --world W --seed S --pairs 20 --out DIR   (see eval planning --help)\n"
     "  airground-sim mission --world W --ugvs N --seed S [--comm-range METRES] [--mission FILE.yaml] --out DIR\n"
+    "  airground-sim hil --world W --mission FILE.yaml --out DIR   (the real role binaries over the wire protocols)\n"
     "                        (a whole team mission and its report; see mission --help)\n"
     "  airground-sim study --ugvs 1,2,3,5,10 --comm-range 50,150,1000 --seeds K --out DIR   (a grid of missions)\n"
     "  airground-sim segment --weights FILE --image IMAGE.png --out DIR [--threads N]   (ErfNet: logits.npy,\n"
@@ -608,6 +610,60 @@ constexpr const char* kStudyHelp =
     "  --lidar-columns C      (1024)\n"
     "  --set SECTION.KEY=VALUE  passed to every mission (repeatable)\n";
 
+constexpr const char* kHilHelp =
+    "airground-sim hil — hardware in the loop: the simulated world served to the real role binaries over\n"
+    "the devices' wire protocols, in real time. Each ground robot's airground-ugv gets Ouster OS-1 packets on\n"
+    "its lidar UDP port (the ground-truth class in the reflectivity byte) and its two ODrive controllers over\n"
+    "the cannelloni CAN-over-UDP bridge; airground-uav gets UBX NAV-PVT on a pseudo-terminal (its serial\n"
+    "port) and camera frames with visual odometry through the camera stage's frame-stream replay (a FIFO);\n"
+    "airground-base serves the live page. The processes are configured only by the YAML files written to\n"
+    "DIR/config/ and talk gossip over UDP on the loopback interface. The run ends when every ground robot\n"
+    "reports 'done' to the base station (or at --max-duration).\n\n"
+    "Usage: airground-sim hil --world W --mission M.yaml --out DIR [options]\n\n"
+    "Writes DIR/hil_report.md (robots, wire traffic, every stage's timing against its budget), DIR/hil.json,\n"
+    "DIR/trajectories.png (truth white, the robots' own estimates red), DIR/base_state.json, DIR/mission.jsonl\n"
+    "(the base's mission log), DIR/logs/<robot>.log and the robots' CAN recordings and odometry.\n"
+    "Exit status: 0 mission done, 1 not done or a robot process failed, 2 usage error.\n\n"
+    "Options:\n"
+    "  --world W              world folder or 'default' (default)\n"
+    "  --mission M.yaml       the mission: team, starts, guesses, waypoints, survey (required)\n"
+    "  --out DIR              (build/hil)\n"
+    "  --bin-dir DIR          where airground-uav/-ugv/-base are (next to airground-sim)\n"
+    "  --max-duration T       wall-clock seconds before the run is cut off (300)\n"
+    "  --lidar-columns C      512, 1024 or 2048 (1024)\n"
+    "  --seed S               sensor noise (1)\n"
+    "  --quiet                no progress lines\n";
+
+int hil_cmd(const Args& a) {
+  HilOptions o;
+  o.world = a.get("world", o.world);
+  o.mission_file = a.get("mission");
+  o.out_dir = a.get("out", o.out_dir);
+  o.bin_dir = a.get("bin-dir");
+  o.max_duration_s = number(a, "max-duration", o.max_duration_s);
+  o.lidar_columns = static_cast<int>(number(a, "lidar-columns", o.lidar_columns));
+  o.seed = static_cast<std::uint64_t>(number(a, "seed", static_cast<double>(o.seed)));
+  o.progress = !a.has("quiet");
+  if (o.mission_file.empty()) usage_error("hil needs --mission FILE.yaml");
+  if (!(o.max_duration_s > 0)) usage_error("--max-duration must be positive");
+  auto r = run_hil(o);
+  if (!r) {
+    std::fprintf(stderr, "airground-sim hil: %s\n", r.error().message.c_str());
+    return 1;
+  }
+  const HilResult& h = r.value();
+  std::printf("hil: mission %s after %.1f s; report %s/hil_report.md\n", h.mission_done ? "done" : "NOT done", h.duration_s, o.out_dir.c_str());
+  std::printf("%-6s %-14s %8s %10s %10s %10s %10s %8s\n", "robot", "stage", "runs", "p50_us", "p99_us", "max_us", "budget_us", "overruns");
+  for (const HilStageTiming& t : h.timing)
+    std::printf("%-6s %-14s %8llu %10.1f %10.1f %10.1f %10.0f %8llu%s\n", t.robot.c_str(), t.stage.c_str(), static_cast<unsigned long long>(t.runs),
+                t.p50_us, t.p99_us, t.max_us, t.budget_us, static_cast<unsigned long long>(t.overruns), t.p99_us > t.budget_us ? "  over budget" : "");
+  for (const HilRobot& rb : h.robots)
+    if (!rb.final_state.empty())
+      std::printf("%s: %s, %.1f m driven, localization error final %.2f m, mean %.2f m, max %.2f m, %llu collisions\n", rb.name.c_str(),
+                  rb.final_state.c_str(), rb.distance_m, rb.final_error_m, rb.mean_error_m, rb.max_error_m, static_cast<unsigned long long>(rb.collisions));
+  return h.mission_done ? 0 : 1;
+}
+
 std::vector<double> number_list(const Args& a, const std::string& k, const std::string& def) {
   std::vector<double> out;
   std::string v = a.has(k) ? "" : def;
@@ -958,6 +1014,13 @@ int main(int argc, char** argv) {
         return 0;
       }
       return mission_cmd(parse(argc, argv, 2));
+    }
+    if (cmd == "hil") {
+      if (help) {
+        std::fputs(kHilHelp, stdout);
+        return 0;
+      }
+      return hil_cmd(parse(argc, argv, 2));
     }
     if (cmd == "study") {
       if (help) {

@@ -243,9 +243,12 @@ void TrackerStage::step(TimeNs now) noexcept {
   if (loc_.fresh()) pose_ = loc_.read();
   if (cmd_in_.fresh()) cmd_ = cmd_in_.read();
   // The newest scan only: an older one describes where the robot was.
-  LidarScanMsg* newest = nullptr;
-  while (scans_.size() > 1) scans_.pop();
-  newest = scans_.front();
+  // (front() before every pop(): the ring's consumer side learns the writer's position only there.)
+  LidarScanMsg* newest = scans_.front();
+  while (newest != nullptr && scans_.size() > 1) {
+    scans_.pop();
+    newest = scans_.front();
+  }
   if (newest == nullptr) return;
   ++scans_in_;
   if (newest->count > newest->points.size()) {

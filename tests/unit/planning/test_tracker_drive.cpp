@@ -101,6 +101,33 @@ TEST(TrackerDrive, ABoxTheMapMissedOnTheRouteStopsTheRobotBeforeIt) {
   EXPECT_EQ(rig.tracker->published().state, static_cast<std::uint8_t>(TrackState::kFailed));
 }
 
+// Two scans queued, then steps with none (a driver on its own thread, as on the robot): the tracker takes
+// the newest and then waits. It used to pop without front(), so the ring's reader overtook the writer:
+// a stale scan came out, then size() wrapped and the step never returned (seen in the HIL run).
+TEST(TrackerDrive, QueuedScansThenNoneTheNewestIsTakenAndTheStepReturns) {
+  Rig rig;
+  LocalizationMsg m;
+  m.status = LocalizationStatus::kTracking;
+  rig.loc_w.publish(m);
+  const auto pts = test::scan({}, 0.6, 0.0, 0.0, kAzimuthStepDeg);
+  for (TimeNs stamp : {TimeNs{100}, TimeNs{200}}) {
+    rig.scan->stamp = stamp;
+    rig.scan->sensor_in_body = Pose3{0, 0, 0.6, 0, 0, 0};
+    rig.scan->count = static_cast<std::uint32_t>(pts.size());
+    std::copy(pts.begin(), pts.end(), rig.scan->points.begin());
+    ASSERT_EQ(rig.scan_w.push(*rig.scan), 0U);
+  }
+  for (int k = 1; k <= 5; ++k) {
+    rig.clock.set(k * 100 * kNsPerMs);
+    rig.tracker->step(rig.clock.now());
+    EXPECT_EQ(rig.tracker->published().stamp, 200) << "step " << k << ": the newest scan, and nothing after it";
+  }
+  rig.scan->stamp = 300;
+  ASSERT_EQ(rig.scan_w.push(*rig.scan), 0U);
+  rig.tracker->step(rig.clock.now() + 100 * kNsPerMs);
+  EXPECT_EQ(rig.tracker->published().stamp, 300);
+}
+
 TEST(TrackerDrive, AReturnRightAheadStopsTheWheelsAtOnce) {
   Rig rig;
   for (int k = 0; k < 60; ++k) rig.tick(k, {});

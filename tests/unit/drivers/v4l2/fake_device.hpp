@@ -1,6 +1,7 @@
 // A V4L2 capture device in memory behind the system-call seam: it answers the ioctls the driver makes,
 // owns the "mmap" buffers, and plays a script of dequeue events (frames with a counter pattern, EAGAIN,
-// error-flagged buffers, sequence gaps, short buffers) so the driver can be tested without /dev/video.
+// error-flagged buffers, sequence gaps, short buffers, a failing device) so the driver can be tested
+// without /dev/video.
 #pragma once
 
 #include <linux/videodev2.h>
@@ -18,7 +19,7 @@
 namespace ag::v4l2::testing {
 
 struct FakeEvent {
-  enum class Kind { kFrame, kEagain } kind{Kind::kFrame};
+  enum class Kind { kFrame, kEagain, kError } kind{Kind::kFrame};  // kError: DQBUF fails with EIO (unplugged)
   std::uint32_t sequence{0};
   std::int64_t stamp_us{0};
   std::uint32_t flags{V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC | V4L2_BUF_FLAG_TSTAMP_SRC_SOE};
@@ -33,6 +34,7 @@ class FakeDevice final : public Syscalls {
   std::uint32_t line_padding{64};     // the driver pads each line (stride > width * bpp)
   std::uint32_t granted_buffers{0};   // 0 = as requested
   std::int32_t exposure_100us{50};    // 5 ms; 0 = no exposure control
+  std::vector<std::uint8_t> line;     // non-empty: every line of every frame starts with these bytes (a known picture)
   std::deque<FakeEvent> script;
   // Observations.
   int streamon{0}, streamoff{0}, closes{0}, unmaps{0}, qbufs{0};
@@ -151,8 +153,8 @@ class FakeDevice final : public Syscalls {
         }
         const FakeEvent e = script.front();
         script.pop_front();
-        if (e.kind == FakeEvent::Kind::kEagain) {
-          errno = EAGAIN;
+        if (e.kind == FakeEvent::Kind::kEagain || e.kind == FakeEvent::Kind::kError) {
+          errno = e.kind == FakeEvent::Kind::kError ? EIO : EAGAIN;
           return -1;
         }
         auto* b = static_cast<v4l2_buffer*>(arg);
@@ -167,7 +169,10 @@ class FakeDevice final : public Syscalls {
         return 0;
       }
       case VIDIOC_STREAMON: ++streamon; return 0;
-      case VIDIOC_STREAMOFF: ++streamoff; return 0;
+      case VIDIOC_STREAMOFF:  // as in V4L2: every buffer leaves the queue
+        ++streamoff;
+        queued.clear();
+        return 0;
       default: errno = ENOTTY; return -1;
     }
   }
@@ -176,6 +181,10 @@ class FakeDevice final : public Syscalls {
   void fill(std::vector<std::uint8_t>& b, std::uint32_t seq) const noexcept {
     for (std::uint32_t y = 0; y < height; ++y) {
       std::uint8_t* row = b.data() + static_cast<std::size_t>(y) * stride;
+      if (!line.empty()) {
+        std::memcpy(row, line.data(), line.size() < stride ? line.size() : stride);
+        continue;
+      }
       std::memcpy(row, &seq, 4);
       for (std::uint32_t x = 4; x < stride; ++x) row[x] = static_cast<std::uint8_t>(x + y);
     }

@@ -1,0 +1,78 @@
+// The HIL mission: airground-sim hil runs the real airground-uav, airground-ugv and airground-base
+// processes on the short mission in tests/hil/hil_mission.yaml. The quadrotor gets UBX on a
+// pseudo-terminal and camera frames + VO through the frame-stream FIFO, the ground robot Ouster packets
+// over UDP and its ODrives over the cannelloni CAN bridge, and all three talk gossip over UDP. The
+// mission must run to the end (the robot drives to its waypoint and back, localized in the map the
+// quadrotor made), every process must stop cleanly, and every stage's timing is printed against its budget.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <string>
+
+#include "process.hpp"
+
+namespace ag::test {
+namespace {
+
+namespace fs = std::filesystem;
+
+TEST(Hil, AShortMissionRunsToTheEndOverTheWireProtocols) {
+  const fs::path out = fs::path(binary_dir()) / "hil-test";
+  fs::remove_all(out);
+  const ProcessResult r = run({binary_dir() + "/sim/airground-sim", "hil", "--world", "default", "--mission",
+                               source_dir() + "/tests/hil/hil_mission.yaml", "--out", out.string(), "--max-duration", "240", "--lidar-columns", "512", "--quiet"},
+                              330.0);
+  std::printf("%s", r.out.c_str());  // the stage timing table, against the budgets
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("mission done"), std::string::npos);
+
+  std::ifstream f(out / "hil.json");
+  ASSERT_TRUE(f) << "no hil.json";
+  const nlohmann::json j = nlohmann::json::parse(f);
+  EXPECT_TRUE(j.at("mission_done").get<bool>());
+  std::map<std::string, nlohmann::json> robots;
+  for (const auto& rb : j.at("robots")) robots[rb.at("name").get<std::string>()] = rb;
+  ASSERT_EQ(robots.size(), 3U);
+  for (const auto& [name, rb] : robots) EXPECT_EQ(rb.at("exit_code").get<int>(), 0) << name << " did not stop cleanly";
+  const auto& ugv = robots.at("ugv1");
+  EXPECT_EQ(ugv.at("state").get<std::string>(), "done");
+  EXPECT_GT(ugv.at("distance_m").get<double>(), 25.0) << "16 m out and back";
+  EXPECT_EQ(ugv.at("collisions").get<int>(), 0);
+  // Localized in the quadrotor's map from the Ouster packets and the CAN encoders (the base's copy of
+  // the pose against the truth of that time).
+  EXPECT_GE(ugv.at("mean_error_m").get<double>(), 0.0) << "the base never saw it tracking";
+  EXPECT_LT(ugv.at("mean_error_m").get<double>(), 2.0);  // measured 1.3 m (the base's copy lags the robot)
+  EXPECT_LT(ugv.at("final_error_m").get<double>(), 3.0);
+
+  // Every protocol carried traffic.
+  const auto& tr = j.at("traffic");
+  EXPECT_GT(tr.at("lidar_packets").get<long>(), 1500) << "32 packets a revolution (512 columns) at up to 10 Hz";
+  EXPECT_GT(tr.at("ubx_nav_pvt").get<long>(), 50);
+  EXPECT_GT(tr.at("camera_frames").get<long>(), 50);
+  EXPECT_GT(tr.at("vo_records").get<long>(), 50);
+  EXPECT_GT(tr.at("can_commands_received").get<long>(), 500) << "Set_Input_Vel at 50 Hz";
+
+  // Every stage of every role ran and was timed.
+  std::map<std::string, std::set<std::string>> timed;
+  for (const auto& t : j.at("stage_timing")) {
+    EXPECT_GT(t.at("runs").get<long>(), 0) << t.dump();
+    EXPECT_GT(t.at("budget_us").get<double>(), 0.0) << t.dump();
+    timed[t.at("robot").get<std::string>()].insert(t.at("stage").get<std::string>());
+  }
+  for (const char* s : {"camera", "gps", "pose_graph", "ortho_map", "comms", "regions"}) EXPECT_TRUE(timed["uav"].count(s)) << s;
+  for (const char* s : {"lidar", "localization", "planner", "drive", "base", "tracker", "mission", "comms"}) EXPECT_TRUE(timed["ugv1"].count(s)) << s;
+  EXPECT_TRUE(timed["base"].count("web"));
+
+  // What a person looks at, and the robot's own CAN recording.
+  for (const char* file : {"hil_report.md", "trajectories.png", "base_state.json", "config/ugv1.yaml", "config/uav.yaml", "logs/ugv1.log"})
+    EXPECT_TRUE(fs::exists(out / file)) << file;
+  EXPECT_GT(fs::file_size(out / "logs" / "can-ugv1.log"), 10000U);
+}
+
+}  // namespace
+}  // namespace ag::test
