@@ -504,6 +504,7 @@ Result<HilResult> run_hil(const HilOptions& opt) {
   std::uint32_t image_seq = 0;
   std::string last_state;
   std::string failure;
+  TimeNs done_seen = -1;
   const TimeNs deadline = t0 + static_cast<TimeNs>(opt.max_duration_s * 1e9);
   while (true) {
     const TimeNs now = monotonic_now();
@@ -669,7 +670,9 @@ Result<HilResult> run_hil(const HilOptions& opt) {
             }
             if (u.state == "done") ++done;
           }
-          if (done == n) {
+          // Done: a few more polls with the robots standing, so the final error is not the base's lag.
+          if (done == n && done_seen < 0) done_seen = now;
+          if (done == n && now - done_seen >= 3 * kNsPerS) {
             res.mission_done = true;
             break;
           }
