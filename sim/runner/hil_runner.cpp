@@ -434,7 +434,6 @@ Result<HilResult> run_hil(const HilOptions& opt) {
   auto beams = OusterBeamModel::from_metadata_json((out / "config" / ("ouster-" + ugvs.front()->name + ".json")).string(), opt.lidar_columns);
   if (!beams) return beams.error();
   LidarSimulator lidar(w, beams.value(), LidarNoise{}, raycaster);
-  WorkerPool pool(2);
 
   // Start the robots: base first (it only listens), then the ground robots, then the quadrotor.
   std::vector<std::size_t> order;
@@ -462,6 +461,7 @@ Result<HilResult> run_hil(const HilOptions& opt) {
     std::fprintf(stderr, "hil: %zu processes started (base page http://127.0.0.1:%u/); configs and logs in %s\n", children.size(),
                  static_cast<unsigned>(web_port), out.c_str());
 
+  std::atomic<std::uint64_t> cam_written{0}, cam_dropped{0}, cam_skipped{0}, vo_written{0};
   // Physics thread.
   std::mutex mu;
   std::atomic<bool> stop{false};
@@ -492,16 +492,83 @@ Result<HilResult> run_hil(const HilOptions& opt) {
     }
   });
 
+  // Camera thread: renders a frame every 1/camera_hz (or as fast as it can) and writes it, after the VO
+  // queued since the last one, to the frame stream (opened once the uav reads the FIFO). On its own
+  // thread so a slow render never holds back the LiDAR or the GNSS.
+  std::mutex vo_mu;
+  std::deque<VoMsg> vo_queue;
+  std::atomic<bool> stop_camera{false};
+  std::thread camera_thread([&] {
+    std::optional<camera::FrameStreamWriter> frames;
+    auto image = std::make_unique<CameraImageMsg>();
+    CameraFrame cf;
+    std::uint32_t image_seq = 0;
+    const TimeNs period = static_cast<TimeNs>(1e9 / opt.camera_hz);
+    TimeNs next = monotonic_now() + kNsPerS;
+    std::vector<VoMsg> vo_out;
+    WorkerPool cam_pool(2);
+    while (!stop_camera.load(std::memory_order_relaxed)) {
+      timespec ts{static_cast<time_t>(next / kNsPerS), static_cast<long>(next % kNsPerS)};
+      ::clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
+      if (stop_camera.load(std::memory_order_relaxed)) break;
+      const TimeNs now = monotonic_now();
+      next += period;
+      if (next < now) {
+        cam_skipped.fetch_add(static_cast<std::uint64_t>((now - next) / period) + 1, std::memory_order_relaxed);
+        next = now + period;
+      }
+      if (!frames) {
+        const int fd = ::open(fifo.c_str(), O_WRONLY | O_NONBLOCK | O_CLOEXEC);
+        if (fd >= 0) {
+          (void)::fcntl(fd, F_SETPIPE_SZ, 4 << 20);  // a whole frame fits: the reader drains it in one step
+          auto wr = camera::FrameStreamWriter::from_fd(fd, fifo.string());
+          if (wr) frames.emplace(std::move(wr).value());
+        }
+      }
+      Pose3 qp;
+      {
+        std::lock_guard<std::mutex> lk(mu);
+        qp = quad.pose();
+      }
+      camera.prepare(qp, cf, now);
+      constexpr int kBands = 8;
+      cam_pool.run(kBands, [&](std::size_t j) {
+        const int h = cf.rgb.rows, b = static_cast<int>(j);
+        camera.render_rows(qp, h * b / kBands, h * (b + 1) / kBands, cf);
+      });
+      vo_out.clear();
+      {
+        std::lock_guard<std::mutex> lk(vo_mu);
+        vo_out.assign(vo_queue.begin(), vo_queue.end());
+        vo_queue.clear();
+      }
+      if (!frames) {
+        cam_dropped.fetch_add(1, std::memory_order_relaxed);
+        continue;
+      }
+      // (A failed write is counted, the stream kept: the camera stage does not reopen a FIFO that ended.)
+      for (const VoMsg& m : vo_out)
+        if (frames->write_vo(m)) vo_written.fetch_add(1, std::memory_order_relaxed);
+      CameraImageMsg& m = *image;
+      m.stamp = now;
+      m.published = now;
+      m.seq = image_seq++;
+      m.labels = LabelSource::kGroundTruth;
+      for (int r = 0; r < kImageHeight; ++r) {
+        std::memcpy(m.rgb.data() + static_cast<std::size_t>(r) * kImageWidth * 3, cf.rgb.ptr<std::uint8_t>(r), kImageWidth * 3);
+        std::memcpy(m.cls.data() + static_cast<std::size_t>(r) * kImageWidth, cf.cls.ptr<std::uint8_t>(r), kImageWidth);
+      }
+      if (frames->write_image(m)) cam_written.fetch_add(1, std::memory_order_relaxed);
+      else cam_dropped.fetch_add(1, std::memory_order_relaxed);
+    }
+  });
+
   // Sensor loop.
   const TimeNs t0 = monotonic_now();
-  const TimeNs lidar_period = kNsPerS / 10, cam_period = static_cast<TimeNs>(1e9 / opt.camera_hz), state_period = kNsPerS;
-  TimeNs next_lidar = t0 + kNsPerS, next_cam = t0 + kNsPerS, next_state = t0 + 2 * kNsPerS, next_progress = t0 + 5 * kNsPerS;
+  const TimeNs lidar_period = kNsPerS / 10, state_period = kNsPerS;
+  TimeNs next_lidar = t0 + kNsPerS, next_state = t0 + 2 * kNsPerS, next_progress = t0 + 5 * kNsPerS;
   TimeNs next_trail = t0;
-  std::optional<camera::FrameStreamWriter> frames;
-  auto image = std::make_unique<CameraImageMsg>();
-  CameraFrame cf;
   std::vector<std::uint8_t> pkt(ouster::kMaxPacketSize);
-  std::uint32_t image_seq = 0;
   std::string last_state;
   std::string failure;
   TimeNs done_seen = -1;
@@ -559,63 +626,29 @@ Result<HilResult> run_hil(const HilOptions& opt) {
       const std::size_t len = ublox::ubx_encode(ublox::kClassNav, ublox::kIdNavPvt, payload, msg);
       if (::write(pty, msg, len) == static_cast<ssize_t>(len)) ++res.ubx_messages;
     }
-    // Visual odometry and camera frames through the frame stream (opened once the uav reads the FIFO).
-    if (!frames) {
-      const int fd = ::open(fifo.c_str(), O_WRONLY | O_NONBLOCK | O_CLOEXEC);
-      if (fd >= 0) {
-        (void)::fcntl(fd, F_SETPIPE_SZ, 4 << 20);  // a whole frame fits: the reader drains it in one step
-        auto wr = camera::FrameStreamWriter::from_fd(fd, fifo.string());
-        if (wr) frames.emplace(std::move(wr).value());
-      }
-    }
+    // Visual odometry: queued for the camera thread, which writes it to the frame stream before each image.
     VoSample vs;
-    if (vo.sample(now, qp, vs) && frames) {
+    if (vo.sample(now, qp, vs)) {
       VoMsg m;
       m.stamp = vs.stamp;
       m.published = now;
       m.segment = vs.segment;
       m.tracking = vs.tracking;
       m.pose = vs.pose;
-      // (A failed write is counted, the stream kept: the camera stage does not reopen a FIFO that ended.)
-      if (frames->write_vo(m)) ++res.vo_records;
+      std::lock_guard<std::mutex> lk(vo_mu);
+      if (vo_queue.size() < 256) vo_queue.push_back(m);
     }
-    const bool cam_due = now >= next_cam, lidar_due = now >= next_lidar;
-    if (cam_due || lidar_due) {
-      constexpr int kBands = 8;
-      const std::size_t jobs = (cam_due ? kBands : 0) + (lidar_due ? ugvs.size() : 0);
-      if (cam_due) camera.prepare(qp, cf, now);
-      pool.run(jobs, [&](std::size_t j) {
-        if (cam_due && j < static_cast<std::size_t>(kBands)) {
-          const int h = cf.rgb.rows;
-          camera.render_rows(qp, h * static_cast<int>(j) / kBands, h * (static_cast<int>(j) + 1) / kBands, cf);
-        } else {
-          const std::size_t k = j - (cam_due ? kBands : 0);
-          lidar.scan(lidar_poses[k], opt.seed ^ static_cast<std::uint64_t>(now) ^ k, ugvs[k]->scan);
-        }
-      });
-      if (cam_due) {
-        next_cam += cam_period;
-        if (frames) {
-          CameraImageMsg& m = *image;
-          m.stamp = now;
-          m.published = now;
-          m.seq = image_seq++;
-          m.labels = LabelSource::kGroundTruth;
-          for (int r = 0; r < kImageHeight; ++r) {
-            std::memcpy(m.rgb.data() + static_cast<std::size_t>(r) * kImageWidth * 3, cf.rgb.ptr<std::uint8_t>(r), kImageWidth * 3);
-            std::memcpy(m.cls.data() + static_cast<std::size_t>(r) * kImageWidth, cf.cls.ptr<std::uint8_t>(r), kImageWidth);
-          }
-          if (frames->write_image(m)) {
-            ++res.camera_frames;
-          } else {
-            ++res.camera_frames_dropped;
-          }
-        } else {
-          ++res.camera_frames_dropped;
-        }
-      }
-      if (lidar_due) {
+    const bool lidar_due = now >= next_lidar;
+    if (lidar_due) {
+      for (std::size_t k = 0; k < ugvs.size(); ++k) lidar.scan(lidar_poses[k], opt.seed ^ static_cast<std::uint64_t>(now) ^ k, ugvs[k]->scan);
+      {
+        // A revolution every 100 ms; one the simulator could not cast in time is skipped, not sent late.
         next_lidar += lidar_period;
+        if (next_lidar < now) {
+          res.lidar_revolutions_skipped += static_cast<std::uint64_t>((now - next_lidar) / lidar_period) + 1;
+          next_lidar = now + lidar_period;
+        }
+        ++res.lidar_revolutions;
         for (auto& up : ugvs) {
           HilUgv& u = *up;
           ouster::LidarFrame& f = u.frame;
@@ -684,14 +717,14 @@ Result<HilResult> run_hil(const HilOptions& opt) {
     if (opt.progress && now >= next_progress) {
       next_progress += 5 * kNsPerS;
       std::fprintf(stderr, "hil %5.0f s  uav (%.0f, %.0f, %.0f) wp %zu  frames %llu  lidar pkts %llu", to_seconds(now - t0), qp.x, qp.y, qp.z,
-                   quad.waypoints_reached(), static_cast<unsigned long long>(res.camera_frames), static_cast<unsigned long long>(res.lidar_packets));
+                   quad.waypoints_reached(), static_cast<unsigned long long>(cam_written.load()), static_cast<unsigned long long>(res.lidar_packets));
       std::lock_guard<std::mutex> lk(mu);
       for (auto& u : ugvs)
         std::fprintf(stderr, " | %s %s %.1f m%s", u->name.c_str(), u->state.c_str(), u->distance_m,
                      u->est_error_m >= 0 ? (" err " + num(u->est_error_m).substr(0, 4) + " m").c_str() : "");
       std::fprintf(stderr, "\n");
     }
-    const TimeNs wake = std::min({next_lidar, next_cam, next_state, now + 20 * kNsPerMs});
+    const TimeNs wake = std::min({next_lidar, next_state, now + 20 * kNsPerMs});
     if (wake > monotonic_now()) {
       timespec ts{static_cast<time_t>(wake / kNsPerS), static_cast<long>(wake % kNsPerS)};
       ::clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
@@ -719,9 +752,14 @@ Result<HilResult> run_hil(const HilOptions& opt) {
       c.exit_code = -1;
     }
   }
+  stop_camera.store(true);
+  camera_thread.join();
+  res.camera_frames = cam_written.load();
+  res.camera_frames_dropped = cam_dropped.load();
+  res.camera_frames_skipped = cam_skipped.load();
+  res.vo_records = vo_written.load();
   stop.store(true);
   physics.join();
-  frames.reset();
   ::close(pty);
   if (pty_slave >= 0) ::close(pty_slave);
   for (auto& u : ugvs) {
@@ -791,7 +829,10 @@ Result<HilResult> run_hil(const HilOptions& opt) {
     j["mission_done"] = res.mission_done;
     j["duration_s"] = res.duration_s;
     j["failure"] = failure;
-    j["traffic"] = {{"lidar_packets", res.lidar_packets}, {"ubx_nav_pvt", res.ubx_messages}, {"camera_frames", res.camera_frames},
+    const double secs = std::max(1.0, res.duration_s);
+    j["rates_hz"] = {{"lidar", static_cast<double>(res.lidar_revolutions) / secs}, {"camera", static_cast<double>(res.camera_frames) / secs}};
+    j["traffic"] = {{"lidar_packets", res.lidar_packets}, {"lidar_revolutions", res.lidar_revolutions}, {"lidar_revolutions_skipped", res.lidar_revolutions_skipped},
+                    {"camera_frames_skipped", res.camera_frames_skipped}, {"ubx_nav_pvt", res.ubx_messages}, {"camera_frames", res.camera_frames},
                     {"camera_frames_dropped", res.camera_frames_dropped}, {"vo_records", res.vo_records}, {"can_commands_received", res.can_frames_in}};
     for (const HilRobot& r : res.robots)
       j["robots"].push_back({{"name", r.name}, {"exit_code", r.exit_code}, {"state", r.final_state}, {"distance_m", r.distance_m},
@@ -808,8 +849,9 @@ Result<HilResult> run_hil(const HilOptions& opt) {
       md << "| " << r.name << " | " << r.exit_code << " | " << r.final_state << " | " << num(r.distance_m).substr(0, 6) << " | "
          << (r.final_error_m >= 0 ? num(r.final_error_m).substr(0, 5) : "-") << " | "
          << (r.mean_error_m >= 0 ? num(r.mean_error_m).substr(0, 5) + " / " + num(r.max_error_m).substr(0, 5) : "-") << " | " << r.collisions << " |\n";
-    md << "\nWire traffic: " << res.lidar_packets << " Ouster packets, " << res.ubx_messages << " UBX NAV-PVT, " << res.camera_frames
-       << " camera frames (" << res.camera_frames_dropped << " not delivered), " << res.vo_records << " VO records, " << res.can_frames_in
+    md << "\nWire traffic: " << res.lidar_packets << " Ouster packets (" << res.lidar_revolutions << " revolutions, "
+       << res.lidar_revolutions_skipped << " skipped: the simulator was late), " << res.ubx_messages << " UBX NAV-PVT, " << res.camera_frames
+       << " camera frames (" << res.camera_frames_dropped << " not delivered, " << res.camera_frames_skipped << " skipped), " << res.vo_records << " VO records, " << res.can_frames_in
        << " Set_Input_Vel frames.\n\n## Stage timing (thread CPU per step, from each process's final counters)\n\n"
        << "| robot | stage | runs | p50 [us] | p99 [us] | max [us] | budget [us] | overruns |\n|---|---|---|---|---|---|---|---|\n";
     for (const HilStageTiming& t : res.timing)

@@ -53,6 +53,8 @@ struct HilResult {
   std::vector<HilRobot> robots;      // uav, ugv1.., base
   std::vector<HilStageTiming> timing;
   std::uint64_t lidar_packets{0}, ubx_messages{0}, camera_frames{0}, camera_frames_dropped{0}, vo_records{0};
+  std::uint64_t lidar_revolutions{0}, lidar_revolutions_skipped{0};  // per ground robot; skipped: cast too late
+  std::uint64_t camera_frames_skipped{0};                            // the render took longer than the period
   std::uint64_t can_frames_in{0}, can_frames_out{0};
 };
 
