@@ -116,6 +116,11 @@ std::string num(double v) {
   std::snprintf(b, sizeof b, "%.6f", v);
   return b;
 }
+std::string fixed(double v, int digits) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.*f", digits, v);
+  return b;
+}
 
 struct Child {
   std::string name, role;
@@ -721,7 +726,7 @@ Result<HilResult> run_hil(const HilOptions& opt) {
       std::lock_guard<std::mutex> lk(mu);
       for (auto& u : ugvs)
         std::fprintf(stderr, " | %s %s %.1f m%s", u->name.c_str(), u->state.c_str(), u->distance_m,
-                     u->est_error_m >= 0 ? (" err " + num(u->est_error_m).substr(0, 4) + " m").c_str() : "");
+                     u->est_error_m >= 0 ? (" err " + fixed(u->est_error_m, 2) + " m").c_str() : "");
       std::fprintf(stderr, "\n");
     }
     const TimeNs wake = std::min({next_lidar, next_state, now + 20 * kNsPerMs});
@@ -843,20 +848,21 @@ Result<HilResult> run_hil(const HilOptions& opt) {
     std::ofstream(out / "hil.json") << j.dump(2) << "\n";
     std::ofstream md(out / "hil_report.md");
     md << "# HIL run: " << opt.mission_file << "\n\n"
-       << (res.mission_done ? "Mission **done**" : "Mission **not finished**") << " after " << num(res.duration_s).substr(0, 6) << " s"
+       << (res.mission_done ? "Mission **done**" : "Mission **not finished**") << " after " << fixed(res.duration_s, 1) << " s"
        << (failure.empty() ? "" : " — " + failure) << ".\n\nLocalization error: the pose the base station last heard against the truth of that time (every poll while tracking: mean, max).\n\n| robot | exit | state | driven [m] | final error [m] | mean / max error [m] | collisions |\n|---|---|---|---|---|---|---|\n";
     for (const HilRobot& r : res.robots)
-      md << "| " << r.name << " | " << r.exit_code << " | " << r.final_state << " | " << num(r.distance_m).substr(0, 6) << " | "
-         << (r.final_error_m >= 0 ? num(r.final_error_m).substr(0, 5) : "-") << " | "
-         << (r.mean_error_m >= 0 ? num(r.mean_error_m).substr(0, 5) + " / " + num(r.max_error_m).substr(0, 5) : "-") << " | " << r.collisions << " |\n";
+      md << "| " << r.name << " | " << r.exit_code << " | " << r.final_state << " | " << fixed(r.distance_m, 1) << " | "
+         << (r.final_error_m >= 0 ? fixed(r.final_error_m, 2) : "-") << " | "
+         << (r.mean_error_m >= 0 ? fixed(r.mean_error_m, 2) + " / " + fixed(r.max_error_m, 2) : "-") << " | " << r.collisions << " |\n";
     md << "\nWire traffic: " << res.lidar_packets << " Ouster packets (" << res.lidar_revolutions << " revolutions, "
        << res.lidar_revolutions_skipped << " skipped: the simulator was late), " << res.ubx_messages << " UBX NAV-PVT, " << res.camera_frames
        << " camera frames (" << res.camera_frames_dropped << " not delivered, " << res.camera_frames_skipped << " skipped), " << res.vo_records << " VO records, " << res.can_frames_in
-       << " Set_Input_Vel frames.\n\n## Stage timing (thread CPU per step, from each process's final counters)\n\n"
+       << " Set_Input_Vel frames.\n\n## Stage timing (wall time per step, as each process's real-time executor measured it: "
+          "preemption by the other processes on this machine counts; from their final counters)\n\n"
        << "| robot | stage | runs | p50 [us] | p99 [us] | max [us] | budget [us] | overruns |\n|---|---|---|---|---|---|---|---|\n";
     for (const HilStageTiming& t : res.timing)
-      md << "| " << t.robot << " | " << t.stage << " | " << t.runs << " | " << num(t.p50_us).substr(0, 8) << " | " << num(t.p99_us).substr(0, 8)
-         << " | " << num(t.max_us).substr(0, 8) << " | " << t.budget_us << " | " << t.overruns << " |\n";
+      md << "| " << t.robot << " | " << t.stage << " | " << t.runs << " | " << fixed(t.p50_us, 1) << " | " << fixed(t.p99_us, 1)
+         << " | " << fixed(t.max_us, 1) << " | " << t.budget_us << " | " << t.overruns << " |\n";
     cv::Mat img;
     cv::cvtColor(class_display_image(w.class_id), img, cv::COLOR_RGB2BGR);
     auto px = [&](const cv::Point2d& p) { return cv::Point(g.col(p.x), g.row(p.y)); };
