@@ -65,6 +65,7 @@ Status PoseGraphStage::init(StageContext& ctx) {
   p.min_gps_fixes = static_cast<int>(v.integer("min_gps_fixes"));
   p.min_gps_baseline_m = v.real("min_gps_baseline_m");
   keyframe_distance_m_ = v.real("keyframe_distance_m");
+  segment_settle_m_ = v.real("segment_settle_m");
   max_image_wait_s_ = v.real("max_image_wait_s");
   graph_ = std::make_unique<PoseGraph>(p);
   clock_ = &ctx.clock;
@@ -143,9 +144,11 @@ void PoseGraphStage::publish_poses(TimeNs now) noexcept {
 
 void PoseGraphStage::step(TimeNs now) noexcept {
   while (const GpsMsg* g = gps_.front()) {
-    if (g->fix_type >= 2)
+    if (g->fix_type >= 2) {
       graph_->add_gps(g->stamp, Eigen::Vector3d(g->east_m, g->north_m, g->up_m), g->h_accuracy_m);
-    else
+      last_fix_ = Eigen::Vector3d(g->east_m, g->north_m, g->up_m);
+      have_fix_ = true;
+    } else
       ++c_.gps_no_fix;
     gps_.pop();
   }
@@ -190,6 +193,25 @@ void PoseGraphStage::step(TimeNs now) noexcept {
       ++c_.frames_before_init;
       camera_.pop();
       continue;
+    }
+    // A segment after a tracking loss starts with the previous one's scale, a guess: its keyframes'
+    // baselines, and so every stereo depth, would be off by the guess's error (metres at 40 m). Wait
+    // until GPS has seen it travel segment_settle_m, which pins its scale in the graph.
+    if (!have_seg_ || segment != seg_) {
+      const bool first = !have_seg_;
+      have_seg_ = true;
+      seg_ = segment;
+      seg_settled_ = first || segment_settle_m_ <= 0;  // the first segment is pinned by the climb and the priors
+      seg_origin_ = last_fix_;
+      if (!have_fix_) seg_settled_ = true;
+    }
+    if (!seg_settled_) {
+      if ((last_fix_ - seg_origin_).norm() < segment_settle_m_) {
+        ++c_.frames_settling;
+        camera_.pop();
+        continue;
+      }
+      seg_settled_ = true;
     }
     const Eigen::Isometry3d pose = pose_of(ref);
     if (have_kf_ && segment == last_kf_segment_ && (pose.translation() - last_kf_position_).norm() < keyframe_distance_m_) {

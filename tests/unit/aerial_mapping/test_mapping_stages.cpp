@@ -5,6 +5,7 @@
 #include <cmath>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "airground/aerial_mapping/stages.hpp"
 #include "airground/core/messages.hpp"
@@ -35,6 +36,7 @@ struct Faults {
   double no_fix_from{-1}, no_fix_to{-1};              // [s] GPS reports fix type 0
   double lost_from{-1}, lost_to{-1};                  // [s] odometry flagged tracking lost
   double out_of_order_at{-1};                         // [s] one image, one odometry sample and one fix stamped 1 s old
+  double new_segment_at{-1};                          // [s] odometry restarts: segment 1, its own origin and scale
 };
 
 bool in(double t, double a, double b) { return t >= a && t < b; }
@@ -47,8 +49,9 @@ struct Run {
   const OrthoMapStage* om{nullptr};
 };
 
-std::unique_ptr<Run> run(const Faults& f, double duration_s) {
+std::unique_ptr<Run> run(const Faults& f, double duration_s, const std::vector<std::string>& sets = {}) {
   auto r = std::make_unique<Run>();
+  for (const std::string& kv : sets) EXPECT_TRUE(r->config.set(kv).ok()) << kv;
   auto created = RoleInstance::create(role(), r->config, r->clock, "uav-test");
   EXPECT_TRUE(created.ok()) << created.error().message;
   if (!created.ok()) return nullptr;
@@ -88,6 +91,11 @@ std::unique_ptr<Run> run(const Faults& f, double duration_s) {
       m.tracking = !in(s, f.lost_from, f.lost_to);
       const Eigen::Vector3d p = position(s);
       m.pose = Pose3{p.x(), p.y(), p.z(), 0.0, 0.0, 0.0};
+      if (f.new_segment_at >= 0 && s >= f.new_segment_at) {  // a new frame: origin at the restart, scale 2
+        m.segment = 1;
+        const Eigen::Vector3d q = 2.0 * (p - position(f.new_segment_at));
+        m.pose = Pose3{q.x(), q.y(), q.z(), 0.0, 0.0, 0.0};
+      }
       vo.value().push(m);
     }
     for (; next_gps <= t; next_gps += kNsPerS / 5) {
@@ -144,6 +152,28 @@ TEST(MappingStages, CleanInputKeyframesEveryTwoMetresAndMatchesPairs) {
   EXPECT_EQ(c.gps_no_fix, 0u);
   EXPECT_GT(r->om->counters().pairs_matched, 25u);
   EXPECT_GT(r->om->map().cells_classified(), 1000u);
+}
+
+// After a tracking loss the new odometry segment starts with the old one's scale, a guess: no keyframes
+// (so no stereo depths from guessed baselines) until GPS has seen it travel segment_settle_m (15 m: 3 s
+// at 5 m/s, ~15 frames); then keyframing resumes. With the rule off, keyframing goes straight on.
+TEST(MappingStages, ANewOdometrySegmentIsNotKeyframedUntilGpsPinnedItsScale) {
+  Faults f;
+  f.new_segment_at = 10.0;
+  auto r = run(f, 25.0);
+  ASSERT_NE(r, nullptr);
+  const PoseGraphStageCounters& c = r->pg->counters();
+  EXPECT_GE(c.frames_settling, 10u);
+  EXPECT_LE(c.frames_settling, 22u);
+  auto off = run(f, 25.0, {"pose_graph.segment_settle_m=0"});
+  ASSERT_NE(off, nullptr);
+  EXPECT_EQ(off->pg->counters().frames_settling, 0u);
+  // Keyframing resumed after the settling distance: about 15 m (7 keyframes) fewer than without the rule.
+  const std::uint64_t with = c.frames_keyframed, without = off->pg->counters().frames_keyframed;
+  ASSERT_GT(without, with);
+  EXPECT_GE(without - with, 4u);
+  EXPECT_LE(without - with, 10u);
+  EXPECT_GT(with, 35u) << "keyframing resumed";
 }
 
 TEST(MappingStages, EveryKindOfBadInputIsCountedAndMappingResumes) {

@@ -38,6 +38,7 @@ struct PoseGraphStageCounters {
   std::uint64_t frames_in{0}, frames_keyframed{0};
   std::uint64_t frames_without_odometry{0};  // no odometry around the image time (or a segment change)
   std::uint64_t frames_before_init{0};       // the graph was not georeferenced yet
+  std::uint64_t frames_settling{0};          // a new odometry segment whose scale GPS has not pinned yet
   std::uint64_t frames_out_of_order{0};
   std::uint64_t frames_dropped_busy{0};      // keyframe ring full
   std::uint64_t odometry_lost{0};            // samples flagged tracking lost
@@ -48,6 +49,8 @@ class PoseGraphStage final : public Stage {
  public:
   static constexpr ParamSpec kParams[] = {
       ParamSpec::real("keyframe_distance_m", 2.0, 0.2, 50.0, "m", "a new keyframe once the optimised position moved this far (ASOOM: 2 m)"),
+      ParamSpec::real("segment_settle_m", 15.0, 0.0, 1000.0, "m",
+                      "after a tracking loss, no keyframes until GPS saw the new odometry segment travel this far (its scale is a guess until then); 0 = off"),
       ParamSpec::real("max_image_wait_s", 1.0, 0.05, 10.0, "s", "an image waits this long for the odometry after it, then is dropped (counted)"),
       ParamSpec::integer("solve_every_frames", 30, 1, 1000, "frames", "re-solve the graph after this many frames (ASOOM: ~30)"),
       ParamSpec::integer("window_frames", 600, 0, 100000, "frames", "free nodes per solve, older ones held constant; 0 = all"),
@@ -107,6 +110,11 @@ class PoseGraphStage final : public Stage {
   double max_image_wait_s_{1.0};
   std::uint32_t next_id_{0};
   std::uint32_t last_kf_segment_{0};
+  // The newest fix, and where it was when the current odometry segment began (segment_settle_m).
+  double segment_settle_m_{15.0};
+  bool have_fix_{false}, have_seg_{false}, seg_settled_{false};
+  std::uint32_t seg_{0};
+  Eigen::Vector3d last_fix_{Eigen::Vector3d::Zero()}, seg_origin_{Eigen::Vector3d::Zero()};
   Eigen::Vector3d last_kf_position_{0, 0, 0};
   bool have_kf_{false};
   TimeNs last_image_stamp_{-1};
