@@ -147,7 +147,7 @@ class OrthoMapStage final : public Stage {
       ParamSpec::real("min_depth_m", 1.0, 0.1, 1000.0, "m", "points nearer are dropped (ASOOM: 1)"),
       ParamSpec::real("max_depth_m", 150.0, 1.0, 10000.0, "m", "points further are dropped (ASOOM: 150)"),
       ParamSpec::real("min_baseline_m", 0.5, 0.01, 100.0, "m", "keyframe pairs closer than this are not matched"),
-      ParamSpec::real("baseline_depth_ratio", 0.12, 0.0, 1.0, "", "pair each keyframe with the earlier one whose baseline is nearest this x the ground depth (0 = the previous keyframe, ASOOM)"),
+      ParamSpec::real("baseline_depth_ratio", 0.18, 0.0, 1.0, "", "pair each keyframe with the earlier one whose baseline is nearest this x the ground depth (0 = the previous keyframe, ASOOM)"),
       ParamSpec::integer("pair_history", 8, 1, 32, "keyframes", "earlier keyframes kept as stereo partners"),
       ParamSpec::real("resolution_m", 0.5, 0.05, 10.0, "m", "map cell size"),
       ParamSpec::integer("tile_cells", 64, 8, 1024, "cells", "tile edge"),
@@ -210,7 +210,7 @@ class OrthoMapStage final : public Stage {
   // Earlier keyframes (newest last), the candidates for the next keyframe's stereo partner.
   std::vector<std::unique_ptr<KeyframeMsg>> history_;
   std::size_t history_count_{0}, history_head_{0};  // ring over history_
-  double baseline_depth_ratio_{0.12};
+  double baseline_depth_ratio_{0.18};
   std::vector<float> depth_scratch_;
   std::vector<MapPoint> points_;
   std::vector<std::pair<std::uint32_t, Eigen::Isometry3d>> corrections_;
