@@ -247,15 +247,7 @@ Result<HilResult> run_hil(const HilOptions& opt) {
 
   // The team key, as an operator would make it.
   const fs::path key = out / "config" / "team.key";
-  {
-    std::ofstream k(key);
-    Rng rng(derive_seed(opt.seed, std::uint64_t{0x68696C}));
-    static constexpr char kHex[] = "0123456789abcdef";
-    for (int i = 0; i < 64; ++i) k << kHex[rng.below(16)];
-    k << "\n";
-    if (!k) return Error::make(ErrorCode::kIo, "cannot write " + key.string());
-  }
-  fs::permissions(key, fs::perms::owner_read | fs::perms::owner_write, fs::perm_options::replace, ec);
+  if (auto st = write_team_key(key.string(), derive_seed(opt.seed, std::uint64_t{0x68696C})); !st) return st.error();
 
   // Ports: gossip per process, lidar + IMU per ground robot, the CAN bridge's two ends per ground robot, the page.
   const int n = static_cast<int>(mf.team.size());

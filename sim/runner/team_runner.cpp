@@ -48,6 +48,20 @@
 
 namespace ag::sim {
 
+Status write_team_key(const std::string& path, std::uint64_t seed) {
+  {
+    std::ofstream k(path);
+    Rng rng(seed);
+    static constexpr char kHex[] = "0123456789abcdef";
+    for (int i = 0; i < 64; ++i) k << kHex[rng.below(16)];
+    k << "\n";
+    if (!k) return Error::make(ErrorCode::kIo, "cannot write the team key " + path);
+  }
+  std::error_code ec;
+  std::filesystem::permissions(path, std::filesystem::perms::owner_read | std::filesystem::perms::owner_write, std::filesystem::perm_options::replace, ec);
+  return ok_status();
+}
+
 Result<std::shared_ptr<const World>> resolve_world(const std::string& world_arg) {
   if (world_arg == "default") return std::shared_ptr<const World>(&default_world(), [](const World*) {});
   auto w = load_world(world_arg);
@@ -1073,15 +1087,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   } links;
   if (opt.gossip) {
     const fs::path key = t.out / "team.key";
-    {
-      std::ofstream k(key);
-      Rng rng(derive_seed(opt.seed, std::uint64_t{0x6B6579}));
-      static constexpr char kHex[] = "0123456789abcdef";
-      for (int i = 0; i < 64; ++i) k << kHex[rng.below(16)];
-      k << "\n";
-      if (!k) return Error::make(ErrorCode::kIo, "cannot write the team key " + key.string());
-    }
-    fs::permissions(key, fs::perms::owner_read | fs::perms::owner_write, fs::perm_options::replace, ec);
+    if (auto st = write_team_key(key.string(), derive_seed(opt.seed, std::uint64_t{0x6B6579})); !st) return st.error();
     comms_common = {"comms.transport=inproc", "comms.key_file=" + key.string(), "comms.epoch_from_clock=false"};
     auto reg = [&](const std::string& name, int node) {
       comms::register_inproc_link(name, &t.net->endpoint(node));

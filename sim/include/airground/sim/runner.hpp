@@ -244,4 +244,8 @@ Result<RunSummary> run_team(const RunOptions& options, const ProgressFn& progres
 // Loads a world directory, or generates the built-in default for "default".
 Result<std::shared_ptr<const World>> resolve_world(const std::string& world_arg);
 
+// A team key as an operator makes one (64 hex digits, owner-only), drawn from `seed` so a run repeats;
+// the lockstep runner and the HIL mode write one per run. The error names the file.
+Status write_team_key(const std::string& path, std::uint64_t seed);
+
 }  // namespace ag::sim
