@@ -8,6 +8,10 @@
 #include <fstream>
 #include <limits>
 #include <sstream>
+#include <utility>
+#include <vector>
+
+#include <yaml-cpp/yaml.h>
 
 #include "airground/aerial_mapping/stages.hpp"
 #include "airground/core/classes.hpp"
@@ -81,31 +85,47 @@ Result<std::string> model_dir(const EvalMappingOptions& o) {
     for (const auto& e : fs::directory_iterator(o.config_dir, ec))
       if (e.path().extension() == ".yaml") fs::copy_file(e.path(), dir / e.path().filename(), fs::copy_options::overwrite_existing, ec);
   }
-  auto append = [&](const char* file, const std::string& body) {
+  // Merges `keys` into the model file `file` (section `section`): the caller's file may hold the keys at
+  // its top level or under the section (as `airground-sim config --out` writes it); ours win.
+  auto merge = [&](const char* file, const char* section, const std::vector<std::pair<std::string, std::string>>& keys) -> Status {
     const fs::path p = dir / file;
-    std::string existing;
+    YAML::Node model(YAML::NodeType::Map);
     if (fs::exists(p)) {
-      std::ifstream in(p);
-      std::ostringstream ss;
-      ss << in.rdbuf();
-      existing = ss.str();
+      try {
+        YAML::Node root = YAML::LoadFile(p.string());
+        if (root.IsMap() && root.size() == 1 && root[section]) root = root[section];
+        if (root.IsMap()) model = root;
+        else if (!root.IsNull()) return Error::make(ErrorCode::kConfig, "config error: " + p.string() + ": '" + section + "' must be a mapping of key: value");
+      } catch (const YAML::Exception& e) {
+        return Error::make(ErrorCode::kConfig, "config error: " + p.string() + ":" + std::to_string(e.mark.line + 1) + ": malformed YAML: " + e.msg);
+      }
     }
-    std::ofstream out(p);
-    // A section named after the model holds the keys; overrides of ours win (set last).
-    if (existing.empty()) out << body;
-    else out << existing << "\n" << body;
+    for (const auto& [k, v] : keys) model[k] = v;
+    YAML::Node out;
+    out[section] = model;
+    std::ofstream f(p);
+    f << out << "\n";
+    if (!f) return Error::make(ErrorCode::kIo, "cannot write " + p.string());
+    return ok_status();
   };
-  std::string vo, gps;
-  if (o.vo_scale > 0) vo += "scale_min: " + std::to_string(o.vo_scale) + "\nscale_max: " + std::to_string(o.vo_scale) + "\n";
-  if (o.tracking_loss_at_s >= 0) vo += "forced_loss_at_s: " + std::to_string(o.tracking_loss_at_s) + "\n";
-  if (!o.random_faults) {
-    vo += "tracking_loss_rate_per_s: 0\n";
-    gps += "dropout_rate_per_s: 0\n";
+  std::vector<std::pair<std::string, std::string>> vo, gps;
+  if (o.vo_scale > 0) {
+    vo.emplace_back("scale_min", std::to_string(o.vo_scale));
+    vo.emplace_back("scale_max", std::to_string(o.vo_scale));
   }
-  if (o.gps_outlier_at_s >= 0)
-    gps += "outlier_at_s: " + std::to_string(o.gps_outlier_at_s) + "\noutlier_m: " + std::to_string(o.gps_outlier_m) + "\n";
-  if (!vo.empty()) append("visual_odometry.yaml", vo);
-  if (!gps.empty()) append("gps.yaml", gps);
+  if (o.tracking_loss_at_s >= 0) vo.emplace_back("forced_loss_at_s", std::to_string(o.tracking_loss_at_s));
+  if (!o.random_faults) {
+    vo.emplace_back("tracking_loss_rate_per_s", "0");
+    gps.emplace_back("dropout_rate_per_s", "0");
+  }
+  if (o.gps_outlier_at_s >= 0) {
+    gps.emplace_back("outlier_at_s", std::to_string(o.gps_outlier_at_s));
+    gps.emplace_back("outlier_m", std::to_string(o.gps_outlier_m));
+  }
+  if (!vo.empty())
+    if (auto st = merge("visual_odometry.yaml", "visual_odometry", vo); !st) return st.error();
+  if (!gps.empty())
+    if (auto st = merge("gps.yaml", "gps", gps); !st) return st.error();
   return dir.string();
 }
 

@@ -42,7 +42,7 @@ struct OrthoMapParams {
   // A cell reports an elevation once its leading hypothesis has this many points (a typical cell seen
   // from 40 m gathers hundreds; the few points that reach a narrow gap between crowns, or the far side of
   // a wall, are mostly wrong matches). Fewer: elevation unknown (NaN), class and colour still shown.
-  int min_elevation_points{16};      // [points]
+  int min_elevation_points{32};      // [points]
   int window_keyframes{256};         // keyframes kept re-binnable (>= the pose graph's free window)
   double rebuild_translation_m{0.2}; // [m] a keyframe moved further than this is re-binned
   double rebuild_rotation_rad{0.005};  // [rad] ... or turned by more than this

@@ -158,7 +158,7 @@ class OrthoMapStage final : public Stage {
       ParamSpec::real("ground_check_m", 1.0, 0.0, 100.0, "m", "flat-class points further than this from the local ground are dropped (0 = off)"),
       ParamSpec::integer("ground_window_cells", 3, 0, 32, "cells", "half-width of the window whose flat-class median is the local ground"),
       ParamSpec::real("raised_min_height_m", 0.3, 0.0, 100.0, "m", "tree/building/vehicle points lower than this above the local ground are dropped"),
-      ParamSpec::integer("min_elevation_points", 16, 1, 100000, "points", "a cell reports an elevation once it has this many points (else unknown)"),
+      ParamSpec::integer("min_elevation_points", 32, 1, 100000, "points", "a cell reports an elevation once it has this many points (else unknown)"),
       ParamSpec::integer("window_keyframes", 256, 2, 512, "keyframes", "keyframes kept re-binnable after pose-graph corrections"),
       ParamSpec::real("rebuild_translation_m", 0.2, 0.0, 100.0, "m", "a keyframe moved further than this is re-binned (ASOOM: 2)"),
       ParamSpec::real("rebuild_rotation_rad", 0.005, 0.0, 3.2, "rad", "... or turned more than this (ASOOM: 0.1)"),
