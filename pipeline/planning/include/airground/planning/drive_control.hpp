@@ -21,7 +21,7 @@ struct DriveParams {
   double lookahead_min_m{1.0};
   double lookahead_time_s{1.2};     // look-ahead = max(min, speed x this)
   double turn_in_place_rad{1.0};    // heading error beyond which the robot turns on the spot
-  double goal_tolerance_m{0.5};
+  double goal_tolerance_m{0.25};
   double track_m{0.55};             // [m] wheel separation (the base's)
   double max_wheel_speed_mps{1.6};  // both wheels scaled down together beyond this (curvature kept)
 };
@@ -35,7 +35,7 @@ inline constexpr ParamSpec kDriveParamSpecs[] = {
     ParamSpec::real("lookahead_min_m", 1.0, 0.1, 10.0, "m", "shortest pure-pursuit look-ahead"),
     ParamSpec::real("lookahead_time_s", 1.2, 0.0, 10.0, "s", "look-ahead grows with speed x this"),
     ParamSpec::real("turn_in_place_rad", 1.0, 0.1, 3.2, "rad", "heading error beyond which the robot turns on the spot"),
-    ParamSpec::real("goal_tolerance_m", 0.5, 0.05, 5.0, "m", "the goal is reached within this"),
+    ParamSpec::real("goal_tolerance_m", 0.25, 0.05, 5.0, "m", "the goal is reached within this (nav2's xy_goal_tolerance default)"),
     ParamSpec::real("track_m", 0.55, 0.05, 5.0, "m", "wheel separation of the base"),
     ParamSpec::real("max_wheel_speed_mps", 1.6, 0.1, 10.0, "m/s", "wheel speed limit (both wheels scaled together)"),
 };
