@@ -18,6 +18,7 @@
 #include "airground/core/pose_math.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "airground/sim/map_export.hpp"
+#include "airground/sim/model_params.hpp"
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -92,8 +93,7 @@ Result<std::string> model_dir(const EvalMappingOptions& o) {
     YAML::Node model(YAML::NodeType::Map);
     if (fs::exists(p)) {
       try {
-        YAML::Node root = YAML::LoadFile(p.string());
-        if (root.IsMap() && root.size() == 1 && root[section]) root = root[section];
+        const YAML::Node root = model_mapping(YAML::LoadFile(p.string()), section);
         if (root.IsMap()) model = root;
         else if (!root.IsNull()) return Error::make(ErrorCode::kConfig, "config error: " + p.string() + ": '" + section + "' must be a mapping of key: value");
       } catch (const YAML::Exception& e) {

@@ -33,6 +33,7 @@
 #include "airground/sim/generator.hpp"
 #include "airground/sim/gps.hpp"
 #include "airground/sim/lidar.hpp"
+#include "airground/sim/model_params.hpp"
 #include "airground/sim/quadrotor.hpp"
 #include "airground/sim/radio.hpp"
 #include "airground/sim/radio_link.hpp"
@@ -91,9 +92,7 @@ Result<T> model_config(const std::string& dir, const char* name, std::string_vie
   } catch (const YAML::Exception& e) {
     return Error::make(ErrorCode::kConfig, "config error: " + p.string() + ":" + std::to_string(e.mark.line + 1) + ": malformed YAML: " + e.msg);
   }
-  const std::string sec(section);
-  if (root.IsMap() && root.size() == 1 && root[sec]) return load(root[sec], p.string());
-  return load(root, p.string());
+  return load(model_mapping(root, section), p.string());
 }
 
 class CsvLog {

@@ -71,9 +71,8 @@ void PlannerStage::plan_now(TimeNs now) noexcept {
     m.length_m = 0;
     // A map still being loaded (tiles queued for the roadmap) explains most early failures: say so, so
     // a start-up "no free cell near the goal" is not read as a wrong goal. It is re-planned anyway.
-    const std::size_t pending = map_->pending_tiles();
     if (c_.plans_failed == 1 || c_.plans_failed % 50 == 0) {
-      if (pending > 0)
+      if (const std::size_t pending = map_->pending_tiles(); pending > 0)
         AG_LOG_INFO("planner", "goal %u at (%.1f, %.1f): %s while the map loads (%zu tiles queued; %llu failures)", goal_.id, goal_.goal.x,
                     goal_.goal.y, to_string(path_->status), pending, static_cast<unsigned long long>(c_.plans_failed));
       else

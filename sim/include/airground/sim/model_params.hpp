@@ -51,6 +51,14 @@ inline Result<Config> load_model_params(std::span<const ParamSection> schema, st
   return load_model_params(schema, node, origin);
 }
 
+// A model file's mapping: its keys at the top level, or under one key named after the model's section
+// (as `airground-sim config --out` writes it). Both the runner and `eval mapping` read files this way.
+inline YAML::Node model_mapping(const YAML::Node& root, std::string_view section) {
+  const std::string sec(section);
+  if (root.IsMap() && root.size() == 1 && root[sec]) return root[sec];
+  return root;
+}
+
 inline Error model_config_error(std::string_view origin, const std::string& what) {
   return Error::make(ErrorCode::kConfig, "config error: " + std::string(origin) + ": " + what);
 }
