@@ -174,5 +174,24 @@ TEST_F(MappingMission, BothFaultsAreHandledTheMapStaysWithinBoundsAndGdalReadsTh
   }
 }
 
+// A user model file the fault injection cannot merge into is refused before any flight, naming it.
+TEST(MappingEvalModels, AMalformedUserModelFileIsAClearErrorNamingIt) {
+  const fs::path root = out_root() / "bad-models";
+  fs::create_directories(root / "user-models");
+  {
+    std::ofstream f(root / "user-models" / "visual_odometry.yaml");
+    f << "visual_odometry:\n  scale_min: [3\n";  // an unclosed list
+  }
+  EvalMappingOptions o;
+  o.config_dir = (root / "user-models").string();
+  o.out_dir = (root / "out").string();
+  o.tracking_loss_at_s = 10;
+  o.quiet = true;
+  auto m = eval_mapping(o);
+  ASSERT_FALSE(m.ok());
+  EXPECT_NE(m.error().message.find("visual_odometry.yaml"), std::string::npos) << m.error().message;
+  EXPECT_NE(m.error().message.find("malformed YAML"), std::string::npos) << m.error().message;
+}
+
 }  // namespace
 }  // namespace ag::sim
