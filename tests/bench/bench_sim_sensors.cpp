@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "airground/core/classes.hpp"
+#include "airground/planning/local_tracker.hpp"
 #include "airground/sim/camera.hpp"
 #include "airground/sim/lidar.hpp"
 #include "airground/sim/raycast.hpp"
@@ -282,6 +283,29 @@ int main(int argc, char** argv) {
     const Timing t = time_it([&] { lidar.scan_per_ray(lidar_pose, 1, pts); }, 1.0, 3);
     std::printf("lidar  64x1024 without the max pyramid: %6.2f ms/scan (reference)\n", 1e3 * t.per_op_s);
     std::snprintf(buf, sizeof buf, ",\"lidar_64x1024_plain_dda_ms\":%.3f", 1e3 * t.per_op_s);
+    json += buf;
+  }
+  // The ground robot's obstacle grid from that 64x1024 scan (the tracker stage's work per scan): free
+  // space traced once per end cell, against a line to every ground return (the same grid).
+  if (!camera_only) {
+    const ag::sim::LidarSimulator lidar(town, beams_or.value(), ag::sim::LidarNoise{}, rc);
+    std::vector<ag::sim::LidarPoint> pts;
+    lidar.scan(lidar_pose, 3, pts);
+    std::vector<ag::ScanReturn> sr;
+    for (const auto& q : pts) sr.push_back(ag::ScanReturn{q.x, q.y, q.z, q.range, q.cls, q.ring, q.col});
+    const ag::Pose3 mount{0, 0, 1.0, 0, 0, 0};
+    const ag::Pose2 robot{lidar_pose.x, lidar_pose.y, lidar_pose.yaw};
+    ag::plan::LocalTrackerParams once, every;
+    every.trace_each_end_cell_once = false;
+    ag::plan::LocalTracker a(once), b(every);
+    const Timing t = time_it([&] { (void)a.update(sr, mount, robot, 1.0); }, 1.0, 10);
+    const Timing r = time_it([&] { (void)b.update(sr, mount, robot, 1.0); }, 1.0, 5);
+    int same = 0;
+    for (int j = 0; j < a.width(); ++j)
+      for (int i = 0; i < a.width(); ++i) same += a.cell(i, j) == b.cell(i, j);
+    std::printf("tracker obstacle grid from it: %6.2f ms/scan; a line to every ground return %6.2f ms: x%.1f (grids %s)\n",
+                1e3 * t.per_op_s, 1e3 * r.per_op_s, r.per_op_s / t.per_op_s, same == a.width() * a.width() ? "identical" : "DIFFER");
+    std::snprintf(buf, sizeof buf, ",\"tracker_update_ms\":%.3f,\"tracker_update_every_ray_ms\":%.3f", 1e3 * t.per_op_s, 1e3 * r.per_op_s);
     json += buf;
   }
   json += "}";

@@ -13,6 +13,8 @@ namespace {
 constexpr std::uint8_t kUnknown = 0, kFree = 1, kObstacle = 2;
 constexpr float kClearCap = 3.0F;
 constexpr double kResumeMinM = 1.0;  // [m] a forward goal nearer than this does not end a back-up
+constexpr std::size_t kFarSlots = 1U << 14;  // end cells outside the grid, per scan (power of two)
+constexpr int kFarProbes = 16;
 }  // namespace
 
 const char* to_string(TrackState s) noexcept {
@@ -31,6 +33,30 @@ LocalTracker::LocalTracker(const LocalTrackerParams& p) : p_(p) {
   grid_.assign(static_cast<std::size_t>(n_) * static_cast<std::size_t>(n_), kUnknown);
   clear_.assign(grid_.size(), 0.0F);
   inliers_.assign(4096, 0);
+  end_stamp_.assign(grid_.size(), 0);
+  far_keys_.assign(kFarSlots, 0);
+  far_stamp_.assign(kFarSlots, 0);
+}
+
+bool LocalTracker::first_free_ray(int ei, int ej) noexcept {
+  if (ei >= 0 && ej >= 0 && ei < n_ && ej < n_) {
+    std::uint32_t& s = end_stamp_[idx(ei, ej)];
+    if (s == stamp_) return false;
+    s = stamp_;
+    return true;
+  }
+  const std::uint64_t key = (static_cast<std::uint64_t>(static_cast<std::uint32_t>(ei)) << 32) | static_cast<std::uint32_t>(ej);
+  std::uint64_t h = key * 0x9E3779B97F4A7C15ULL;
+  for (int probe = 0; probe < kFarProbes; ++probe, ++h) {
+    const std::size_t slot = static_cast<std::size_t>(h >> 50) & (kFarSlots - 1);
+    if (far_stamp_[slot] != stamp_) {
+      far_stamp_[slot] = stamp_;
+      far_keys_[slot] = key;
+      return true;
+    }
+    if (far_keys_[slot] == key) return false;
+  }
+  return true;  // the set is crowded here: trace it again (same result, more work)
 }
 
 bool LocalTracker::cell_of(double x, double y, int& i, int& j) const noexcept {
@@ -149,7 +175,12 @@ bool LocalTracker::update(std::span<const ScanReturn> pts, const Pose3& mount, c
     mx = robot.x + cy * bx - sy * by;
     my = robot.y + sy * bx + cy * by;
   };
-  // Free space first: a ray from the robot to every ground return.
+  // Free space first: a ray from the robot to every ground return (once per end cell).
+  if (++stamp_ == 0) {  // wrapped: forget every old mark
+    std::fill(end_stamp_.begin(), end_stamp_.end(), 0U);
+    std::fill(far_stamp_.begin(), far_stamp_.end(), 0U);
+    stamp_ = 1;
+  }
   for (const ScanReturn& q : pts) {
     if (!(q.range > 0.0F)) continue;
     const double h = plane_.height(q.x, q.y, q.z);
@@ -158,6 +189,7 @@ bool LocalTracker::update(std::span<const ScanReturn> pts, const Pose3& mount, c
     to_map(q, mx, my, bx, by);
     int ei = 0, ej = 0;
     (void)cell_of(mx, my, ei, ej);
+    if (p_.trace_each_end_cell_once && !first_free_ray(ei, ej)) continue;
     int x = ri, y = rj;
     const int dx = std::abs(ei - ri), dy = -std::abs(ej - rj), sx = ri < ei ? 1 : -1, syy = rj < ej ? 1 : -1;
     int err = dx + dy;

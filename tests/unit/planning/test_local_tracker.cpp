@@ -89,5 +89,77 @@ TEST(LocalTracker, ReflexStopsForAReturnAboveTheThresholdAheadOnly) {
   EXPECT_TRUE(t.reflex_stop()) << "1.1 m ahead at 1.2 m/s";
 }
 
+// The free-space pass traces each end cell once per scan; the grid must be exactly the one of tracing a
+// line to every ground return (the reference below, the tracker's rules written out plainly), also for
+// returns beyond the grid (the far set), over updates at other poses (the per-scan marks are reset).
+std::vector<std::uint8_t> reference_grid(const LocalTracker& t, const std::vector<ScanReturn>& pts, const Pose3& mount, const Pose2& robot) {
+  const LocalTrackerParams p{};
+  const int n = t.width();
+  std::vector<std::uint8_t> g(static_cast<std::size_t>(n) * static_cast<std::size_t>(n), 0);
+  const Eigen::Matrix3d rm = rotation_matrix(mount.roll, mount.pitch, mount.yaw);
+  auto cell = [&](const ScanReturn& q, int& i, int& j) {
+    const Eigen::Vector3d b = rm * Eigen::Vector3d(q.x, q.y, q.z) + Eigen::Vector3d(mount.x, mount.y, mount.z);
+    const double mx = robot.x + std::cos(robot.yaw) * b.x() - std::sin(robot.yaw) * b.y();
+    const double my = robot.y + std::sin(robot.yaw) * b.x() + std::cos(robot.yaw) * b.y();
+    i = static_cast<int>(std::floor((mx - robot.x) / p.cell_m + 0.5 * n));
+    j = static_cast<int>(std::floor((my - robot.y) / p.cell_m + 0.5 * n));
+  };
+  const int ri = static_cast<int>(std::floor(0.5 * n)), rj = ri;  // the robot is at the grid's centre
+  for (const ScanReturn& q : pts) {
+    if (!(q.range > 0.0F) || std::fabs(t.ground().height(q.x, q.y, q.z)) >= p.ground_band_m) continue;
+    int ei = 0, ej = 0;
+    cell(q, ei, ej);
+    int x = ri, y = rj;
+    const int dx = std::abs(ei - ri), dy = -std::abs(ej - rj), sx = ri < ei ? 1 : -1, sy = rj < ej ? 1 : -1;
+    int err = dx + dy;
+    for (int guard = 0; guard < 4 * n; ++guard) {
+      if (x < 0 || y < 0 || x >= n || y >= n) break;
+      g[static_cast<std::size_t>(y * n + x)] = 1;
+      if (x == ei && y == ej) break;
+      const int e2 = 2 * err;
+      if (e2 >= dy) { err += dy; x += sx; }
+      if (e2 <= dx) { err += dx; y += sy; }
+    }
+  }
+  for (const ScanReturn& q : pts) {
+    if (!(q.range > 0.0F)) continue;
+    const double h = t.ground().height(q.x, q.y, q.z);
+    if (h <= p.obstacle_min_m || h >= p.overhang_m) continue;
+    int i = 0, j = 0;
+    cell(q, i, j);
+    if (i >= 0 && j >= 0 && i < n && j < n) g[static_cast<std::size_t>(j * n + i)] = 2;
+  }
+  return g;
+}
+
+TEST(LocalTracker, FreeSpaceTracedOncePerEndCellEqualsTracingEveryReturn) {
+  LocalTracker t{LocalTrackerParams{}};
+  const std::vector<std::vector<Box>> scenes = {{{4, 5, -0.5, 0.5, 1.0}}, {{-3, -2, 1, 6, 2.5}, {6, 7, -8, -4, 1.2}}, {}};
+  const Pose2 poses[] = {{0, 0, 0}, {10.05, -3.3, 0.7}, {-7.2, 4.4, -2.1}};
+  int checked = 0;
+  for (int k = 0; k < 6; ++k) {
+    // Sparse in azimuth (7 deg), so that a line left out leaves cells unknown.
+    auto pts = scan(scenes[static_cast<std::size_t>(k % 3)], 0.6, 0.0, 0.0, 7);
+    // Ground returns far outside the 20 m grid (as a 120 m Ouster gives), several in each far cell.
+    for (int a = 0; a < 3 * 67; ++a) {
+      const double az = (a / 3) * 2.0 * kPi / 67.0 + 0.01, r = 35.0 + 0.05 * (a % 3);
+      pts.push_back(ScanReturn{static_cast<float>(r * std::cos(az)), static_cast<float>(r * std::sin(az)), -0.6F, static_cast<float>(r), 0, 0, 0});
+    }
+    const Pose2 robot = poses[static_cast<std::size_t>(k % 3)];
+    ASSERT_TRUE(t.update(pts, kMount, robot, 0.0));
+    const auto ref = reference_grid(t, pts, kMount, robot);
+    int diff = 0, free_cells = 0;
+    for (int j = 0; j < t.width(); ++j)
+      for (int i = 0; i < t.width(); ++i) {
+        diff += t.cell(i, j) != ref[static_cast<std::size_t>(j * t.width() + i)];
+        free_cells += t.cell(i, j) == 1;
+      }
+    EXPECT_EQ(diff, 0) << "update " << k;
+    EXPECT_GT(free_cells, t.width() * t.width() / 4) << "update " << k;
+    ++checked;
+  }
+  EXPECT_EQ(checked, 6);
+}
+
 }  // namespace
 }  // namespace ag::plan

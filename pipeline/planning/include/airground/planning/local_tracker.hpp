@@ -37,6 +37,7 @@ struct LocalTrackerParams {
   double reflex_time_s{0.5};
   double reflex_half_width_m{0.35};  // ... within this of the centre line stops the robot
   double backup_timeout_s{8.0};      // backing up that long without a free way forward fails
+  bool trace_each_end_cell_once{true};  // false: a line to every ground return (the reference, same grid)
 };
 
 struct Plane {
@@ -93,6 +94,14 @@ class LocalTracker {
   std::vector<std::uint8_t> grid_;
   std::vector<float> clear_;  // [m]
   std::vector<std::int32_t> inliers_;
+  // Free-space rays to the same end cell trace the same line: each end cell is traced once per scan.
+  // In-grid ends are marked in end_stamp_ (this update's stamp_), ends outside the grid in a small
+  // open-addressed set (far_keys_/far_stamp_); when that is full a ray is traced anyway (same grid).
+  std::vector<std::uint32_t> end_stamp_;
+  std::vector<std::uint64_t> far_keys_;
+  std::vector<std::uint32_t> far_stamp_;
+  std::uint32_t stamp_{0};
+  bool first_free_ray(int ei, int ej) noexcept;
   Plane plane_;
   bool have_plane_{false}, reflex_{false};
   std::uint64_t rng_{0x9E3779B97F4A7C15ULL};
