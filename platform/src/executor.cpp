@@ -40,17 +40,34 @@ void run_measured(Runnable& r, TimeNs now, TimeNs lateness, ExecTimer timer) noe
 
 // ---------------------------------------------------------------------------------------------- lockstep
 
-void LockstepExecutor::add(RoleInstance& robot) { append(runs_, robot); }
+void LockstepExecutor::add(RoleInstance& robot) {
+  append(runs_, robot);
+  ++lanes_;
+  lane_of_.resize(runs_.size(), lanes_);
+}
 
 void LockstepExecutor::add_stage(Stage& stage, StagePerf& perf, double rate_hz) {
   perf.period_ns = period_from_hz(rate_hz);
   if (perf.budget_ns <= 0) perf.budget_ns = perf.period_ns;
   runs_.push_back(Runnable{&stage, &perf, perf.name.c_str(), perf.period_ns, perf.budget_ns, 0, -1, 0});
+  lane_of_.push_back(0);
 }
 
 void LockstepExecutor::start(TimeNs t0) noexcept {
   clock_.set(t0);
   for (auto& r : runs_) r.next_release = t0;
+  lane_runs_.assign(lanes_ + 1, {});
+  for (std::size_t i = 0; i < runs_.size(); ++i) lane_runs_[lane_of_[i]].push_back(i);
+  due_.reserve(lanes_);
+}
+
+void LockstepExecutor::run_lane(std::size_t lane, TimeNs t) noexcept {
+  for (const std::size_t i : lane_runs_[lane]) {
+    Runnable& r = runs_[i];
+    if (r.next_release != t) continue;
+    run_measured(r, t, 0, timer_);
+    r.next_release += r.period;
+  }
 }
 
 TimeNs LockstepExecutor::next_release() const noexcept {
@@ -60,10 +77,32 @@ TimeNs LockstepExecutor::next_release() const noexcept {
 }
 
 void LockstepExecutor::run_until(TimeNs t_end) noexcept {
+  const bool parallel = parallel_ != nullptr && trace_ == nullptr && lane_runs_.size() == lanes_ + 1;
   for (;;) {
     const TimeNs t = next_release();
     if (t > t_end) break;
     clock_.set(t);
+    if (parallel) {
+      run_lane(0, t);
+      due_.clear();
+      for (std::size_t lane = 1; lane <= lanes_; ++lane)
+        for (const std::size_t i : lane_runs_[lane])
+          if (runs_[i].next_release == t) {
+            due_.push_back(lane);
+            break;
+          }
+      batch_t_ = t;
+      if (due_.size() == 1) {
+        run_lane(due_[0], t);
+      } else if (!due_.empty()) {
+        parallel_(parallel_user_, due_.size(), [](void* self, std::size_t job) noexcept {
+          auto* ex = static_cast<LockstepExecutor*>(self);
+          ex->run_lane(ex->due_[job], ex->batch_t_);
+        }, this);
+      }
+      if (after_ != nullptr) after_(parallel_user_);
+      continue;
+    }
     for (std::size_t i = 0; i < runs_.size(); ++i) {
       Runnable& r = runs_[i];
       if (r.next_release != t) continue;

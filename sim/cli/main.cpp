@@ -94,7 +94,9 @@ constexpr const char* kRunHelp =
     "                           radio.yaml, diff_drive.yaml, quadrotor.yaml, camera.yaml, lidar_noise.yaml\n"
     "                           (airground-sim config --out DIR writes the defaults)\n"
     "  --record none|light|full what to record (light: CSV streams + every 20th camera frame)\n"
-    "  --threads N              sensor worker threads (all cores)\n"
+    "  --threads N              worker threads for the sensors and the robots' stages (all cores)\n"
+    "  --serial-robots          step the robots one after another on one thread (same results, slower;\n"
+    "                           for a debugger or a profile per robot)\n"
     "  --quiet                  no progress line\n";
 
 constexpr const char* kEvalMappingHelp =
@@ -443,6 +445,7 @@ int run(const Args& a) {
   o.survey_overlap = number(a, "overlap", o.survey_overlap);
   o.config_dir = a.get("config-dir");
   o.threads = static_cast<int>(number(a, "threads", 0));
+  o.parallel_robots = !a.has("serial-robots");
   const std::string ugv_map = a.get("ugv-map", o.uav ? "online" : "gt");
   if (ugv_map == "online") o.ugv_map = UgvMapSource::kOnline;
   else if (ugv_map == "gt") o.ugv_map = UgvMapSource::kGroundTruth;
@@ -516,7 +519,8 @@ constexpr const char* kMissionHelp =
     "  --web-port P            the base station serves its live page on http://localhost:P/ during the run\n"
     "  --pace X                hold the run to X times real time (to watch it on the page)\n"
     "  --record none|light|full  recordings (light)\n"
-    "  --threads N             sensor worker threads (all cores)\n"
+    "  --threads N             worker threads for the sensors and the robots' stages (all cores)\n"
+    "  --serial-robots         step the robots one after another (same results, slower)\n"
     "  --verbose [S]           every S simulated seconds (30) a status line per robot\n"
     "  --quiet                 no progress bar\n";
 
@@ -544,6 +548,7 @@ int mission_cmd(const Args& a) {
   o.max_duration_s = number(a, "max-duration", o.max_duration_s);
   o.lidar_columns = static_cast<int>(number(a, "lidar-columns", o.lidar_columns));
   o.threads = static_cast<int>(number(a, "threads", 0));
+  o.parallel_robots = !a.has("serial-robots");
   o.web_port = static_cast<int>(number(a, "web-port", 0));
   o.web_pace = number(a, "pace", 0);
   o.status_period_s = a.has("verbose") ? number(a, "verbose", 30) : 0;

@@ -161,6 +161,7 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
   r.lidar_columns = o.lidar_columns;
   r.record = o.record;
   r.threads = o.threads;
+  r.parallel_robots = o.parallel_robots;
   r.progress = o.progress;
   r.gossip = true;
   r.drive_by_stages = true;

@@ -178,6 +178,9 @@ struct Ugv {
   SimProbeStage* probe{nullptr};
   bool killed{false};
   TimeNs killed_at{-1};
+  // Robots stepped in parallel: the sampling callback's sample waits here for the end of the release time.
+  UgvSample pending_sample{};
+  bool has_pending_sample{false};
   std::uint64_t wheel_commands{0};
   LatestWriter<GoalMsg> goal_out{};
   bool goal_pending{false};
@@ -249,6 +252,7 @@ struct Team {
   std::vector<std::unique_ptr<Ugv>> ugvs;
   std::unique_ptr<RoleInstance> base;
   WorkerPool* pool{nullptr};
+  bool parallel_robots{false};  // the robots' stages of one release time run side by side (LockstepExecutor::set_parallel)
   fs::path out;
   TimeNs camera_period{0}, lidar_period{0}, heartbeat_period{0}, log_period{0};
   TimeNs next_camera{0}, next_lidar{0}, next_heartbeat{0}, next_log{0};
@@ -556,7 +560,12 @@ class SimProbeStage final : public Stage {
       s.route_done = ugv->route_done;
       s.killed = ugv->killed;
       s.role = ugv->role.get();
-      team->opt.sample(s);
+      if (team->parallel_robots) {  // called from this robot's worker: hand it over at the end of the release time
+        ugv->pending_sample = s;
+        ugv->has_pending_sample = true;
+      } else {
+        team->opt.sample(s);
+      }
     }
   }
 
@@ -1338,6 +1347,28 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   if (t.uav) exec.add(*t.uav->role);
   for (auto& u : t.ugvs) exec.add(*u->role);
   exec.add(*t.base);
+  // Robots side by side on the sensor workers: they share nothing but the radio (sends deferred to the
+  // end of each release time, in node order) and the sampling callback (likewise, in robot order), so
+  // the run is the serial one bit for bit. Not with channel taps: those hand out messages in place.
+  t.parallel_robots = opt.parallel_robots && pool.size() > 1 && !opt.ugv_tap.any();
+  if (t.parallel_robots) {
+    if (t.net) t.net->set_deferred(true);
+    exec.set_parallel(
+        [](void* user, std::size_t jobs, LockstepExecutor::JobFn job, void* job_user) {
+          const std::function<void(std::size_t)> fn = [job, job_user](std::size_t j) { job(job_user, j); };
+          static_cast<Team*>(user)->pool->run(jobs, fn);
+        },
+        [](void* user) {
+          Team& tm = *static_cast<Team*>(user);
+          if (tm.net) tm.net->flush();
+          for (auto& u : tm.ugvs)
+            if (u->has_pending_sample) {
+              u->has_pending_sample = false;
+              tm.opt.sample(u->pending_sample);
+            }
+        },
+        &t);
+  }
   exec.start(0);
 
   const TimeNs end = from_seconds(opt.duration_s);

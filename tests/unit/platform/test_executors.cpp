@@ -263,6 +263,61 @@ TEST(LockstepExecutor, RunUntilLeavesTheClockAtTheEndAndTheNextReleasePending) {
   EXPECT_EQ(run.ex.runnables().size(), 3u);
 }
 
+// Robots side by side (set_parallel): each robot's trace is the serial run's, the jobs really run on
+// other threads, and `after` follows every release time on the caller.
+struct ThreadedJobs {
+  std::size_t batches{0}, jobs{0}, afters{0};
+  std::thread::id caller{std::this_thread::get_id()};
+  bool after_off_caller{false};
+};
+void run_on_threads(void* user, std::size_t n, LockstepExecutor::JobFn job, void* job_user) {
+  auto& u = *static_cast<ThreadedJobs*>(user);
+  ++u.batches;
+  u.jobs += n;
+  std::vector<std::thread> ts;
+  for (std::size_t j = n; j-- > 0;) ts.emplace_back([=] { job(job_user, j); });  // started in reverse order
+  for (auto& t : ts) t.join();
+}
+void count_after(void* user) {
+  auto& u = *static_cast<ThreadedJobs*>(user);
+  ++u.afters;
+  if (std::this_thread::get_id() != u.caller) u.after_off_caller = true;
+}
+
+TEST(LockstepExecutor, RobotsSideBySideGiveEachRobotsSerialTrace) {
+  auto two = [](bool parallel, ThreadedJobs& jobs, Trace& ta, Trace& tb) {
+    SimClock clock;
+    ta.reserve(2000);
+    tb.reserve(2000);
+    g_trace = &ta;
+    auto a = build(kLockstepRole, clock, "a");
+    g_trace = &tb;
+    auto b = build(kLockstepRole, clock, "b");
+    g_trace = nullptr;
+    EXPECT_TRUE(a && b);
+    if (!a || !b) return;
+    LockstepExecutor ex(clock);
+    ex.add(*a->robot);
+    ex.add(*b->robot);
+    if (parallel) ex.set_parallel(&run_on_threads, &count_after, &jobs);
+    ex.start(0);
+    ex.run_until(2 * kNsPerS);
+  };
+  ThreadedJobs serial_jobs, par_jobs;
+  Trace sa, sb, pa, pb;
+  two(false, serial_jobs, sa, sb);
+  two(true, par_jobs, pa, pb);
+  ASSERT_EQ(sa.size(), 201u + 51u + 21u);
+  EXPECT_TRUE(same_trace(sa, pa));
+  EXPECT_TRUE(same_trace(sb, pb));
+  EXPECT_TRUE(same_trace(sa, sb)) << "two copies of one robot";
+  EXPECT_EQ(serial_jobs.batches, 0u);
+  EXPECT_EQ(par_jobs.batches, 201u) << "one batch per release time (both robots due at every 100 Hz release)";
+  EXPECT_EQ(par_jobs.jobs, 2u * 201u);
+  EXPECT_EQ(par_jobs.afters, 201u);
+  EXPECT_FALSE(par_jobs.after_off_caller);
+}
+
 TEST(LockstepExecutor, StartsAtAnyEpoch) {
   SimClock clock;
   Trace trace;

@@ -33,11 +33,16 @@ struct Runnable {
 // Measures one step and updates its counters; shared by both executors.
 void run_measured(Runnable& r, TimeNs now, TimeNs lateness, ExecTimer timer) noexcept;
 
-// Single thread, simulated clock, stages of all robots in (robot, table) order at each release time:
-// the same inputs give the same trace, bit for bit, and it runs as fast as the CPU allows.
+// Simulated clock, stages of all robots in (robot, table) order at each release time: the same inputs
+// give the same trace, bit for bit, and it runs as fast as the CPU allows. Single thread by default;
+// with set_parallel() the robots of one release time run side by side (see there).
 class LockstepExecutor {
  public:
   using TraceFn = void (*)(void* user, TimeNs t, std::size_t runnable);
+  using JobFn = void (*)(void* job_user, std::size_t job) noexcept;
+  // Runs job(job_user, 0 .. jobs-1), possibly at once on several threads; returns when all are done.
+  using ParallelFn = void (*)(void* user, std::size_t jobs, JobFn job, void* job_user);
+  using AfterFn = void (*)(void* user);
 
   explicit LockstepExecutor(SimClock& clock, ExecTimer timer = ExecTimer::kThreadCpu) : clock_(clock), timer_(timer) {}
   void add(RoleInstance& robot);
@@ -48,15 +53,36 @@ class LockstepExecutor {
   // Run every release with time <= t_end, then leave the clock at t_end.
   void run_until(TimeNs t_end) noexcept;
   [[nodiscard]] TimeNs next_release() const noexcept;
+  // A trace (tests) runs everything on the caller, in order.
   void set_trace(TraceFn fn, void* user) noexcept { trace_ = fn; trace_user_ = user; }
+  // Robots in parallel: at each release time the stages of add_stage() run first, on the caller, in
+  // the order added; then every robot with a stage due is one job of `run_jobs` (its due stages in
+  // table order); then `after(user)` on the caller. The result equals the serial order's as long as the
+  // robots share no mutable state during a release time: the caller defers what crosses between them
+  // (radio sends, callbacks) to `after`, in robot order. Call before start(); nullptr run_jobs: serial.
+  void set_parallel(ParallelFn run_jobs, AfterFn after, void* user) noexcept {
+    parallel_ = run_jobs;
+    after_ = after;
+    parallel_user_ = user;
+  }
   [[nodiscard]] const std::vector<Runnable>& runnables() const noexcept { return runs_; }
 
  private:
+  void run_lane(std::size_t lane, TimeNs t) noexcept;
+
   SimClock& clock_;
   ExecTimer timer_;
   std::vector<Runnable> runs_;
+  std::vector<std::size_t> lane_of_;              // per runnable: 0 for add_stage(), robot k for the k-th add()
+  std::size_t lanes_{0};                          // robots added
+  std::vector<std::vector<std::size_t>> lane_runs_;  // built by start(): runnables of each lane, in order
+  std::vector<std::size_t> due_;                  // scratch: lanes with a stage due now
+  TimeNs batch_t_{0};
   TraceFn trace_{nullptr};
   void* trace_user_{nullptr};
+  ParallelFn parallel_{nullptr};
+  AfterFn after_{nullptr};
+  void* parallel_user_{nullptr};
 };
 
 struct RealtimeOptions {

@@ -27,6 +27,7 @@ struct MissionOptions {
   double max_duration_s{1800};     // [s] simulated; the mission normally ends earlier (every robot back)
   int lidar_columns{1024};
   int threads{0};
+  bool parallel_robots{true};      // robots of one release time side by side on the workers (same results)
   bool progress{true};
   double status_period_s{0};       // > 0: a status line per robot on stderr this often (simulated seconds)
   RecordLevel record{RecordLevel::kLight};

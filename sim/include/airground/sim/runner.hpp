@@ -111,6 +111,7 @@ struct RunOptions {
   std::string config_dir{};       // optional YAML overrides: gps.yaml, visual_odometry.yaml, wheel_odometry.yaml, radio.yaml, diff_drive.yaml, quadrotor.yaml, camera.yaml, lidar_noise.yaml
   RecordLevel record{RecordLevel::kLight};
   int threads{0};                 // sensor worker threads, 0 = all cores
+  bool parallel_robots{true};     // with threads > 1, the robots' stages of one release time run side by side (same results)
   bool progress{true};
   bool keep_uav_truth{false};     // keep the quadrotor's true poses for RunInspection
   bool stop_when_survey_done{false};  // end the run when the quadrotor finished its survey (duration_s caps it)
