@@ -86,6 +86,23 @@ class Export(unittest.TestCase):
         self.assertNotEqual(r.returncode, 0)
         self.assertIn("multiples of 8", r.stderr)
 
+    def test_training_resumes_from_our_weights_file(self):
+        import erfnet_train  # noqa: E402 (the trainer's --init reads .agw files as well as state_dicts)
+        torch.manual_seed(5)
+        net7 = erfnet_reference.Net(erfnet_train.NUM_CLASSES)
+        classes, tensors = erfnet_export.convert(net7.state_dict(), "net7")
+        erfnet_weights.write(self.path("seven.agw"), tensors, classes, 640, 400)
+        state = erfnet_train.load_init(self.path("seven.agw"))
+        for k, v in net7.state_dict().items():
+            if not k.startswith("encoder.output_conv.") and not k.endswith("num_batches_tracked"):
+                torch.testing.assert_close(state[k], v, msg=k)
+        erfnet_reference.Net(erfnet_train.NUM_CLASSES).load_state_dict(state)
+        classes20, tensors20 = erfnet_export.convert(self.sd, "sd")
+        erfnet_weights.write(self.path("twenty.agw"), tensors20, classes20, 640, 400)
+        with self.assertRaises(SystemExit) as e:
+            erfnet_train.load_init(self.path("twenty.agw"))
+        self.assertIn("20 classes, training needs 7", str(e.exception.code))
+
 
 if __name__ == "__main__":
     unittest.main()
