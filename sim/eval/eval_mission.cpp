@@ -171,6 +171,8 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
   r.init_yaw_error_deg = o.init_yaw_error_deg;
   r.kills = o.kills;
   r.sample_hz = 5;
+  r.uav_return_home = true;  // a mission file may say otherwise (survey.return_home)
+  r.ugv_survey_end = true;
   r.uav_config = {kv("regions.area_x0_m", ax0), kv("regions.area_y0_m", ay0), kv("regions.area_x1_m", ax1), kv("regions.area_y1_m", ay1)};
   r.uav_config.insert(r.uav_config.end(), o.uav_config.begin(), o.uav_config.end());
   r.ugv_config = o.ugv_config;
@@ -209,6 +211,8 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
       r.ugv_config.insert(r.ugv_config.begin(), s);  // the command line's --set still wins
     r.uav_config.insert(r.uav_config.begin(), kv("regions.merge_distance_m", mp.merge_distance_m));
     r.uav_config.insert(r.uav_config.begin(), "regions.min_region_cells=" + std::to_string(mp.min_region_cells));
+    if (mp.survey_end_s > 0) r.ugv_config.insert(r.ugv_config.begin(), kv("mission.survey_end_s", mp.survey_end_s));
+    r.uav_return_home = mf->survey.return_home;
     r.uav_speed_mps = mf->survey.speed_mps;
     r.survey_overlap = mf->survey.overlap;
     const mission::Area& sa = mf->survey.area;

@@ -314,7 +314,8 @@ Result<HilResult> run_hil(const HilOptions& opt) {
       {"base.wheel_radius_m", num(dd.wheel_radius_m)}, {"base.track_m", num(dd.track_width_m)},
       {"mission.visit_radius_m", num(mf.params.visit_radius_m)}, {"mission.max_sigma_m", num(mf.params.max_sigma_m)},
       {"mission.claim_timeout_s", num(mf.params.claim_timeout_s)}, {"mission.idle_return_s", num(mf.params.idle_return_s)},
-      {"mission.mission_end_s", num(mf.params.mission_end_s)}, {"comms.send_pose", "true"}, {"comms.deliver_map_tiles", "true"}};
+      {"mission.mission_end_s", num(mf.params.mission_end_s)},
+      {"mission.survey_end_s", num(mf.params.survey_end_s)}, {"comms.send_pose", "true"}, {"comms.deliver_map_tiles", "true"}};
 
   for (int i = 0; i < n; ++i) {
     const mission::TeamMember& tm = mf.team[static_cast<std::size_t>(i)];

@@ -1123,6 +1123,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   std::vector<Config> cfgs;
   cfgs.reserve(static_cast<std::size_t>(opt.ugvs) + 2);
 
+  double survey_time_s = 0;  // the quadrotor's route, estimated [s]
   if (opt.uav) {
     const Pose3 start{staging.x, staging.y, w.terrain.at<float>(w.grid().row(staging.y), w.grid().col(staging.x)), 0, 0, staging.yaw};
     auto u = std::make_unique<Uav>(Uav{Quadrotor(quad_cfg.value(), start), GpsSimulator(gps_cfg.value(), w.header.datum, opt.seed ^ std::uint64_t{0x67707331}),
@@ -1137,7 +1138,10 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
                           : survey_lawnmower(g.origin_x + margin, g.origin_y - g.size_y() + margin, g.origin_x + g.size_x() - margin,
                                              g.origin_y - margin, opt.uav_altitude_m, opt.survey_overlap, hfov, so);
     if (!route) return route.error();
-    u->vehicle.set_waypoints(std::move(route).value());
+    std::vector<Waypoint> wps = std::move(route).value();
+    if (opt.uav_return_home && !wps.empty()) wps.push_back(Waypoint{start.x, start.y, wps.back().z, 0});
+    survey_time_s = estimate_route_time_s(quad_cfg.value(), start, wps);
+    u->vehicle.set_waypoints(std::move(wps));
     if (rec) {
       u->truth_log = CsvLog(t.out / "truth_uav.csv", "t_s,x_m,y_m,z_m,roll_rad,pitch_rad,yaw_rad");
       u->gps_log = CsvLog(t.out / "gps_uav.csv", "t_s,fix_type,lat_deg,lon_deg,height_m,east_m,north_m,up_m,h_acc_m");
@@ -1207,6 +1211,11 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     ugv_extra.emplace_back(std::string("planner.area_x1_m=") + buf);
     std::snprintf(buf, sizeof buf, "%.3f", g.origin_y);
     ugv_extra.emplace_back(std::string("planner.area_y1_m=") + buf);
+  }
+  if (opt.ugv_survey_end && opt.uav) {
+    char buf[96];
+    std::snprintf(buf, sizeof buf, "mission.survey_end_s=%.1f", survey_time_s);
+    ugv_extra.emplace_back(buf);  // before ugv_config: a mission file's value or --set wins
   }
   ugv_extra.insert(ugv_extra.end(), opt.ugv_config.begin(), opt.ugv_config.end());
   if (opt.ugv_tap.scan) ugv_extra.emplace_back("sim_probe.scans=true");

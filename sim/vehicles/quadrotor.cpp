@@ -58,6 +58,27 @@ Result<QuadrotorConfig> load_quadrotor_config(std::string_view yaml, std::string
   return quad_from(load_model_params(kQuadSchema, yaml, origin), origin);
 }
 
+double estimate_route_time_s(const QuadrotorConfig& cfg, const Pose3& start, std::span<const Waypoint> route) noexcept {
+  double t = 0, x = start.x, y = start.y, z = start.z;
+  const double accel = cfg.max_accel_mps2, brake = kBrakeShare * cfg.max_accel_mps2;
+  for (const Waypoint& wp : route) {
+    const double h = std::hypot(wp.x - x, wp.y - y), v = std::abs(wp.z - z), len = std::hypot(h, v);
+    double s = std::min(wp.speed_mps > 0 ? wp.speed_mps : cfg.cruise_speed_mps, cfg.max_speed_mps);
+    if (len > 1e-9 && s * v / len > cfg.max_vertical_speed_mps) s = cfg.max_vertical_speed_mps * len / v;
+    // Trapezoid from rest to rest (a triangle on short legs), the tolerance sphere cut off the end.
+    const double d = std::max(0.0, len - cfg.waypoint_tolerance_m);
+    const double ramp = s * s / (2 * accel) + s * s / (2 * brake);
+    if (d >= ramp) {
+      t += d / s + s / (2 * accel) + s / (2 * brake);
+    } else {
+      const double peak = std::sqrt(d / (1 / (2 * accel) + 1 / (2 * brake)));
+      t += peak / accel + peak / brake;
+    }
+    x = wp.x, y = wp.y, z = wp.z;
+  }
+  return t;
+}
+
 Quadrotor::Quadrotor(const QuadrotorConfig& cfg, const Pose3& start) : cfg_(cfg), pose_(start) {}
 
 void Quadrotor::set_waypoints(std::vector<Waypoint> route) {

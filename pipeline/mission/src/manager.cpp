@@ -366,7 +366,10 @@ void MissionManager::tick(TimeNs now) noexcept {
     } else if (state_ == ClaimState::kIdle || state_ == ClaimState::kFailedRetrying) {
       if (state_ == ClaimState::kFailedRetrying && !claim_dirty_) state_ = ClaimState::kIdle, claim_dirty_ = true;  // after one record saying so
       cancel_goal();
-      if (now - idle_since_ >= from_seconds(p_.idle_return_s)) begin_return(now);
+      // Waiting counts from the last new region or map tile, and not from before the survey's end: more
+      // regions are coming while the quadrotor still flies.
+      const TimeNs since = p_.survey_end_s > 0 ? std::max(idle_since_, t0_ + from_seconds(p_.survey_end_s)) : idle_since_;
+      if (now - since >= from_seconds(p_.idle_return_s)) begin_return(now);
     }
   }
   if (state_ == ClaimState::kReturning && tracking && std::hypot(p_.start_x - loc_.pose.x, p_.start_y - loc_.pose.y) <= p_.visit_radius_m) {

@@ -218,8 +218,8 @@ Result<MissionFile> load_mission_string(std::string_view yaml, std::string_view 
   if (pm.IsDefined()) {
     if (!pm.IsMap()) return c.err(pm, "parameters", "must be a map");
     check_keys(c, pm, "parameters.",
-               {"visit_radius_m", "max_sigma_m", "claim_timeout_s", "idle_return_s", "mission_end_s", "merge_distance_m", "min_region_cells",
-                "comm_range_m"},
+               {"visit_radius_m", "max_sigma_m", "claim_timeout_s", "idle_return_s", "mission_end_s", "survey_end_s", "merge_distance_m",
+                "min_region_cells", "comm_range_m"},
                err, bad);
     if (bad) return err;
     MissionParameters& q = f.params;
@@ -228,6 +228,7 @@ Result<MissionFile> load_mission_string(std::string_view yaml, std::string_view 
         !get(c, pm, "claim_timeout_s", pp, q.claim_timeout_s, false, 1, 3600, err) ||
         !get(c, pm, "idle_return_s", pp, q.idle_return_s, false, 0, 36000, err) ||
         !get(c, pm, "mission_end_s", pp, q.mission_end_s, false, 0, 360000, err) ||
+        !get(c, pm, "survey_end_s", pp, q.survey_end_s, false, 0, 360000, err) ||
         !get(c, pm, "merge_distance_m", pp, q.merge_distance_m, false, 0.5, 100, err) ||
         !get(c, pm, "min_region_cells", pp, q.min_region_cells, false, 1, 100000, err) ||
         !get(c, pm, "comm_range_m", pp, q.comm_range_m, false, 0, 1e6, err))
@@ -238,7 +239,8 @@ Result<MissionFile> load_mission_string(std::string_view yaml, std::string_view 
   const YAML::Node sv = root["survey"];
   if (sv.IsDefined()) {
     if (!sv.IsMap()) return c.err(sv, "survey", "must be a map");
-    check_keys(c, sv, "survey.", {"robot", "pattern", "altitude_m", "speed_mps", "line_spacing_m", "overlap", "camera_hfov_deg", "heading_deg", "area"},
+    check_keys(c, sv, "survey.", {"robot", "pattern", "altitude_m", "speed_mps", "line_spacing_m", "overlap", "camera_hfov_deg", "heading_deg", "area",
+                                  "return_home"},
                err, bad);
     if (bad) return err;
     Survey& s = f.survey;
@@ -255,6 +257,11 @@ Result<MissionFile> load_mission_string(std::string_view yaml, std::string_view 
         !get(c, sv, "heading_deg", sp, s.heading_deg, false, -360, 360, err))
       return err;
     if (sv["area"].IsDefined() && !get_area(c, sv["area"], "survey.area", s.area, err)) return err;
+    if (const YAML::Node rh = sv["return_home"]; rh.IsDefined()) {
+      const std::string t = rh.IsScalar() ? rh.Scalar() : "";
+      if (t != "true" && t != "false") return c.err(rh, "survey.return_home", "'" + t + "' is not true or false");
+      s.return_home = t == "true";
+    }
     if (f.member(s.robot) != nullptr) return c.err(sv["robot"], "survey.robot", "robot " + std::to_string(s.robot) + " is a ground robot of the team");
   }
   return f;

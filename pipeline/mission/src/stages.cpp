@@ -156,6 +156,7 @@ Status MissionStage::init(StageContext& ctx) {
   p.claim_timeout_s = v.real("claim_timeout_s");
   p.idle_return_s = v.real("idle_return_s");
   p.mission_end_s = v.real("mission_end_s");
+  p.survey_end_s = v.real("survey_end_s");
   p.republish_s = v.real("republish_s");
   p.map_growing_s = v.real("map_growing_s");
   p.defer_s = v.real("defer_s");

@@ -300,6 +300,37 @@ TEST(Manager, MapDataStillArrivingKeepsTheRobotWaiting) {
   EXPECT_NE(t.bots[0].m->state(), ClaimState::kIdle) << "idle_return_s after the last tile: home";
 }
 
+// Out of radio range of the quadrotor a robot hears nothing for long: it waits until the survey's expected
+// end (and idle_return_s more) before going home, and a region heard late is still taken.
+TEST(Manager, BeforeTheSurveysEndARobotThatHeardNothingKeepsWaiting) {
+  Team t;
+  ManagerParams p = quick();  // idle_return_s = 10
+  p.survey_end_s = 40;
+  t.add(1, 1, 5, 5, p);
+  t.add(2, 2, 5, 7, quick());  // the same without survey_end_s
+  auto home = [](const ClaimState st) { return st == ClaimState::kReturning || st == ClaimState::kDone; };  // at the start: done at once
+  double home1 = -1, home2 = -1;
+  while (t.seconds() < 49.5) {
+    t.step();
+    if (home1 < 0 && home(t.bots[0].m->state())) home1 = t.seconds();
+    if (home2 < 0 && home(t.bots[1].m->state())) home2 = t.seconds();
+  }
+  EXPECT_NEAR(home2, 10.0, 0.5) << "no survey end known: idle_return_s after the start";
+  EXPECT_LT(home1, 0) << "the survey is not over: still waiting at " << t.seconds() << " s";
+  t.region(1, 25, 5);  // heard at last (the quadrotor came back into range)
+  t.publish_regions();
+  t.step();
+  EXPECT_EQ(t.bots[0].m->state(), ClaimState::kGoing);
+  while (t.bots[0].m->own_visited().count == 0 && t.seconds() < 100) t.step();
+  ASSERT_EQ(t.bots[0].m->own_visited().count, 1);
+  const double visited = t.seconds();
+  while (home1 < 0 && t.seconds() < 200) {
+    t.step();
+    if (home(t.bots[0].m->state())) home1 = t.seconds();
+  }
+  EXPECT_NEAR(home1 - visited, 10.0, 0.5) << "after the survey's end, idle_return_s as before";
+}
+
 TEST(Manager, AWaypointsMissionDrivesThemInOrderSkipsAnUnreachableOneAndReturns) {
   Team t;
   ManagerParams p = quick();

@@ -53,6 +53,13 @@ TEST(MissionFile, AGoodFileGivesEveryValue) {
   EXPECT_DOUBLE_EQ(f->params.visit_radius_m, 2.5);
   EXPECT_DOUBLE_EQ(f->params.claim_timeout_s, 20) << "defaults for what is not given";
   EXPECT_DOUBLE_EQ(f->survey.spacing_m(), 20);
+  EXPECT_TRUE(f->survey.return_home) << "back over the launch point by default (RTL)";
+  EXPECT_DOUBLE_EQ(f->params.survey_end_s, 0) << "the simulator estimates it";
+  auto g = load_mission_string(std::string(kGood).replace(std::string(kGood).find("line_spacing_m: 20"), 18,
+                                                          "line_spacing_m: 20, return_home: false"),
+                               "good2.yaml");
+  ASSERT_TRUE(g.ok()) << g.error().message;
+  EXPECT_FALSE(g->survey.return_home);
   ASSERT_NE(f->member(2), nullptr);
   EXPECT_EQ(f->member(7), nullptr);
 }
@@ -120,6 +127,8 @@ TEST(MissionFile, EveryKindOfBadFileNamesFileLineAndKey) {
       {"bad pattern", with("altitude_m: 50", "pattern: spiral, altitude_m: 50"), "survey.pattern: 'spiral' is not one of lawnmower", 9},
       {"survey too low", with("altitude_m: 50", "altitude_m: 2"), "survey.altitude_m: 2 outside", 9},
       {"survey by a ground robot", with("altitude_m: 50", "robot: 1, altitude_m: 50"), "survey.robot: robot 1 is a ground robot", 9},
+      {"return_home not a bool", with("altitude_m: 50", "return_home: maybe, altitude_m: 50"), "survey.return_home: 'maybe' is not true or false", 9},
+      {"survey_end_s negative", with("max_sigma_m: 1.0", "max_sigma_m: 1.0, survey_end_s: -5"), "parameters.survey_end_s: -5 outside", 8},
       {"target not a pair", with("[20, -20]", "[20]"), "targets[1]: must be [x, y]", 7},
   };
   for (const Bad& c : cases) {

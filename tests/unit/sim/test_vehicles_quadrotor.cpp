@@ -146,6 +146,30 @@ TEST(Quadrotor, FliesTheSurveyWithinLimits) {
   EXPECT_LT(uav.speed(), 0.05);
 }
 
+// The ground robots wait for the survey's regions until its estimated end: the estimate must be close to
+// the flight, for a survey with its climb and its return to launch, at two speeds, and for short legs.
+TEST(Quadrotor, RouteTimeEstimateMatchesTheFlight) {
+  for (const double speed : {5.0, 9.0}) {
+    QuadrotorConfig c;
+    c.cruise_speed_mps = speed;
+    const Pose3 start{-20, -20, 0, 0, 0, 0};
+    auto route = survey_lawnmower(0, 0, 300, 200, 60, 0.6, 1.2).value();
+    route.push_back(Waypoint{start.x, start.y, route.back().z, 0});  // back over the launch point
+    route.push_back(Waypoint{start.x + 4, start.y, route.back().z, 0});  // a short leg (no cruise)
+    Quadrotor uav(c, start);
+    uav.set_waypoints(route);
+    double t = 0;
+    while (!uav.finished() && t < 7200) {
+      uav.step(kDt);
+      t += kDt;
+    }
+    ASSERT_TRUE(uav.finished());
+    const double est = estimate_route_time_s(c, start, route);
+    EXPECT_NEAR(est, t, 0.03 * t) << "speed " << speed << ": flown in " << t << " s, estimated " << est << " s";
+    EXPECT_GT(t, uav.distance_flown() / speed) << "the estimate is not just distance / speed";
+  }
+}
+
 TEST(Quadrotor, WaypointSpeedIsCappedAndYawFollowsMotion) {
   QuadrotorConfig c;
   c.cruise_speed_mps = 5.0;

@@ -45,6 +45,12 @@ std::span<const ParamSection> quadrotor_config_schema() noexcept;  // one sectio
 Result<QuadrotorConfig> load_quadrotor_config(const YAML::Node& node, std::string_view origin);
 Result<QuadrotorConfig> load_quadrotor_config(std::string_view yaml, std::string_view origin);
 
+// How long flying route from start takes [s]: per leg, its length at the leg's speed (limited by the
+// vertical speed on climbs) plus the time lost accelerating from and braking to a stop (stop-and-turn
+// corners, as Quadrotor::step flies them). Within a few percent of the simulated flight; the ground robots
+// are told it so they wait for the survey's regions (mission.survey_end_s).
+[[nodiscard]] double estimate_route_time_s(const QuadrotorConfig& cfg, const Pose3& start, std::span<const Waypoint> route) noexcept;
+
 class Quadrotor {
  public:
   explicit Quadrotor(const QuadrotorConfig& cfg, const Pose3& start = {});

@@ -116,6 +116,13 @@ struct RunOptions {
   bool keep_uav_truth{false};     // keep the quadrotor's true poses for RunInspection
   bool stop_when_survey_done{false};  // end the run when the quadrotor finished its survey (duration_s caps it)
   double survey_margin_m{20};     // [m] the survey area is the world minus this margin
+  // After the survey the quadrotor flies back over its launch point at survey height and hovers there (as
+  // PX4 and ArduPilot return to launch at the end of a mission): a team with a short radio range hears
+  // the last regions there. The run's "survey done" includes the return.
+  bool uav_return_home{false};
+  // Tell the ground robots when the survey (with the return) should end, as mission.survey_end_s (the
+  // route's flying time, estimate_route_time_s): until then one with nothing to do waits for regions.
+  bool ugv_survey_end{false};
   std::function<Status(const RunInspection&)> inspect{};  // called after the run, before the reports
 
   // --- the ground robots' drivers in simulation (channels "lidar_scan", "wheel_odometry", "initial_pose",

@@ -7,7 +7,7 @@
 // within visit_radius_m of the goal while tracking with a pose sigma below max_sigma_m, reports failures
 // (no route max_no_route times, no progress for no_progress_timeout_s), takes over the claims of robots
 // not heard for claim_timeout_s, waits for new regions when nothing is left and returns to its start
-// after idle_return_s without new regions (or at mission_end_s).
+// after idle_return_s without new regions, not before the survey's expected end (or at mission_end_s).
 #pragma once
 
 #include <array>
@@ -37,6 +37,10 @@ struct ManagerParams {
   double claim_timeout_s{20.0};        // a robot not heard this long: its claim is void
   double idle_return_s{60.0};          // nothing left and no new region this long: return to start
   double mission_end_s{0.0};           // > 0: return to start this long after the first tick regardless
+  // > 0: the quadrotor's survey should end this long after the first tick; until then a robot with nothing
+  // to do keeps waiting for regions (a team out of radio range of the quadrotor hears of them late), and
+  // idle_return_s counts from then at the earliest.
+  double survey_end_s{0.0};
   double republish_s{2.0};             // own claim and visited records re-sent this often
   // No route while the map is still growing (a tile within map_growing_s) is not a failure: the unknown
   // ground between here and there may still be mapped. The region is dropped quietly and not chosen by

@@ -39,6 +39,7 @@ struct Survey {
   double camera_hfov_deg{70.0}; // across-track field of view
   double heading_deg{0.0};      // line direction, degrees from east (counter-clockwise); 0 = lines run east-west
   Area area;                    // defaults to the mission area
+  bool return_home{true};       // after the last line fly back over the launch point and hover (RTL)
   [[nodiscard]] double spacing_m() const noexcept;
 };
 struct MissionParameters {
@@ -47,6 +48,7 @@ struct MissionParameters {
   double claim_timeout_s{20.0};
   double idle_return_s{60.0};
   double mission_end_s{0.0};
+  double survey_end_s{0.0};     // > 0: the survey ends about then (robots wait for regions till then); 0 = the simulator estimates it
   double merge_distance_m{12.0};
   int min_region_cells{8};
   double comm_range_m{0.0};     // 0 = unlimited (simulator)

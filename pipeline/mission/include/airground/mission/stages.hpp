@@ -86,6 +86,7 @@ inline constexpr ParamSpec kMissionParams[] = {
     ParamSpec::real("claim_timeout_s", 20.0, 1.0, 3600.0, "s", "a robot not heard this long: its claim is void, others take over"),
     ParamSpec::real("idle_return_s", 60.0, 0.0, 36000.0, "s", "nothing left and no new region or map tile this long: return to the start"),
     ParamSpec::real("mission_end_s", 0.0, 0.0, 360000.0, "s", "> 0: return to the start this long after start-up regardless"),
+    ParamSpec::real("survey_end_s", 0.0, 0.0, 360000.0, "s", "> 0: the quadrotor's survey ends about this long after start-up: until then wait for regions, idle_return_s counts from then"),
     ParamSpec::real("republish_s", 2.0, 0.1, 600.0, "s", "own claim and visited records are re-sent this often"),
     ParamSpec::real("map_growing_s", 20.0, 0.0, 3600.0, "s", "no route within this of the last map tile is not a failure (the way may not be mapped yet) ..."),
     ParamSpec::real("defer_s", 20.0, 0.0, 3600.0, "s", "... the region is dropped and not chosen by this robot again for this long"),
