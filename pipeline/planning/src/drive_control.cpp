@@ -60,6 +60,15 @@ TwistCommand PathFollower::limit(double v, double w, double dt) noexcept {
 
 TwistCommand PathFollower::stop(double dt) noexcept { return limit(0.0, 0.0, dt); }
 
+TwistCommand PathFollower::turn_toward(const Pose2& pose, const Point2& target, double dt, double min_heading_rad) noexcept {
+  const double dx = target.x - pose.x, dy = target.y - pose.y;
+  const double err = std::atan2(-std::sin(pose.yaw) * dx + std::cos(pose.yaw) * dy, std::cos(pose.yaw) * dx + std::sin(pose.yaw) * dy);
+  if (!std::isfinite(err) || std::fabs(err) <= min_heading_rad) return halt();
+  out_.v_mps = 0.0;  // never forward, not even while ramping down
+  if (state_ == FollowState::kFollowing) state_ = FollowState::kTurning;
+  return limit(0.0, std::copysign(p_.max_turn_rate_radps, err) * std::min(1.0, std::fabs(err)), dt);
+}
+
 TwistCommand PathFollower::step(const Pose2& pose, double dt, double speed_cap, const Point2* steer_to) noexcept {
   if (state_ == FollowState::kIdle || state_ == FollowState::kArrived || n_ < 2) return stop(dt);
   // Advance the segment to the one nearest the robot (never backwards).

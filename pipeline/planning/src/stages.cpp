@@ -138,6 +138,7 @@ Status DriveStage::init(StageContext& ctx) {
   pose_timeout_ = from_seconds(v.real("pose_timeout_s"));
   local_timeout_ = from_seconds(v.real("local_goal_timeout_s"));
   initialising_speed_ = v.real("initialising_speed_mps");
+  reflex_hold_ = from_seconds(v.real("reflex_turn_after_s"));
   steer_local_ = v.boolean("steer_to_local_goal");
   auto lg = ctx.channels.latest_reader<LocalGoalMsg>("local_goal");
   if (!lg) return lg.error();
@@ -182,9 +183,16 @@ void DriveStage::step(TimeNs now) noexcept {
   const bool local_ok = local_.stamp > 0 && now - local_.stamp <= local_timeout_ && (local_.path_seq == path_seq_ || local_.reflex_stop);
   TwistCommand tw;
   if (local_ok && local_.reflex_stop) {
-    if (cmd_.v_mps != 0.0 || cmd_.w_radps != 0.0) ++reflex_stops_;
-    tw = follow_->halt();
+    if (cmd_.v_mps > 0.0) ++reflex_stops_;
+    // Nothing forward; a turn on the spot toward the tracker's goal is allowed (the way it found around
+    // the obstacle, or back along the route when it backs up).
+    const Point2 lg{local_.goal.x, local_.goal.y};
+    if (reflex_since_ < 0) reflex_since_ = now;
+    const bool can_turn = have_path_ && pose_ok && !blocked_ && local_.valid && std::isfinite(lg.x) && std::isfinite(lg.y) &&
+                          now - reflex_since_ >= reflex_hold_;  // first a standstill
+    tw = can_turn ? follow_->turn_toward(pose_.pose, lg, dt) : follow_->halt();
   } else {
+    reflex_since_ = -1;
     if (local_ok && local_.state == static_cast<std::uint8_t>(TrackState::kFailed)) blocked_ = true;  // until a new route
     const Point2 lg{local_.goal.x, local_.goal.y};
     const bool steer = steer_local_ && local_ok && local_.valid && std::isfinite(lg.x) && std::isfinite(lg.y);

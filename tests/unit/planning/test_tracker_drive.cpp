@@ -141,6 +141,33 @@ TEST(TrackerDrive, AReturnRightAheadStopsTheWheelsAtOnce) {
   EXPECT_EQ(rig.drive->reflex_stops(), 1U);
 }
 
+// The robot stopped facing a box at an angle (a parked car at the end of a row), the route clear beside it:
+// the reflex holds it still for reflex_turn_after_s, then it turns on the spot toward the tracker's goal,
+// never creeping forward into the box, and drives on. The drive stage used to halt both wheels for as
+// long as the reflex held, so the robot stood there for ever (seen in a 5-robot study mission).
+TEST(TrackerDrive, StoppedFacingABoxItTurnsAwayOnTheSpotAndDrivesOn) {
+  Rig rig;
+  rig.pose = Pose2{5.0, 0.0, 0.9};
+  const std::vector<test::Box> box{{5.25, 5.65, 0.4, 0.75, 1.0}};
+  double first_turn = -1, yaw_at_turn = 0;
+  bool forward_while_reflex = false;
+  for (int k = 0; k < 200; ++k) {  // 10 s
+    const Pose2 before = rig.pose;
+    rig.tick(k, box);
+    const WheelCommandMsg& c = rig.drive->published();
+    if (rig.tracker->published().reflex_stop && c.left_mps + c.right_mps > 1e-9) forward_while_reflex = true;
+    if (first_turn < 0 && std::fabs(rig.pose.yaw - before.yaw) > 1e-6) {
+      first_turn = (k + 1) * 0.05;
+      yaw_at_turn = before.yaw;
+    }
+  }
+  ASSERT_GE(first_turn, 0.0) << "it never turned: standing facing the box";
+  EXPECT_GE(first_turn, 1.0 - 0.11) << "a standstill first";
+  EXPECT_NEAR(yaw_at_turn, 0.9, 1e-6);
+  EXPECT_FALSE(forward_while_reflex) << "never forward while the reflex holds";
+  EXPECT_GT(rig.pose.x, 9.0) << "then on along the route";
+}
+
 TEST(TrackerDrive, AWallAcrossTheRouteAndBehindCancelsItAndStops) {
   Rig rig;
   const std::vector<test::Box> walls{{6, 6.5, -12, 12, 1.5}, {-1.5, -1.2, -12, 12, 1.5}};

@@ -70,6 +70,10 @@ class PathFollower {
     out_ = TwistCommand{};
     return out_;
   }
+  // Under the reflex stop: no forward motion, but a turn on the spot toward target (map frame) when it is
+  // more than min_heading_rad off the nose; else halt(). A robot that stopped facing a car turns away
+  // from it instead of standing there for ever.
+  TwistCommand turn_toward(const Pose2& pose, const Point2& target, double dt, double min_heading_rad = 0.1) noexcept;
   [[nodiscard]] FollowState state() const noexcept { return state_; }
   [[nodiscard]] double remaining_m() const noexcept { return remaining_; }
   [[nodiscard]] const TwistCommand& last() const noexcept { return out_; }

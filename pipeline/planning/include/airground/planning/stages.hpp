@@ -88,6 +88,8 @@ inline constexpr ParamSpec kDriveOwnParams[] = {
     ParamSpec::real("initialising_speed_mps", 0.6, 0.0, 5.0, "m/s",
                     "top speed while the localizer is still converging (it needs motion to converge); 0 = wait for tracking"),
     ParamSpec::boolean("steer_to_local_goal", true, "steer at the local tracker's goal (clear of what the LiDAR sees) when it has one"),
+    ParamSpec::real("reflex_turn_after_s", 1.0, 0.0, 60.0, "s",
+                    "under a reflex stop this long: turn on the spot toward the local goal (never forward); else it could stand facing a car for ever"),
 };
 inline constexpr auto kDriveParamArray = detail::concat(kDriveOwnParams, kDriveParamSpecs);
 
@@ -115,6 +117,7 @@ class DriveStage final : public Stage {
   std::uint32_t path_seq_{0}, n_pts_{0};
   bool have_path_{false}, blocked_{false};
   TimeNs last_{-1}, pose_timeout_{0}, local_timeout_{0};
+  TimeNs reflex_since_{-1}, reflex_hold_{0};
   double initialising_speed_{0.6};
   bool steer_local_{true};
   std::uint64_t reflex_stops_{0};
