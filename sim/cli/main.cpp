@@ -613,7 +613,9 @@ constexpr const char* kStudyHelp =
     "  --max-duration T       per mission (1800 s)\n"
     "  --altitude A           quadrotor altitude (40 m; the paper flew 60 m)\n"
     "  --lidar-columns C      (1024)\n"
-    "  --set SECTION.KEY=VALUE  passed to every mission (repeatable)\n";
+    "  --set SECTION.KEY=VALUE  passed to every mission (repeatable)\n"
+    "  --report-only          run nothing: write the table and plots from the missions already done\n"
+    "                         (also while another study process is still running into DIR)\n";
 
 constexpr const char* kHilHelp =
     "airground-sim hil — hardware in the loop: the simulated world served to the real role binaries over\n"
@@ -721,7 +723,9 @@ int study_cmd(const Args& a, const char* self) {
         grid.push_back(Job{static_cast<int>(u), r, first_seed + k, (std::filesystem::path(out) / "runs" / d).string()});
       }
   std::filesystem::create_directories(std::filesystem::path(out) / "runs");
-  std::fprintf(stderr, "study: %zu missions (%zu team sizes x %zu ranges x %d seeds), %d at once -> %s\n", grid.size(), ugvs.size(), ranges.size(), seeds, jobs, out.c_str());
+  if (a.has("report-only")) grid.clear();
+  else
+    std::fprintf(stderr, "study: %zu missions (%zu team sizes x %zu ranges x %d seeds), %d at once -> %s\n", grid.size(), ugvs.size(), ranges.size(), seeds, jobs, out.c_str());
   std::size_t next = 0, running = 0, finished = 0;
   const auto t0 = std::chrono::steady_clock::now();
   auto launch = [&](Job& j) {

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <set>
 #include <sstream>
 
 #include "airground/sim/eval_mission.hpp"
@@ -139,7 +140,30 @@ Result<std::string> summarise_study(const std::string& dir) {
                   loc_sum / static_cast<double>(loc_n), loc_max, odom_sum / static_cast<double>(rows.size()));
     md << line;
   }
-  md << "\n\n![mission time](mission_time.png)\n\n![pose error](pose_error.png)\n\n![targets](targets.png)\n\n"
+  // Mission time by team size and range (mean over the seeds done), the paper's main figure as a table.
+  std::set<int> sizes;
+  for (const Row& r : rows) sizes.insert(r.ugvs);
+  md << "\n\nMission time [s] by team size (mean over seeds; runs in brackets; `cap`: a run hit the time cap):\n\n| robots |";
+  for (const auto& [range, m] : by_range) md << " range " << static_cast<int>(range) << " m |";
+  md << "\n|---|";
+  for (std::size_t i = 0; i < by_range.size(); ++i) md << "---|";
+  md << "\n";
+  for (const int u : sizes) {
+    md << "| " << u << " |";
+    for (const auto& [range, m] : by_range) {
+      const auto it = m.find(u);
+      bool cap = false;
+      for (const Row& r : rows)
+        if (r.ugvs == u && r.range == range && !r.completed) cap = true;
+      if (it == m.end()) md << " – |";
+      else {
+        std::snprintf(line, sizeof line, " %.0f (%d)%s |", it->second.first / it->second.second, it->second.second, cap ? " cap" : "");
+        md << line;
+      }
+    }
+    md << "\n";
+  }
+  md << "\n![mission time](mission_time.png)\n\n![pose error](pose_error.png)\n\n![targets](targets.png)\n\n"
      << "| run | robots | range [m] | seed | targets | done | mission time [s] | loc error mean / p95 [m] | odometry only [m] | false visits | failed goals | collisions | MB on air | RTF |\n"
      << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const Row& r : rows) {
