@@ -60,9 +60,17 @@ TwistCommand PathFollower::limit(double v, double w, double dt) noexcept {
 
 TwistCommand PathFollower::stop(double dt) noexcept { return limit(0.0, 0.0, dt); }
 
-TwistCommand PathFollower::turn_toward(const Pose2& pose, const Point2& target, double dt, double min_heading_rad) noexcept {
+namespace {
+// target in the robot's frame (x ahead, y left).
+Point2 in_robot_frame(const Pose2& pose, const Point2& target) noexcept {
   const double dx = target.x - pose.x, dy = target.y - pose.y;
-  const double err = std::atan2(-std::sin(pose.yaw) * dx + std::cos(pose.yaw) * dy, std::cos(pose.yaw) * dx + std::sin(pose.yaw) * dy);
+  return Point2{std::cos(pose.yaw) * dx + std::sin(pose.yaw) * dy, -std::sin(pose.yaw) * dx + std::cos(pose.yaw) * dy};
+}
+}  // namespace
+
+TwistCommand PathFollower::turn_toward(const Pose2& pose, const Point2& target, double dt, double min_heading_rad) noexcept {
+  const Point2 l = in_robot_frame(pose, target);
+  const double err = std::atan2(l.y, l.x);
   if (!std::isfinite(err) || std::fabs(err) <= min_heading_rad) return halt();
   out_.v_mps = 0.0;  // never forward, not even while ramping down
   if (state_ == FollowState::kFollowing) state_ = FollowState::kTurning;
@@ -123,8 +131,8 @@ TwistCommand PathFollower::step(const Pose2& pose, double dt, double speed_cap, 
     }
   }
   if (steer_to != nullptr) target = *steer_to;
-  const double dx = target.x - pose.x, dy = target.y - pose.y;
-  const double lx = std::cos(pose.yaw) * dx + std::sin(pose.yaw) * dy, ly = -std::sin(pose.yaw) * dx + std::cos(pose.yaw) * dy;
+  const Point2 l = in_robot_frame(pose, target);
+  const double lx = l.x, ly = l.y;
   const double heading_err = std::atan2(ly, lx);
   if (std::fabs(heading_err) > p_.turn_in_place_rad || (state_ == FollowState::kTurning && std::fabs(heading_err) > 0.3)) {
     state_ = FollowState::kTurning;
