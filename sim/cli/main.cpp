@@ -510,7 +510,7 @@ constexpr const char* kMissionHelp =
     "  --init-error M          initial guesses up to M metres off, uniform per robot (16)\n"
     "  --init-yaw-error D      ... and D degrees (10)\n"
     "  --altitude A            quadrotor survey altitude (40 m)\n"
-    "  --max-duration T        stop after T simulated seconds at the latest (1800)\n"
+    "  --max-duration T        stop after T simulated seconds at the latest (4x the survey's flying time, >= 1800)\n"
     "  --kill-ugv I@T          power ground robot I (1-based) off at T seconds (repeatable)\n"
     "  --kill-base T           power the base station off at T seconds\n"
     "  --set SECTION.KEY=VALUE any parameter of the ground robots' role config (repeatable)\n"
@@ -545,7 +545,8 @@ int mission_cmd(const Args& a) {
   o.init_error_m = number(a, "init-error", o.init_error_m);
   o.init_yaw_error_deg = number(a, "init-yaw-error", o.init_yaw_error_deg);
   o.uav_altitude_m = number(a, "altitude", o.uav_altitude_m);
-  o.max_duration_s = number(a, "max-duration", o.max_duration_s);
+  o.max_duration_s = a.has("max-duration") ? number(a, "max-duration", 0) : 0;
+  if (a.has("max-duration") && !(o.max_duration_s > 0)) usage_error("--max-duration must be > 0");
   o.lidar_columns = static_cast<int>(number(a, "lidar-columns", o.lidar_columns));
   o.threads = static_cast<int>(number(a, "threads", 0));
   o.parallel_robots = !a.has("serial-robots");
@@ -553,7 +554,7 @@ int mission_cmd(const Args& a) {
   o.web_pace = number(a, "pace", 0);
   o.status_period_s = a.has("verbose") ? number(a, "verbose", 30) : 0;
   if (o.ugvs < 1 || o.ugvs > 32) usage_error("--ugvs must be 1..32");
-  if (o.comm_range_m < 0 || o.init_error_m < 0 || !(o.max_duration_s > 0)) usage_error("--comm-range, --init-error must be >= 0, --max-duration > 0");
+  if (o.comm_range_m < 0 || o.init_error_m < 0) usage_error("--comm-range, --init-error must be >= 0");
   if (o.web_port < 0 || o.web_port > 65535) usage_error("--web-port must be 1..65535");
   if (a.has("kill-ugv"))
     for (const auto& k : a.opt.at("kill-ugv")) {
@@ -610,7 +611,7 @@ constexpr const char* kStudyHelp =
     "  --world W              (default)\n"
     "  --first-seed S         seeds S .. S+K-1 (1)\n"
     "  --jobs J               missions at once (each gets cores / J sensor threads)\n"
-    "  --max-duration T       per mission (1800 s)\n"
+    "  --max-duration T       per mission (as mission: 4x the survey's flying time, >= 1800 s)\n"
     "  --altitude A           quadrotor altitude (40 m; the paper flew 60 m)\n"
     "  --lidar-columns C      (1024)\n"
     "  --set SECTION.KEY=VALUE  passed to every mission (repeatable)\n"
@@ -731,8 +732,12 @@ int study_cmd(const Args& a, const char* self) {
   auto launch = [&](Job& j) {
     std::vector<std::string> args = {self, "mission", "--world", world, "--ugvs", std::to_string(j.ugvs), "--seed", std::to_string(j.seed),
                                      "--comm-range", std::to_string(j.range), "--out", j.dir, "--threads", std::to_string(threads), "--quiet",
-                                     "--record", "none", "--max-duration", a.get("max-duration", "1800"), "--altitude", a.get("altitude", "40"),
+                                     "--record", "none", "--altitude", a.get("altitude", "40"),
                                      "--lidar-columns", a.get("lidar-columns", "1024")};
+    if (a.has("max-duration")) {
+      args.emplace_back("--max-duration");
+      args.push_back(a.get("max-duration"));
+    }
     if (a.has("set"))
       for (const auto& s : a.opt.at("set")) {
         args.emplace_back("--set");

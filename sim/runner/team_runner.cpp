@@ -929,6 +929,7 @@ Status write_reports(const Team& t, const RunSummary& s) {
     << "\nsim_s: " << s.sim_s << "\nwall_s: " << s.wall_s << "\nreal_time_factor: " << s.real_time_factor
     << "\nsensor_cpu_s: " << s.sensor_cpu_s << "\ncamera_frames: " << s.camera_frames << "\ngps_fixes: " << s.gps_fixes
     << "\nvo_samples: " << s.vo_samples << "\nvo_segments: " << s.vo_segments << "\nuav_distance_m: " << s.uav_distance_m
+    << "\nuav_route_estimate_s: " << s.uav_route_estimate_s << "\nduration_cap_s: " << s.duration_cap_s
     << "\nuav_waypoints_reached: " << s.uav_waypoints_reached << "\nradio:\n  sent: " << s.radio_sent
     << "\n  delivered: " << s.radio_delivered << "\n  dropped_range: " << s.radio_dropped_range
     << "\n  dropped_loss: " << s.radio_dropped_loss << "\n  dropped_queue: " << s.radio_dropped_queue
@@ -944,6 +945,7 @@ Status write_reports(const Team& t, const RunSummary& s) {
   j << "{\"sim_s\": " << s.sim_s << ", \"wall_s\": " << s.wall_s << ", \"real_time_factor\": " << s.real_time_factor
     << ", \"camera_frames\": " << s.camera_frames << ", \"gps_fixes\": " << s.gps_fixes << ", \"vo_samples\": " << s.vo_samples
     << ", \"vo_segments\": " << s.vo_segments << ", \"uav_distance_m\": " << s.uav_distance_m
+    << ", \"uav_route_estimate_s\": " << s.uav_route_estimate_s << ", \"duration_cap_s\": " << s.duration_cap_s
     << ", \"radio\": {\"sent\": " << s.radio_sent << ", \"delivered\": " << s.radio_delivered << "}"
     << ", \"stage_overruns\": " << s.stage_overruns << ", \"ground_robots\": [";
   for (std::size_t i = 0; i < s.ugvs.size(); ++i) {
@@ -1380,7 +1382,9 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   }
   exec.start(0);
 
-  const TimeNs end = from_seconds(opt.duration_s);
+  const double duration_s = opt.duration_survey_factor > 0 && opt.uav ? std::max(opt.duration_s, opt.duration_survey_factor * survey_time_s)
+                                                                    : opt.duration_s;
+  const TimeNs end = from_seconds(duration_s);
   TimeNs chunk = std::max<TimeNs>(kNsPerS / 10, end / 100);
   if (opt.stop_when_survey_done || opt.stop_when_routes_done) chunk = std::min<TimeNs>(chunk, 2 * kNsPerS);
   if (opt.stop_when) chunk = std::min<TimeNs>(chunk, kNsPerS);
@@ -1411,13 +1415,15 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     }
     if (progress) {
       const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
-      progress(to_seconds(tt), opt.duration_s, wall > 0 ? to_seconds(tt) / wall : 0);
+      progress(to_seconds(tt), duration_s, wall > 0 ? to_seconds(tt) / wall : 0);
     }
   }
   const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
 
   RunSummary s;
   s.sim_s = to_seconds(ended);
+  s.uav_route_estimate_s = survey_time_s;
+  s.duration_cap_s = duration_s;
   s.wall_s = wall_s;
   s.real_time_factor = wall_s > 0 ? s.sim_s / wall_s : 0;
   s.sensor_cpu_s = to_seconds(t.sensor_cpu);

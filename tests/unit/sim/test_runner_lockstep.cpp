@@ -83,6 +83,26 @@ TEST(TeamRunner, SensorsRunAtTheirRatesAndRobotsMove) {
   EXPECT_TRUE(fs::exists(fs::path(::testing::TempDir()) / "rates" / "report.md"));
 }
 
+TEST(TeamRunner, TheCapGrowsWithTheSurveyWhenAskedTo) {
+  RunOptions o = small_run("cap", 1);
+  o.ugvs = 0;
+  o.record = RecordLevel::kNone;
+  o.duration_s = 2;
+  o.duration_survey_factor = 0.005;  // of a survey of the 400 m world: several seconds
+  auto r = run_team(o);
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  const RunSummary& s = r.value();
+  ASSERT_GT(s.uav_route_estimate_s, 600.0) << "a lawnmower over the 400 m world at 40 m takes many minutes";
+  EXPECT_NEAR(s.duration_cap_s, 0.005 * s.uav_route_estimate_s, 1e-9);
+  EXPECT_NEAR(s.sim_s, s.duration_cap_s, 1e-6) << "the run went on past duration_s to the survey's share";
+  o.duration_s = 1.5 * s.duration_cap_s;  // a longer duration_s still wins
+  o.duration_survey_factor = 0.005;
+  o.camera_hz = 1;
+  auto longer = run_team(o);
+  ASSERT_TRUE(longer.ok());
+  EXPECT_NEAR(longer->sim_s, o.duration_s, 1e-6);
+}
+
 TEST(TeamRunner, RejectsBadOptionsAndMissingWorlds) {
   RunOptions o = small_run("bad", 1);
   o.lidar_columns = 700;

@@ -14,6 +14,8 @@
 
 namespace ag::sim {
 
+inline constexpr double kMinMissionCapS = 1800;  // [s] the shortest default mission cap
+
 struct MissionOptions {
   std::string world{"default"};
   std::string out_dir{"mission"};
@@ -24,7 +26,9 @@ struct MissionOptions {
   double uav_altitude_m{40};
   double init_error_m{16};         // [m] each robot's initial guess is up to this far off (uniform)
   double init_yaw_error_deg{10};
-  double max_duration_s{1800};     // [s] simulated; the mission normally ends earlier (every robot back)
+  // [s] simulated cap; the mission normally ends earlier (every robot back). 0 = four times the survey's
+  // estimated flying time, at least kMinMissionCapS.
+  double max_duration_s{0};
   int lidar_columns{1024};
   int threads{0};
   bool parallel_robots{true};      // robots of one release time side by side on the workers (same results)
@@ -65,6 +69,8 @@ struct MissionMetrics {
   std::uint64_t bytes_on_air{0};   // [B] payload bytes the radio carried (every copy)
   double realtime_factor{0};
   double sim_s{0}, wall_s{0};
+  double time_cap_s{0};       // [s] the run's cap (--max-duration, or 4x the survey's estimated flying time)
+  double survey_estimate_s{0};  // [s] the quadrotor's route with its return, estimated before take-off
   std::vector<MissionRobot> robots;
 };
 

@@ -97,6 +97,9 @@ struct RunOptions {
   bool uav{true};
   std::uint64_t seed{1};
   double duration_s{60};          // simulated seconds
+  // > 0 with a quadrotor: run at least this many times the survey's estimated flying time (with its
+  // return), so a longer survey (lower altitude, bigger area) does not cut a mission short.
+  double duration_survey_factor{0};
   double physics_hz{50};          // vehicle dynamics, odometry, GPS/VO sampling
   double camera_hz{5};            // quadrotor camera frames (1 m apart at 5 m/s, for keyframes every 2 m)
   double camera_scale{0.5};       // 0.5 = 640x400, the size the mapper matches stereo at; 1.0 = 1280x800
@@ -236,6 +239,8 @@ struct RunSummary {
   std::uint64_t vo_samples{0};
   std::uint64_t vo_segments{0};
   double uav_distance_m{0};
+  double uav_route_estimate_s{0};  // the survey's estimated flying time with its return (estimate_route_time_s)
+  double duration_cap_s{0};        // the run's cap: duration_s, or more with duration_survey_factor
   std::uint64_t uav_waypoints_reached{0};
   std::uint64_t radio_sent{0}, radio_delivered{0}, radio_dropped_range{0}, radio_dropped_loss{0}, radio_dropped_queue{0};
   std::uint64_t radio_bytes_sent{0}, radio_bytes_delivered{0};  // payload bytes put on the air / received
