@@ -12,7 +12,7 @@ namespace ag::sim {
 
 namespace {
 
-constexpr int kLeft = 70, kRight = 170, kTop = 36, kBottom = 46;
+constexpr int kLeft = 70, kRight = 170, kTop = 50, kBottom = 46;  // the title, then the y label, above the frame
 const cv::Scalar kInk(40, 40, 40), kGrid(225, 225, 225);
 
 // A "nice" tick step for a range (1, 2 or 5 times a power of ten), about n ticks.
@@ -94,7 +94,7 @@ cv::Mat line_plot(const std::vector<PlotSeries>& series, const PlotOptions& o) {
     cv::line(img, cv::Point(kLeft + pw + 12, ly - 4), cv::Point(kLeft + pw + 36, ly - 4), s.colour, 3);
     text(img, s.name, cv::Point(kLeft + pw + 42, ly));
   }
-  text(img, o.title, cv::Point(kLeft, 24), 0.6);
+  text(img, o.title, cv::Point(kLeft, 22), 0.6);
   text(img, o.x_label, cv::Point(kLeft + pw / 2 - 30, o.height - 8));
   text(img, o.y_label, cv::Point(6, kTop - 8));
   return img;
@@ -127,7 +127,7 @@ cv::Mat timeline_plot(const std::vector<TimelineLane>& lanes, double t_end, cons
     cv::rectangle(img, cv::Point(kLeft + pw + 12, ly - 10), cv::Point(kLeft + pw + 32, ly), legend[k].second, cv::FILLED);
     text(img, legend[k].first, cv::Point(kLeft + pw + 40, ly));
   }
-  text(img, title, cv::Point(kLeft, 24), 0.6);
+  text(img, title, cv::Point(kLeft, 22), 0.6);
   text(img, "simulated time [s]", cv::Point(kLeft + pw / 2 - 60, height - 8));
   return img;
 }
