@@ -25,6 +25,12 @@ TEST(SimCli, HelpAndBadUsage) {
   EXPECT_EQ(run({sim_bin(), "frobnicate"}).exit_code, 2);
   EXPECT_EQ(run({sim_bin(), "render", "--pose", "1", "2"}).exit_code, 2) << "--pose needs six numbers";
   EXPECT_EQ(run({sim_bin(), "run", "--duration", "abc"}).exit_code, 2);
+  EXPECT_NE(run({sim_bin(), "mission", "--help"}).out.find("4x the survey's flying time"), std::string::npos);
+  for (const char* bad : {"0", "-5"}) {  // 0 is the library's "from the survey", not a user's value
+    const auto r = run({sim_bin(), "mission", "--max-duration", bad, "--out", tmp("bad_cap")});
+    EXPECT_EQ(r.exit_code, 2) << bad;
+    EXPECT_NE(r.err.find("--max-duration must be > 0"), std::string::npos) << r.err;
+  }
 }
 
 TEST(SimCli, GenerateShowRenderScanOnASmallWorld) {
