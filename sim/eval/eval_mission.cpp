@@ -156,10 +156,14 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
   r.ugvs = n;
   r.uav = true;
   r.seed = o.seed;
-  r.duration_s = o.max_duration_s > 0 ? o.max_duration_s : kMinMissionCapS;
-  // The robots cannot finish before the survey does and then still drive to the last regions and home:
-  // 4x the flying time: the slowest runs of the study (50 m radio range: robots idle until the quadrotor is back) took 3x.
-  if (!(o.max_duration_s > 0)) r.duration_survey_factor = 4.0;
+  if (o.max_duration_s > 0) {
+    r.duration_s = o.max_duration_s;
+  } else {
+    // The robots cannot finish before the survey does and then still drive to the last regions and home:
+    // 4x the flying time: the slowest runs of the study (50 m radio range: robots idle until the quadrotor is back) took 3x.
+    r.duration_s = kMinMissionCapS;
+    r.duration_survey_factor = 4.0;
+  }
   r.uav_altitude_m = o.uav_altitude_m;
   r.lidar_columns = o.lidar_columns;
   r.record = o.record;
