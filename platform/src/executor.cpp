@@ -33,6 +33,7 @@ void run_measured(Runnable& r, TimeNs now, TimeNs lateness, ExecTimer timer) noe
   const TimeNs exec = timer_now(timer) - a;
   StagePerf& p = *r.perf;
   p.exec.record(exec);
+  p.exec_total.store(p.exec_total.load(std::memory_order_relaxed) + exec, std::memory_order_relaxed);
   p.lateness.record(lateness);
   p.count(p.runs);
   if (exec > r.budget) p.count(p.overruns);

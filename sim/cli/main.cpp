@@ -478,8 +478,12 @@ int run(const Args& a) {
   if (show && tty) std::fprintf(stderr, "\n");
   if (!s) return fail(s.error());
   const RunSummary& r = s.value();
-  std::printf("simulated %.1f s in %.1f s: real-time factor %.1fx (sensor rendering %.1f s CPU on the main thread)\n",
-              r.sim_s, r.wall_s, r.real_time_factor, r.sensor_cpu_s);
+  std::printf("simulated %.1f s in %.1f s: real-time factor %.1fx; CPU %.1f s (%.2f core-s per simulated s): camera %.1f s, "
+              "LiDAR %.1f s",
+              r.sim_s, r.wall_s, r.real_time_factor, r.process_cpu_s, r.sim_s > 0 ? r.process_cpu_s / r.sim_s : 0.0,
+              r.camera_cpu_s, r.lidar_cpu_s);
+  for (const auto& [name, cpu] : r.robot_cpu_s) std::printf(", %s %.1f s", name.c_str(), cpu);
+  std::printf("\n");
   std::printf("quadrotor: %.0f m, %llu camera frames, %llu GPS fixes, %llu VO samples (%llu segments)\n", r.uav_distance_m,
               static_cast<unsigned long long>(r.camera_frames), static_cast<unsigned long long>(r.gps_fixes),
               static_cast<unsigned long long>(r.vo_samples), static_cast<unsigned long long>(r.vo_segments));

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <ctime>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -71,6 +72,15 @@ Result<std::shared_ptr<const World>> resolve_world(const std::string& world_arg)
 }
 
 namespace {
+
+double process_cpu_seconds() noexcept {
+  timespec ts{};
+  if (clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts) != 0) return 0.0;
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+
+constexpr int kCameraBands = 16;        // a camera frame is rendered as this many row bands (jobs)
+constexpr std::size_t kScanParts = 4;   // a LiDAR scan as this many column ranges: both cores busy when only LiDAR is due
 
 // The role stages that talk to devices; in lockstep the simulator writes their channels instead.
 bool is_simulated_driver(std::string_view stage) noexcept {
@@ -141,7 +151,7 @@ struct Ugv {
   Pose2 start;
   Pose2 odom_last;
   std::vector<LidarPoint> scan;
-  std::array<std::vector<LidarPoint>, 4> scan_parts;  // column quarters, simulated in parallel
+  std::array<std::vector<LidarPoint>, kScanParts> scan_parts;  // column quarters, simulated in parallel
   std::vector<Eigen::Vector2d> trail;
   CsvLog truth_log, odom_log, scan_log;
   std::FILE* scan_bin{nullptr};
@@ -256,7 +266,8 @@ struct Team {
   fs::path out;
   TimeNs camera_period{0}, lidar_period{0}, heartbeat_period{0}, log_period{0};
   TimeNs next_camera{0}, next_lidar{0}, next_heartbeat{0}, next_log{0};
-  TimeNs sensor_cpu{0};
+  TimeNs camera_cpu{0}, lidar_cpu{0};  // thread CPU of the sensor jobs, summed over every thread that ran them
+  std::vector<TimeNs> job_cpu;           // scratch: one slot per sensor job of a release time (sized at start)
   std::vector<Delivery> deliveries;
   std::uint64_t frame_pngs{0};
   // The ground robots' map feed.
@@ -801,14 +812,15 @@ void SimWorldStage::step(TimeNs now) noexcept {
   const bool camera_due = t.uav && t.camera && now >= t.next_camera;
   const bool lidar_due = !t.ugvs.empty() && now >= t.next_lidar;
   if (camera_due || lidar_due) {
-    constexpr int kBands = 16;
-    const int bands = camera_due ? kBands : 0;
-    constexpr std::size_t kParts = 4;  // per scan: keeps both cores busy when only LiDAR is due
+    const int bands = camera_due ? kCameraBands : 0;
+    constexpr std::size_t kParts = kScanParts;
     const std::size_t jobs = static_cast<std::size_t>(bands) + (lidar_due ? kParts * t.ugvs.size() : 0);
     const TimeNs cpu0 = thread_cpu_now();
     if (camera_due) t.camera->prepare(t.uav->vehicle.pose(), t.uav->frame, now);
+    const TimeNs prepare_cpu = thread_cpu_now() - cpu0;
     const Pose3 uav_pose = t.uav ? t.uav->vehicle.pose() : Pose3{};
     std::function<void(std::size_t)> job = [&](std::size_t j) {
+      const TimeNs job0 = thread_cpu_now();  // each job its own slot: no sharing between the threads
       if (static_cast<int>(j) < bands) {
         const int h = t.uav->frame.rgb.rows;
         const int b = static_cast<int>(j);
@@ -822,9 +834,11 @@ void SimWorldStage::step(TimeNs now) noexcept {
         t.lidar->scan_columns(lidar_pose(u, t.opt.lidar_mount_height_m), seed, cols * part / static_cast<int>(kParts),
                               cols * (part + 1) / static_cast<int>(kParts), u.scan_parts[static_cast<std::size_t>(part)]);
       }
+      t.job_cpu[j] = thread_cpu_now() - job0;
     };
     t.pool->run(jobs, job);
-    t.sensor_cpu += thread_cpu_now() - cpu0;
+    t.camera_cpu += prepare_cpu;
+    for (std::size_t j = 0; j < jobs; ++j) (static_cast<int>(j) < bands ? t.camera_cpu : t.lidar_cpu) += t.job_cpu[j];
     if (camera_due) {
       t.next_camera += t.camera_period;
       Uav& a = *t.uav;
@@ -927,7 +941,13 @@ Status write_reports(const Team& t, const RunSummary& s) {
   y << "# airground-sim run summary\n"
     << "world: " << t.opt.world << "\nseed: " << t.opt.seed << "\nugvs: " << t.opt.ugvs << "\nuav: " << (t.opt.uav ? "true" : "false")
     << "\nsim_s: " << s.sim_s << "\nwall_s: " << s.wall_s << "\nreal_time_factor: " << s.real_time_factor
-    << "\nsensor_cpu_s: " << s.sensor_cpu_s << "\ncamera_frames: " << s.camera_frames << "\ngps_fixes: " << s.gps_fixes
+    << "\nsensor_cpu_s: " << s.sensor_cpu_s << "\ncamera_cpu_s: " << s.camera_cpu_s << "\nlidar_cpu_s: " << s.lidar_cpu_s
+    << "\nprocess_cpu_s: " << s.process_cpu_s << "\ncpu_per_sim_s: " << (s.sim_s > 0 ? s.process_cpu_s / s.sim_s : 0.0)
+    << "\nrobot_cpu_s: {" << [&] {
+         std::string r;
+         for (const auto& [name, cpu] : s.robot_cpu_s) r += (r.empty() ? "" : ", ") + name + ": " + std::to_string(cpu);
+         return r;
+       }() << "}\ncamera_frames: " << s.camera_frames << "\ngps_fixes: " << s.gps_fixes
     << "\nvo_samples: " << s.vo_samples << "\nvo_segments: " << s.vo_segments << "\nuav_distance_m: " << s.uav_distance_m
     << "\nuav_route_estimate_s: " << s.uav_route_estimate_s << "\nduration_cap_s: " << s.duration_cap_s
     << "\nuav_waypoints_reached: " << s.uav_waypoints_reached << "\nradio:\n  sent: " << s.radio_sent
@@ -943,6 +963,9 @@ Status write_reports(const Team& t, const RunSummary& s) {
       << ", error_mean_m: " << r.loc_error_mean_m << ", error_p95_m: " << r.loc_error_p95_m << ", error_max_m: " << r.loc_error_max_m << "}}\n";
   std::ofstream j(t.out / "summary.json");
   j << "{\"sim_s\": " << s.sim_s << ", \"wall_s\": " << s.wall_s << ", \"real_time_factor\": " << s.real_time_factor
+    << ", \"cpu_s\": {\"process\": " << s.process_cpu_s << ", \"camera\": " << s.camera_cpu_s << ", \"lidar\": " << s.lidar_cpu_s;
+  for (const auto& [name, cpu] : s.robot_cpu_s) j << ", \"" << name << "\": " << cpu;
+  j << "}"
     << ", \"camera_frames\": " << s.camera_frames << ", \"gps_fixes\": " << s.gps_fixes << ", \"vo_samples\": " << s.vo_samples
     << ", \"vo_segments\": " << s.vo_segments << ", \"uav_distance_m\": " << s.uav_distance_m
     << ", \"uav_route_estimate_s\": " << s.uav_route_estimate_s << ", \"duration_cap_s\": " << s.duration_cap_s
@@ -963,6 +986,17 @@ Status write_reports(const Team& t, const RunSummary& s) {
   m << "# airground-sim run\n\n"
     << "World `" << t.opt.world << "`, seed " << t.opt.seed << ", " << (t.opt.uav ? "1 quadrotor + " : "") << t.opt.ugvs
     << " ground robots, " << s.sim_s << " s simulated in " << s.wall_s << " s (real-time factor " << s.real_time_factor << "x).\n\n"
+    << "CPU over the run, in core-seconds per simulated second (the machine's cores divided by the total bound the "
+       "real-time factor): " << [&] {
+         const auto per = [&](double cpu) {
+           char b[32];
+           std::snprintf(b, sizeof b, "%.3f", s.sim_s > 0 ? cpu / s.sim_s : 0.0);
+           return std::string(b);
+         };
+         std::string r = "total " + per(s.process_cpu_s) + "; camera " + per(s.camera_cpu_s) + ", LiDAR " + per(s.lidar_cpu_s);
+         for (const auto& [name, cpu] : s.robot_cpu_s) r += ", " + name + " stages " + per(cpu);
+         return r + " (the rest: world, vehicles, radio, recording, threads).\n\n";
+       }()
     << "![trajectories](trajectories.png)\n\n"
     << "| robot | distance [m] | goals reached | collisions | LiDAR scans | odometry error at end [m] | localization at end | tracking [%] | "
        "localization error mean / p95 / max [m] |\n|---|---|---|---|---|---|---|---|---|\n";
@@ -1343,6 +1377,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
 
   const int threads = opt.threads > 0 ? opt.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   WorkerPool pool(threads);
+  t.job_cpu.assign(static_cast<std::size_t>(kCameraBands) + kScanParts * t.ugvs.size(), 0);
   t.pool = &pool;
   t.camera_period = period_from_hz(opt.camera_hz);
   t.lidar_period = period_from_hz(opt.lidar_hz);
@@ -1389,6 +1424,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   if (opt.stop_when_survey_done || opt.stop_when_routes_done) chunk = std::min<TimeNs>(chunk, 2 * kNsPerS);
   if (opt.stop_when) chunk = std::min<TimeNs>(chunk, kNsPerS);
   const auto wall0 = std::chrono::steady_clock::now();
+  const double process_cpu0 = process_cpu_seconds();
   TimeNs ended = end;
   for (TimeNs tt = 0; tt < end;) {
     tt = std::min(end, tt + chunk);
@@ -1426,7 +1462,18 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   s.duration_cap_s = duration_s;
   s.wall_s = wall_s;
   s.real_time_factor = wall_s > 0 ? s.sim_s / wall_s : 0;
-  s.sensor_cpu_s = to_seconds(t.sensor_cpu);
+  s.process_cpu_s = process_cpu_seconds() - process_cpu0;
+  s.camera_cpu_s = to_seconds(t.camera_cpu);
+  s.lidar_cpu_s = to_seconds(t.lidar_cpu);
+  s.sensor_cpu_s = s.camera_cpu_s + s.lidar_cpu_s;
+  const auto stages_cpu = [](RoleInstance& role) {
+    TimeNs sum = 0;
+    for (std::size_t i = 0; i < role.perf().size(); ++i) sum += role.perf().at(i).exec_total.load(std::memory_order_relaxed);
+    return to_seconds(sum);
+  };
+  if (t.uav) s.robot_cpu_s.emplace_back("uav", stages_cpu(*t.uav->role));
+  for (auto& u : t.ugvs) s.robot_cpu_s.emplace_back(u->name, stages_cpu(*u->role));
+  if (t.base) s.robot_cpu_s.emplace_back("base", stages_cpu(*t.base));
   if (t.uav) {
     s.camera_frames = t.uav->frames;
     s.gps_fixes = t.uav->fixes;

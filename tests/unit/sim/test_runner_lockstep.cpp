@@ -83,6 +83,42 @@ TEST(TeamRunner, SensorsRunAtTheirRatesAndRobotsMove) {
   EXPECT_TRUE(fs::exists(fs::path(::testing::TempDir()) / "rates" / "report.md"));
 }
 
+// The CPU figures count every thread: the sensor jobs run on the workers as well as the caller, so
+// the LiDAR's CPU is the same work whether one thread or two run it, and the parts fit in the whole.
+TEST(TeamRunner, CpuFiguresCountEveryThread) {
+  RunOptions o = small_run("cpu1", 5);
+  o.record = RecordLevel::kNone;
+  o.lidar_columns = 1024;
+  o.camera_hz = 5;
+  o.threads = 1;
+  auto one = run_team(o);
+  ASSERT_TRUE(one.ok()) << one.error().message;
+  o.out_dir = (fs::path(::testing::TempDir()) / "cpu2").string();
+  o.threads = 2;
+  auto two = run_team(o);
+  ASSERT_TRUE(two.ok()) << two.error().message;
+  for (const RunSummary* s : {&one.value(), &two.value()}) {
+    EXPECT_GT(s->camera_cpu_s, 0.0);
+    EXPECT_GT(s->lidar_cpu_s, 0.0);
+    EXPECT_DOUBLE_EQ(s->sensor_cpu_s, s->camera_cpu_s + s->lidar_cpu_s);
+    ASSERT_EQ(s->robot_cpu_s.size(), 4u) << "uav, ugv1, ugv2, base";
+    EXPECT_EQ(s->robot_cpu_s[0].first, "uav");
+    EXPECT_EQ(s->robot_cpu_s[1].first, "ugv1");
+    EXPECT_EQ(s->robot_cpu_s[3].first, "base");
+    double parts = s->sensor_cpu_s;
+    for (const auto& [name, cpu] : s->robot_cpu_s) {
+      EXPECT_GT(cpu, 0.0) << name << " ran its stages";
+      parts += cpu;
+    }
+    EXPECT_LE(parts, 1.02 * s->process_cpu_s + 0.01) << "the parts cannot exceed the process's CPU";
+    EXPECT_GT(parts, 0.5 * s->process_cpu_s) << "sensors and stages are most of the work";
+  }
+  // Two threads share the scans; counting the caller's share alone would report about half.
+  const double ratio = two->lidar_cpu_s / one->lidar_cpu_s;
+  EXPECT_GT(ratio, 0.7) << "LiDAR CPU with 2 threads " << two->lidar_cpu_s << " s, with 1 " << one->lidar_cpu_s << " s";
+  EXPECT_LT(ratio, 1.43);
+}
+
 TEST(TeamRunner, TheCapGrowsWithTheSurveyWhenAskedTo) {
   RunOptions o = small_run("cap", 1);
   o.ugvs = 0;

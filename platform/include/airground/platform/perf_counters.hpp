@@ -50,6 +50,7 @@ struct StagePerf {
   std::atomic<std::uint64_t> runs{0};
   std::atomic<std::uint64_t> overruns{0};  // step() took longer than its budget
   std::atomic<std::uint64_t> slips{0};     // whole releases skipped because the stage started a period late
+  std::atomic<TimeNs> exec_total{0};       // sum of every step()'s execution time (one writer, like the rest)
 
   void count(std::atomic<std::uint64_t>& c, std::uint64_t n = 1) noexcept {
     c.store(c.load(std::memory_order_relaxed) + n, std::memory_order_relaxed);

@@ -233,7 +233,14 @@ struct RunSummary {
   double sim_s{0};
   double wall_s{0};
   double real_time_factor{0};
-  double sensor_cpu_s{0};
+  // CPU time [s] over the run's loop (start-up excluded), summed over every thread: the simulated
+  // sensors (camera, LiDAR), each robot's stages ("uav", "ugv1", ..., "base") and the whole process
+  // (world, vehicles, radio, recording, threads' overhead included). cpu_s / sim_s is the cost of a
+  // simulated second in core-seconds: the machine's cores divided by it bound the real-time factor.
+  double sensor_cpu_s{0};  // camera_cpu_s + lidar_cpu_s
+  double camera_cpu_s{0}, lidar_cpu_s{0};
+  double process_cpu_s{0};
+  std::vector<std::pair<std::string, double>> robot_cpu_s;
   std::uint64_t camera_frames{0};
   std::uint64_t gps_fixes{0};
   std::uint64_t vo_samples{0};
