@@ -150,7 +150,6 @@ struct Ugv {
   std::uint64_t odom_samples{0};
   Pose2 start;
   Pose2 odom_last;
-  std::vector<LidarPoint> scan;
   std::array<std::vector<LidarPoint>, kScanParts> scan_parts;  // column quarters, simulated in parallel
   std::vector<Eigen::Vector2d> trail;
   CsvLog truth_log, odom_log, scan_log;
@@ -861,8 +860,8 @@ void SimWorldStage::step(TimeNs now) noexcept {
       t.next_lidar += t.lidar_period;
       for (auto& up : t.ugvs) {
         Ugv& u = *up;
-        u.scan.clear();
-        for (const auto& part : u.scan_parts) u.scan.insert(u.scan.end(), part.begin(), part.end());
+        std::size_t total = 0;
+        for (const auto& part : u.scan_parts) total += part.size();
         ++u.scans;
         {  // the Ouster driver's revolution, labelled with the simulator's ground truth
           LidarScanMsg& m = *u.scan_msg;
@@ -873,21 +872,22 @@ void SimWorldStage::step(TimeNs now) noexcept {
           m.columns = static_cast<std::uint16_t>(t.opt.lidar_columns);
           m.labels = LabelSource::kGroundTruth;
           m.sensor_in_body = Pose3{0, 0, t.opt.lidar_mount_height_m, 0, 0, 0};
-          const std::size_t n = std::min(u.scan.size(), kMaxScanPoints);
+          std::size_t n = 0;
+          for (const auto& part : u.scan_parts)
+            for (const LidarPoint& q : part) {
+              if (n == kMaxScanPoints) break;
+              m.points[n++] = ScanReturn{q.x, q.y, q.z, q.range, q.cls, q.ring, q.col};
+            }
           m.count = static_cast<std::uint32_t>(n);
-          for (std::size_t k = 0; k < n; ++k) {
-            const LidarPoint& q = u.scan[k];
-            m.points[k] = ScanReturn{q.x, q.y, q.z, q.range, q.cls, q.ring, q.col};
-          }
           if (u.scan_out.push(m) > 0) ++u.channel_drops;
           ++u.scans_published;
         }
-        if (u.scan_log) std::fprintf(u.scan_log.get(), "%.3f,%llu,%zu\n", to_seconds(now), static_cast<unsigned long long>(u.scans), u.scan.size());
+        if (u.scan_log) std::fprintf(u.scan_log.get(), "%.3f,%llu,%zu\n", to_seconds(now), static_cast<unsigned long long>(u.scans), total);
         if (u.scan_bin != nullptr) {  // per scan: int64 stamp, uint32 count, then packed points
-          const std::uint32_t n = static_cast<std::uint32_t>(u.scan.size());
+          const std::uint32_t n = static_cast<std::uint32_t>(total);
           std::fwrite(&now, sizeof now, 1, u.scan_bin);
           std::fwrite(&n, sizeof n, 1, u.scan_bin);
-          std::fwrite(u.scan.data(), sizeof(LidarPoint), u.scan.size(), u.scan_bin);
+          for (const auto& part : u.scan_parts) std::fwrite(part.data(), sizeof(LidarPoint), part.size(), u.scan_bin);
         }
       }
     }
@@ -1290,7 +1290,6 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     // Settle the robot on the ground (height and attitude) before the first step: otherwise the scan at
     // t = 0 would be cast from 0.6 m above the datum rather than above the terrain.
     (void)u->vehicle.step(1e-9, w);
-    u->scan.reserve(static_cast<std::size_t>(64 * opt.lidar_columns));
     for (auto& part : u->scan_parts) part.reserve(static_cast<std::size_t>(16 * opt.lidar_columns));
     if (rec) {
       u->truth_log = CsvLog(t.out / ("truth_" + name + ".csv"), "t_s,x_m,y_m,z_m,roll_rad,pitch_rad,yaw_rad");

@@ -249,27 +249,40 @@ LidarSimulator::LidarSimulator(const World& world, const OusterBeamModel& beams,
     }
   }
 
-  // Group rings by azimuth: sorted by it, a gap of more than 0.5 deg starts a new group.
-  std::vector<int> by_azimuth(rings);
-  for (std::size_t i = 0; i < rings; ++i) by_azimuth[i] = static_cast<int>(i);
-  std::stable_sort(by_azimuth.begin(), by_azimuth.end(), [&](int a, int b) {
-    return beams_.azimuth_deg[static_cast<std::size_t>(a)] < beams_.azimuth_deg[static_cast<std::size_t>(b)];
+  // Slots: ring r of column k + shift[r] for every ring. The OS-1's beams sit at four azimuth offsets
+  // (about -3.2, -1.1, +1.0, +3.2 deg), so one column's rings fan out in four directions, while a slot
+  // takes each ring from the column that points it (within half a column step) the same way: one walk
+  // bounds all of a slot's beams. The shifts round each ring's offset to whole columns against the
+  // reference ring that leaves the smallest spread; ties go to the smallest shifts.
+  const double step_deg = 360.0 / static_cast<double>(cols);
+  double best_spread = kInfinity;
+  int best_reach = 0;
+  std::vector<int> shift(rings);
+  for (std::size_t ref = 0; ref < rings; ++ref) {
+    double lo = kInfinity, hi = -kInfinity;
+    int reach = 0;
+    std::vector<int> sh(rings);
+    for (std::size_t i = 0; i < rings; ++i) {
+      sh[i] = static_cast<int>(std::lround((beams_.azimuth_deg[ref] - beams_.azimuth_deg[i]) / step_deg));
+      const double corrected = beams_.azimuth_deg[i] + sh[i] * step_deg;
+      lo = std::min(lo, corrected);
+      hi = std::max(hi, corrected);
+      reach = std::max(reach, std::abs(sh[i]));
+    }
+    if (hi - lo < best_spread - 1e-9 || (hi - lo < best_spread + 1e-9 && reach < best_reach)) {
+      best_spread = hi - lo;
+      best_reach = reach;
+      shift = sh;
+    }
+  }
+  slot_shift_ = shift;
+  shift_min_ = *std::min_element(shift.begin(), shift.end());
+  shift_max_ = *std::max_element(shift.begin(), shift.end());
+  slot_rings_.resize(rings);
+  for (std::size_t i = 0; i < rings; ++i) slot_rings_[i] = static_cast<int>(i);
+  std::stable_sort(slot_rings_.begin(), slot_rings_.end(), [&](int a, int b) {
+    return beams_.altitude_deg[static_cast<std::size_t>(a)] < beams_.altitude_deg[static_cast<std::size_t>(b)];
   });
-  std::vector<std::vector<int>> groups;
-  for (std::size_t j = 0; j < rings; ++j) {
-    const auto r = static_cast<std::size_t>(by_azimuth[j]);
-    if (j == 0 || beams_.azimuth_deg[r] - beams_.azimuth_deg[static_cast<std::size_t>(by_azimuth[j - 1])] > 0.5)
-      groups.emplace_back();
-    groups.back().push_back(static_cast<int>(r));
-  }
-  group_start_.push_back(0);
-  for (auto& gr : groups) {
-    std::sort(gr.begin(), gr.end(), [&](int a, int b) {
-      return beams_.altitude_deg[static_cast<std::size_t>(a)] < beams_.altitude_deg[static_cast<std::size_t>(b)];
-    });
-    group_rings_.insert(group_rings_.end(), gr.begin(), gr.end());
-    group_start_.push_back(static_cast<int>(group_rings_.size()));
-  }
 }
 
 void LidarSimulator::emit(std::size_t k, double hit_range, std::int32_t cell_col, std::int32_t cell_row,
@@ -337,9 +350,11 @@ void LidarSimulator::scan_columns(const Pose3& pose, std::uint64_t seed, int col
   const Eigen::Vector3d pos(pose.x, pose.y, pose.z);
   const double cast_range = noise_.max_range_m + 6.0 * noise_.range_sigma_m;
   const std::uint64_t key = seed * 0xD1B54A32D192ED03ULL;
-  // A beam may follow the centre line of its chunk for 1 / |its horizontal direction - the centre's|
-  // cells before it can leave the dilation's one cell; chunks are kept narrow enough for ~75 m.
-  constexpr double kChunkSpread = 1.0 / 300.0;
+  // One walk bounds beams whose horizontal directions span at most kChunkSpread [rad]: measured from
+  // the middle direction, a beam strays one cell from the walked line only after 2 kLateral /
+  // kChunkSpread cells (62 m at 0.25 m). A level OS-1 slot spans at most one column step (6 mrad at 1024
+  // columns); a tilt spreads a slot's beams with their altitude and splits it.
+  constexpr double kChunkSpread = 0.008;
   constexpr double kLateral = 0.999;  // [cells] a hair under one cell, for rounding
   constexpr double kBackOff = 1e-7;   // [m] start the exact cast just inside the proven-free part
 
@@ -348,85 +363,115 @@ void LidarSimulator::scan_columns(const Pose3& pose, std::uint64_t seed, int col
     double hu, hv;        // unit horizontal direction, grid coordinates
     double h;             // horizontal cells per metre of range
     double slope;         // [m] of z per horizontal cell
+    std::int32_t col, ring;
   };
-  std::array<Beam, kMaxRings> beam;
-  std::array<int, kMaxRings> order;
-  std::array<FanBeam, kMaxRings> fan;
   struct Hit {
     double range;
     std::int32_t col, row;
     bool hit;
   };
-  std::array<Hit, kMaxRings> hits;
+  std::array<Beam, kMaxRings> beam;  // one slot's beams, gathered in slot_rings_ order
+  std::array<int, kMaxRings> order;  // indices into beam, ascending slope
+  std::array<FanBeam, kMaxRings> fan;
+  // Per thread, sized on the first call: every ray of the part gets its entry, then the part's returns
+  // go out column by column as scan_per_ray() gives them.
+  thread_local std::vector<Hit> hits;
+  thread_local std::vector<Eigen::Vector3d> origins;  // each column's beam origin, map frame
+  const auto first_col = static_cast<std::size_t>(col_begin);
+  const auto ncols = static_cast<std::size_t>(col_end - col_begin);
+  if (hits.size() < ncols * rings) hits.resize(ncols * rings);
+  if (origins.size() < ncols) origins.resize(ncols);
+  for (std::size_t c = 0; c < ncols; ++c) origins[c] = rot * ray_origin_[(first_col + c) * rings] + pos;
 
-  for (auto c = static_cast<std::size_t>(col_begin); c < static_cast<std::size_t>(col_end); ++c) {
-    const std::size_t k0 = c * rings;
-    const Eigen::Vector3d origin = rot * ray_origin_[k0] + pos;  // the same for every ring of the column
-    for (std::size_t i = 0; i < rings; ++i) {
-      Beam& b = beam[i];
-      b.dir = rot * ray_dir_[k0 + i];
+  for (int k = col_begin - shift_max_; k < col_end - shift_min_; ++k) {
+    int n = 0;
+    for (const int r : slot_rings_) {
+      const int c = k + slot_shift_[static_cast<std::size_t>(r)];
+      if (c < col_begin || c >= col_end) continue;
+      Beam& b = beam[static_cast<std::size_t>(n)];
+      b.dir = rot * ray_dir_[static_cast<std::size_t>(c) * rings + static_cast<std::size_t>(r)];
       const double du = b.dir.x() * inv_res, dv = -b.dir.y() * inv_res;
       b.h = std::sqrt(du * du + dv * dv);  // not hypot: slow, and a bound has margin for rounding
       b.hu = b.h > 0.0 ? du / b.h : 1.0;
       b.hv = b.h > 0.0 ? dv / b.h : 0.0;
       b.slope = b.h > 0.0 ? b.dir.z() / b.h : (b.dir.z() > 0.0 ? kInfinity : -kInfinity);
-      hits[i].hit = false;
-    }
-    for (std::size_t gi = 0; gi + 1 < group_start_.size(); ++gi) {
-      const int g0 = group_start_[gi], g1 = group_start_[gi + 1], n = g1 - g0;
-      // Ascending slope: the stored order (ascending altitude) is right for a level sensor; a tilt can
-      // only swap neighbours, which insertion sort fixes in a pass.
-      for (int j = 0; j < n; ++j) {
-        const int r = group_rings_[static_cast<std::size_t>(g0 + j)];
-        int q = j;
-        while (q > 0 && beam[static_cast<std::size_t>(order[static_cast<std::size_t>(q - 1)])].slope >
-                            beam[static_cast<std::size_t>(r)].slope) {
-          order[static_cast<std::size_t>(q)] = order[static_cast<std::size_t>(q - 1)];
-          --q;
-        }
-        order[static_cast<std::size_t>(q)] = r;
+      b.col = c;
+      b.ring = r;
+      hits[(static_cast<std::size_t>(c) - first_col) * rings + static_cast<std::size_t>(r)].hit = false;
+      // Ascending slope: ascending altitude is right for a level sensor, and beams of one slot share
+      // their direction, so a tilt only swaps neighbours, which insertion fixes at once.
+      int q = n;
+      while (q > 0 && beam[static_cast<std::size_t>(order[static_cast<std::size_t>(q - 1)])].slope > b.slope) {
+        order[static_cast<std::size_t>(q)] = order[static_cast<std::size_t>(q - 1)];
+        --q;
       }
-      for (int a = 0; a < n;) {
-        const Beam& first = beam[static_cast<std::size_t>(order[static_cast<std::size_t>(a)])];
-        int e = a + 1;
-        while (e < n) {
-          const Beam& o = beam[static_cast<std::size_t>(order[static_cast<std::size_t>(e)])];
-          const double ddu = o.hu - first.hu, ddv = o.hv - first.hv;
-          if (ddu * ddu + ddv * ddv > 4.0 * kChunkSpread * kChunkSpread) break;
-          ++e;
-        }
-        const Beam& centre = beam[static_cast<std::size_t>(order[static_cast<std::size_t>((a + e - 1) / 2)])];
-        double s_stop = 0.0;
-        for (int j = a; j < e; ++j) {
-          const Beam& o = beam[static_cast<std::size_t>(order[static_cast<std::size_t>(j)])];
-          fan[static_cast<std::size_t>(j - a)].slope = o.slope;
-          s_stop = std::max(s_stop, cast_range * o.h);
-        }
-        double walked = 0.0;
-        const bool fanned = rc.fan_free_bounds(origin, centre.hu, centre.hv, s_stop, fan.data(), e - a, walked);
-        for (int j = a; j < e; ++j) {
-          const auto r = static_cast<std::size_t>(order[static_cast<std::size_t>(j)]);
-          const Beam& o = beam[r];
-          double bound = fanned ? fan[static_cast<std::size_t>(j - a)].bound : 0.0;
-          const double dev = std::sqrt((o.hu - centre.hu) * (o.hu - centre.hu) + (o.hv - centre.hv) * (o.hv - centre.hv));
-          const double s_max = dev > 0.0 ? kLateral / dev : kInfinity;  // where the beam may leave the fan
-          bool near = false;
-          if (bound == kInfinity) {  // rose above every surface at `walked`, checked before
-            bound = s_max < walked ? s_max : kInfinity;
-          } else {
-            near = fan[static_cast<std::size_t>(j - a)].blocked && bound < s_max;  // the hit is likely close
-            bound = std::min(bound, s_max);
-          }
-          const double t_start = o.h > 0.0 ? bound / o.h : (bound == kInfinity ? kInfinity : 0.0);
-          if (t_start > cast_range) continue;  // free over its whole range
-          const RayHit hit = rc.cast_from(origin, o.dir, cast_range, std::max(0.0, t_start - kBackOff), near);
-          if (hit.hit) hits[r] = Hit{hit.range, hit.col, hit.row, true};
-        }
-        a = e;
-      }
+      order[static_cast<std::size_t>(q)] = n++;
     }
+    const auto at = [&](int j) -> const Beam& { return beam[static_cast<std::size_t>(order[static_cast<std::size_t>(j)])]; };
+    for (int a = 0; a < n;) {
+      // A chunk: the next beams by slope while their directions span at most kChunkSpread (sines of
+      // the angle from the first, whose range stays tiny).
+      const Beam& first = at(a);
+      double lo = 0.0, hi = 0.0;
+      int e = a + 1;
+      for (; e < n; ++e) {
+        const Beam& o = at(e);
+        const double sn = first.hu * o.hv - first.hv * o.hu;
+        const double nlo = std::min(lo, sn), nhi = std::max(hi, sn);
+        if (nhi - nlo > kChunkSpread) break;
+        lo = nlo;
+        hi = nhi;
+      }
+      // Walk the middle direction, from the origin of the middle beam's column, lowered by the most
+      // any other origin of the chunk lies below it; the millimetres between the origins come off the
+      // lateral margin.
+      const double mid = 0.5 * (lo + hi), cmid = std::sqrt(1.0 - mid * mid);
+      double cu = first.hu * cmid - first.hv * mid, cv = first.hu * mid + first.hv * cmid;
+      const double cn = std::sqrt(cu * cu + cv * cv);
+      cu /= cn;
+      cv /= cn;
+      const Eigen::Vector3d& oc = origins[static_cast<std::size_t>(at((a + e - 1) / 2).col) - first_col];
+      double off_h = 0.0, off_z = 0.0, s_stop = 0.0;
+      for (int j = a; j < e; ++j) {
+        const Beam& o = at(j);
+        const Eigen::Vector3d d = origins[static_cast<std::size_t>(o.col) - first_col] - oc;
+        off_h = std::max(off_h, std::sqrt(d.x() * d.x() + d.y() * d.y()) * inv_res);
+        off_z = std::max(off_z, -d.z());  // how far below the walked origin this one lies
+        fan[static_cast<std::size_t>(j - a)].slope = o.slope;
+        s_stop = std::max(s_stop, cast_range * o.h);
+      }
+      const double lateral = kLateral - 1.001 * off_h;
+      double walked = 0.0;
+      const Eigen::Vector3d fan_origin(oc.x(), oc.y(), oc.z() - off_z - (off_z > 0.0 ? 1e-9 : 0.0));
+      const bool fanned = lateral > 0.0 && rc.fan_free_bounds(fan_origin, cu, cv, s_stop, fan.data(), e - a, walked);
+      for (int j = a; j < e; ++j) {
+        const Beam& o = at(j);
+        const FanBeam& f = fan[static_cast<std::size_t>(j - a)];
+        double bound = fanned ? f.bound : 0.0;
+        const double dev = std::sqrt((o.hu - cu) * (o.hu - cu) + (o.hv - cv) * (o.hv - cv));
+        const double s_max = !fanned ? 0.0 : dev > 0.0 ? lateral / dev : kInfinity;  // where it may leave the fan
+        bool near = false;
+        if (bound == kInfinity) {  // rose above every surface at `walked`, checked before
+          bound = s_max < walked ? s_max : kInfinity;
+        } else {
+          near = fanned && f.blocked && bound < s_max;  // the hit is likely close
+          bound = std::min(bound, s_max);
+        }
+        const double t_start = o.h > 0.0 ? bound / o.h : (bound == kInfinity ? kInfinity : 0.0);
+        if (t_start > cast_range) continue;  // free over its whole range
+        const Eigen::Vector3d& ob = origins[static_cast<std::size_t>(o.col) - first_col];
+        const RayHit hit = rc.cast_from(ob, o.dir, cast_range, std::max(0.0, t_start - kBackOff), near);
+        if (hit.hit)
+          hits[(static_cast<std::size_t>(o.col) - first_col) * rings + static_cast<std::size_t>(o.ring)] =
+              Hit{hit.range, hit.col, hit.row, true};
+      }
+      a = e;
+    }
+  }
+  for (std::size_t c = 0; c < ncols; ++c) {
+    const Hit* row = hits.data() + c * rings;
     for (std::size_t i = 0; i < rings; ++i)
-      if (hits[i].hit) emit(k0 + i, hits[i].range, hits[i].col, hits[i].row, key, out);
+      if (row[i].hit) emit((first_col + c) * rings + i, row[i].range, row[i].col, row[i].row, key, out);
   }
 }
 

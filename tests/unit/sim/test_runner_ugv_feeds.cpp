@@ -23,6 +23,41 @@ namespace {
 
 namespace fs = std::filesystem;
 
+// A scan travels by copy into every reader's ring slot, and a copy moves only the valid points.
+TEST(LidarScanMsgCopy, CarriesTheHeaderTheValidPointsAndAClaimedCountAsItIs) {
+  auto a = std::make_unique<LidarScanMsg>();
+  a->stamp = 123;
+  a->seq = 7;
+  a->rings = 64;
+  a->columns = 1024;
+  a->labels = LabelSource::kGroundTruth;
+  a->sensor_in_body = Pose3{0, 0, 0.5, 0, 0, 0};
+  a->count = 3;
+  for (std::uint16_t k = 0; k < 4; ++k) a->points[k] = ScanReturn{1.0f * k, 2.0f, 3.0f, 4.0f, 5, k, 9};
+  auto b = std::make_unique<LidarScanMsg>(*a);
+  EXPECT_EQ(b->stamp, 123);
+  EXPECT_EQ(b->seq, 7u);
+  EXPECT_EQ(b->columns, 1024);
+  EXPECT_EQ(b->labels, LabelSource::kGroundTruth);
+  EXPECT_DOUBLE_EQ(b->sensor_in_body.z, 0.5);
+  ASSERT_EQ(b->count, 3u);
+  for (std::uint16_t k = 0; k < 3; ++k) {
+    EXPECT_EQ(b->points[k].x, 1.0f * k);
+    EXPECT_EQ(b->points[k].ring, k);
+    EXPECT_EQ(b->points[k].cls, 5);
+  }
+  auto c = std::make_unique<LidarScanMsg>();
+  c->points[0].x = -1.0f;
+  *c = *a;  // assignment likewise
+  EXPECT_EQ(c->count, 3u);
+  EXPECT_EQ(c->points[2].x, 2.0f);
+  a->count = static_cast<std::uint32_t>(kMaxScanPoints + 5);  // a broken producer's claim
+  *c = *a;
+  EXPECT_EQ(c->count, kMaxScanPoints + 5) << "the claim travels as it is, for the reader to refuse";
+  EXPECT_EQ(c->valid(), kMaxScanPoints);
+  EXPECT_EQ(c->points[3].x, 3.0f);
+}
+
 double length(const std::vector<Eigen::Vector2d>& p) {
   double L = 0;
   for (std::size_t i = 1; i < p.size(); ++i) L += (p[i] - p[i - 1]).norm();

@@ -78,8 +78,9 @@ class LidarSimulator {
   // Replaces `out` with the returns (column by column, top ring first; pixels without a return are
   // absent). Range noise and dropouts come from a counter-based PRNG keyed by (seed, ring, col): the
   // same pose and seed give the same scan. Reuses out's capacity: no allocation after the first call.
-  // Each column's beams share one origin: beams of about the same horizontal direction are bounded
-  // together by one march of the raycaster (fan_free_bounds), then finished by an exact cast each.
+  // Beams of about the same horizontal direction (from a few neighbouring columns, whose origins lie
+  // millimetres apart) are bounded together by one march of the raycaster (fan_free_bounds), then
+  // finished by an exact cast each: the same returns as scan_per_ray().
   void scan(const Pose3& sensor_pose_in_map, std::uint64_t seed, std::vector<LidarPoint>& out) const;
   // The same scan with one full cast per ray: the reference scan() is tested against (and the fallback
   // when the raycaster has no fan pyramid or the sensor is outside the world).
@@ -104,10 +105,12 @@ class LidarSimulator {
   // Per ray (column-major: col * rings + ring), sensor frame: beam origin [m] and unit direction.
   std::vector<Eigen::Vector3d> ray_origin_;
   std::vector<Eigen::Vector3d> ray_dir_;
-  // Rings grouped by beam azimuth (an OS-1 has four values): one group's beams of one column are
-  // almost coplanar. Concatenated, ascending altitude within a group; group g is [group_start_[g], [g+1]).
-  std::vector<int> group_rings_;
-  std::vector<int> group_start_;
+  // The fast scan's slots: slot k holds ring r of column k + slot_shift_[r], so that all of a slot's
+  // beams point about the same way (the OS-1's four beam azimuth offsets cancel to within half a
+  // column step). slot_rings_: every ring, ascending altitude.
+  std::vector<int> slot_shift_;
+  std::vector<int> slot_rings_;
+  int shift_min_{0}, shift_max_{0};
 
   // Appends the return of ring/col for a hit at `hit_range` [m] on cell (cell_col, cell_row), after noise.
   void emit(std::size_t k, double hit_range, std::int32_t cell_col, std::int32_t cell_row, std::uint64_t key,

@@ -4,6 +4,8 @@
 
 #include <array>
 #include <cstdint>
+#include <cstring>
+#include <type_traits>
 
 #include "airground/core/geometry.hpp"
 #include "airground/platform/time.hpp"
@@ -137,8 +139,38 @@ struct LidarScanMsg {
   LabelSource labels{LabelSource::kNone};  // whether `cls` is set
   Pose3 sensor_in_body;      // [m, rad] mount of the sensor on the robot
   std::uint32_t count{0};    // valid entries of points
-  std::array<ScanReturn, kMaxScanPoints> points{};
+  // Only points[0, count) mean anything, and a copy (one per reader of the ring) moves only those: a
+  // 1024-column scan fills under half the array. In an anonymous union so that a copy does not first
+  // initialise the whole array (3 MB); ScanReturn is trivially copyable, so memcpy creates the points.
+  union {
+    std::array<ScanReturn, kMaxScanPoints> points;
+  };
+
+  LidarScanMsg() noexcept : points{} {}
+  LidarScanMsg(const LidarScanMsg& o) noexcept
+      : stamp(o.stamp), published(o.published), seq(o.seq), rings(o.rings), columns(o.columns), labels(o.labels),
+        sensor_in_body(o.sensor_in_body), count(o.count) {
+    std::memcpy(static_cast<void*>(&points), static_cast<const void*>(&o.points), sizeof(ScanReturn) * valid());
+  }
+  LidarScanMsg& operator=(const LidarScanMsg& o) noexcept {
+    if (this == &o) return *this;
+    stamp = o.stamp;
+    published = o.published;
+    seq = o.seq;
+    rings = o.rings;
+    columns = o.columns;
+    labels = o.labels;
+    sensor_in_body = o.sensor_in_body;
+    count = o.count;
+    std::memcpy(static_cast<void*>(&points), static_cast<const void*>(&o.points), sizeof(ScanReturn) * valid());
+    return *this;
+  }
+  ~LidarScanMsg() = default;
+  // The entries a copy carries: count, unless a broken producer claimed more than the array holds (the
+  // count travels as it is, for the reader to refuse the scan).
+  [[nodiscard]] std::size_t valid() const noexcept { return count < kMaxScanPoints ? count : kMaxScanPoints; }
 };
+static_assert(std::is_trivially_copyable_v<ScanReturn>);
 
 // Channel "wheel_odometry" (ring): the base's integrated odometry.
 struct WheelOdometryMsg {
