@@ -8,16 +8,22 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <ctime>
 #include <cmath>
+#include <cstddef>
 #include <cstdio>
 #include <cstring>
 #include <deque>
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <mutex>
+#include <optional>
 #include <sstream>
+#include <thread>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -78,6 +84,100 @@ double process_cpu_seconds() noexcept {
   if (clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts) != 0) return 0.0;
   return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
 }
+
+// The quadrotor's next camera frame, rendered ahead on a thread of its own. The survey flight takes no
+// input from the robots, so a copy of the vehicle stepped like the world stage steps it gives the pose
+// of the next exposure bit for bit; the frame renders while the robots' stages and the LiDAR run, and
+// fills the core a long keyframe step leaves idle. When the frame is due, whatever bands are left are
+// rendered by whoever gets there (the world stage's pool jobs), so it is never later than rendering
+// it then; the pose is checked before use, and the image is the one a render at that instant gives.
+class CameraPrefetch {
+ public:
+  static constexpr int kBands = 25;  // 16 rows each at 640x400: fine enough to share out at the end
+
+  CameraPrefetch(const CameraRenderer& camera, CameraFrame& frame) : camera_(camera), frame_(frame), thread_([this] { loop(); }) {}
+  ~CameraPrefetch() {
+    stop_requested_.store(true, std::memory_order_relaxed);
+    {
+      std::lock_guard<std::mutex> lk(mu_);
+      stop_ = true;
+    }
+    wake_.notify_all();
+    thread_.join();
+  }
+  CameraPrefetch(const CameraPrefetch&) = delete;
+  CameraPrefetch& operator=(const CameraPrefetch&) = delete;
+
+  // Starts the frame of `pose` at `stamp` (the caller has prepared frame_ for it; the last one finished).
+  void start(const Pose3& pose, TimeNs stamp) {
+    {
+      std::lock_guard<std::mutex> lk(mu_);
+      pose_ = pose;
+      stamp_ = stamp;
+      done_ = 0;
+      active_ = true;
+      ++generation_;
+      // Last, releasing: a thread still looping in help() from the frame before may take a band of this
+      // one straight away, and then sees the pose and the prepared frame.
+      next_.store(0, std::memory_order_release);
+    }
+    wake_.notify_all();
+  }
+  [[nodiscard]] bool active() const noexcept { return active_; }
+  [[nodiscard]] bool matches(const Pose3& pose, TimeNs stamp) const noexcept {
+    return active_ && stamp == stamp_ && pose.x == pose_.x && pose.y == pose_.y && pose.z == pose_.z && pose.roll == pose_.roll &&
+           pose.pitch == pose_.pitch && pose.yaw == pose_.yaw;
+  }
+  // Renders bands nobody has taken yet, on the calling thread.
+  void help() noexcept {
+    for (int b = next_.fetch_add(1, std::memory_order_acq_rel); b < kBands; b = next_.fetch_add(1, std::memory_order_acq_rel)) {
+      if (stop_requested_.load(std::memory_order_relaxed)) return;  // shutting down: the frame is dropped
+      const TimeNs c0 = thread_cpu_now();
+      const int h = frame_.rgb.rows;
+      camera_.render_rows(pose_, h * b / kBands, h * (b + 1) / kBands, frame_);
+      cpu_.fetch_add(thread_cpu_now() - c0, std::memory_order_relaxed);
+      std::lock_guard<std::mutex> lk(mu_);
+      if (++done_ == kBands) finished_.notify_all();
+    }
+  }
+  // Helps, then waits for the bands others are still rendering: the frame is complete on return.
+  void finish() {
+    help();
+    std::unique_lock<std::mutex> lk(mu_);
+    finished_.wait(lk, [&] { return done_ >= kBands; });
+    active_ = false;
+  }
+  [[nodiscard]] TimeNs cpu_ns() const noexcept { return cpu_.load(std::memory_order_relaxed); }
+
+ private:
+  void loop() {
+    std::uint64_t seen = 0;
+    for (;;) {
+      {
+        std::unique_lock<std::mutex> lk(mu_);
+        wake_.wait(lk, [&] { return stop_ || generation_ != seen; });
+        if (stop_) return;
+        seen = generation_;
+      }
+      help();
+    }
+  }
+
+  const CameraRenderer& camera_;
+  CameraFrame& frame_;
+  std::mutex mu_;
+  std::condition_variable wake_, finished_;
+  Pose3 pose_;
+  TimeNs stamp_{0};
+  std::atomic<int> next_{kBands};
+  int done_{kBands};
+  bool active_{false};
+  bool stop_{false};
+  std::atomic<bool> stop_requested_{false};
+  std::uint64_t generation_{0};
+  std::atomic<TimeNs> cpu_{0};
+  std::thread thread_;  // last: starts once everything above exists
+};
 
 constexpr int kCameraBands = 16;        // a camera frame is rendered as this many row bands (jobs)
 constexpr std::size_t kScanParts = 4;   // a LiDAR scan as this many column ranges: both cores busy when only LiDAR is due
@@ -151,6 +251,7 @@ struct Ugv {
   Pose2 start;
   Pose2 odom_last;
   std::array<std::vector<LidarPoint>, kScanParts> scan_parts;  // column quarters, simulated in parallel
+  std::vector<unsigned char> bin_scratch;                      // --record full: one part's points, padding zeroed
   std::vector<Eigen::Vector2d> trail;
   CsvLog truth_log, odom_log, scan_log;
   std::FILE* scan_bin{nullptr};
@@ -265,7 +366,11 @@ struct Team {
   fs::path out;
   TimeNs camera_period{0}, lidar_period{0}, heartbeat_period{0}, log_period{0};
   TimeNs next_camera{0}, next_lidar{0}, next_heartbeat{0}, next_log{0};
-  TimeNs camera_cpu{0}, lidar_cpu{0};  // thread CPU of the sensor jobs, summed over every thread that ran them
+  TimeNs camera_cpu{0}, lidar_cpu{0};       // thread CPU of the sensor jobs, summed over every thread that ran them
+  TimeNs physics_period{0};                  // the world stage's release period
+  std::unique_ptr<CameraPrefetch> prefetch;  // with more than one thread: the next frame, rendered ahead
+  std::optional<Quadrotor> uav_ahead;        // scratch: the vehicle stepped ahead to the next exposure
+  std::uint64_t frames_ahead{0};             // camera frames that were rendered ahead and used
   std::vector<TimeNs> job_cpu;           // scratch: one slot per sensor job of a release time (sized at start)
   std::vector<Delivery> deliveries;
   std::uint64_t frame_pngs{0};
@@ -606,6 +711,24 @@ class SimProbeStage final : public Stage {
 };
 
 // The camera driver's job in simulation: the rendered frame at the mapper's 640x400, with its labels.
+// LidarPoints as the .bin recording keeps them: the struct's layout with its padding bytes zeroed, so
+// that one seed gives the same file byte for byte.
+void write_points(const std::vector<LidarPoint>& pts, std::vector<unsigned char>& scratch, std::FILE* f) {
+  scratch.assign(pts.size() * sizeof(LidarPoint), 0);
+  unsigned char* d = scratch.data();
+  for (const LidarPoint& q : pts) {
+    std::memcpy(d + offsetof(LidarPoint, x), &q.x, sizeof q.x);
+    std::memcpy(d + offsetof(LidarPoint, y), &q.y, sizeof q.y);
+    std::memcpy(d + offsetof(LidarPoint, z), &q.z, sizeof q.z);
+    std::memcpy(d + offsetof(LidarPoint, range), &q.range, sizeof q.range);
+    std::memcpy(d + offsetof(LidarPoint, cls), &q.cls, sizeof q.cls);
+    std::memcpy(d + offsetof(LidarPoint, ring), &q.ring, sizeof q.ring);
+    std::memcpy(d + offsetof(LidarPoint, col), &q.col, sizeof q.col);
+    d += sizeof(LidarPoint);
+  }
+  std::fwrite(scratch.data(), 1, scratch.size(), f);
+}
+
 void publish_image(Uav& a, TimeNs now) {
   CameraImageMsg& m = *a.image;
   const cv::Mat* rgb = &a.frame.rgb;
@@ -807,18 +930,30 @@ void SimWorldStage::step(TimeNs now) noexcept {
     if (t.air) t.air->set_position(0, p.x, p.y);
   }
 
-  // Sensors due now, rendered in parallel: camera rows in bands, one job per LiDAR scan.
+  // Sensors due now, rendered in parallel: camera rows in bands, one job per LiDAR scan. A camera frame
+  // rendered ahead (CameraPrefetch) is finished by the same jobs instead.
   const bool camera_due = t.uav && t.camera && now >= t.next_camera;
   const bool lidar_due = !t.ugvs.empty() && now >= t.next_lidar;
   if (camera_due || lidar_due) {
     const int bands = camera_due ? kCameraBands : 0;
     constexpr std::size_t kParts = kScanParts;
     const std::size_t jobs = static_cast<std::size_t>(bands) + (lidar_due ? kParts * t.ugvs.size() : 0);
-    const TimeNs cpu0 = thread_cpu_now();
-    if (camera_due) t.camera->prepare(t.uav->vehicle.pose(), t.uav->frame, now);
-    const TimeNs prepare_cpu = thread_cpu_now() - cpu0;
     const Pose3 uav_pose = t.uav ? t.uav->vehicle.pose() : Pose3{};
+    bool ahead = false;  // this frame was started ahead for exactly this pose and instant
+    if (camera_due && t.prefetch && t.prefetch->active()) {
+      ahead = t.prefetch->matches(uav_pose, now);
+      if (!ahead) t.prefetch->finish();  // a stale guess (never seen): let it end, then render as usual
+      else ++t.frames_ahead;
+    }
+    const TimeNs cpu0 = thread_cpu_now();
+    if (camera_due && !ahead) t.camera->prepare(uav_pose, t.uav->frame, now);
+    const TimeNs prepare_cpu = thread_cpu_now() - cpu0;
     std::function<void(std::size_t)> job = [&](std::size_t j) {
+      if (static_cast<int>(j) < bands && ahead) {  // the prefetch counts its own CPU
+        t.prefetch->help();
+        t.job_cpu[j] = 0;
+        return;
+      }
       const TimeNs job0 = thread_cpu_now();  // each job its own slot: no sharing between the threads
       if (static_cast<int>(j) < bands) {
         const int h = t.uav->frame.rgb.rows;
@@ -836,6 +971,7 @@ void SimWorldStage::step(TimeNs now) noexcept {
       t.job_cpu[j] = thread_cpu_now() - job0;
     };
     t.pool->run(jobs, job);
+    if (ahead) t.prefetch->finish();
     t.camera_cpu += prepare_cpu;
     for (std::size_t j = 0; j < jobs; ++j) (static_cast<int>(j) < bands ? t.camera_cpu : t.lidar_cpu) += t.job_cpu[j];
     if (camera_due) {
@@ -854,6 +990,19 @@ void SimWorldStage::step(TimeNs now) noexcept {
         cv::cvtColor(class_display_image(a.frame.cls), bgr, cv::COLOR_RGB2BGR);
         cv::imwrite((t.out / "camera" / (std::string(name) + "_class.png")).string(), bgr);
         ++t.frame_pngs;
+      }
+      if (t.prefetch) {  // the next exposure: step a copy of the vehicle as this stage will step it
+        if (!t.uav_ahead) t.uav_ahead.emplace(a.vehicle);
+        else *t.uav_ahead = a.vehicle;  // reuses the route's storage
+        TimeNs due = now;
+        while (due < t.next_camera) {
+          due += t.physics_period;
+          t.uav_ahead->step(to_seconds(t.physics_period));
+        }
+        const TimeNs c0 = thread_cpu_now();
+        t.camera->prepare(t.uav_ahead->pose(), a.frame, due);
+        t.camera_cpu += thread_cpu_now() - c0;
+        t.prefetch->start(t.uav_ahead->pose(), due);
       }
     }
     if (lidar_due) {
@@ -887,7 +1036,7 @@ void SimWorldStage::step(TimeNs now) noexcept {
           const std::uint32_t n = static_cast<std::uint32_t>(total);
           std::fwrite(&now, sizeof now, 1, u.scan_bin);
           std::fwrite(&n, sizeof n, 1, u.scan_bin);
-          for (const auto& part : u.scan_parts) std::fwrite(part.data(), sizeof(LidarPoint), part.size(), u.scan_bin);
+          for (const auto& part : u.scan_parts) write_points(part, u.bin_scratch, u.scan_bin);
         }
       }
     }
@@ -947,7 +1096,7 @@ Status write_reports(const Team& t, const RunSummary& s) {
          std::string r;
          for (const auto& [name, cpu] : s.robot_cpu_s) r += (r.empty() ? "" : ", ") + name + ": " + std::to_string(cpu);
          return r;
-       }() << "}\ncamera_frames: " << s.camera_frames << "\ngps_fixes: " << s.gps_fixes
+       }() << "}\ncamera_frames: " << s.camera_frames << "\ncamera_frames_ahead: " << s.camera_frames_ahead << "\ngps_fixes: " << s.gps_fixes
     << "\nvo_samples: " << s.vo_samples << "\nvo_segments: " << s.vo_segments << "\nuav_distance_m: " << s.uav_distance_m
     << "\nuav_route_estimate_s: " << s.uav_route_estimate_s << "\nduration_cap_s: " << s.duration_cap_s
     << "\nuav_waypoints_reached: " << s.uav_waypoints_reached << "\nradio:\n  sent: " << s.radio_sent
@@ -1377,6 +1526,8 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   const int threads = opt.threads > 0 ? opt.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   WorkerPool pool(threads);
   t.job_cpu.assign(static_cast<std::size_t>(kCameraBands) + kScanParts * t.ugvs.size(), 0);
+  t.physics_period = period_from_hz(opt.physics_hz);
+  if (pool.size() > 1 && t.uav && t.camera) t.prefetch = std::make_unique<CameraPrefetch>(*t.camera, t.uav->frame);
   t.pool = &pool;
   t.camera_period = period_from_hz(opt.camera_hz);
   t.lidar_period = period_from_hz(opt.lidar_hz);
@@ -1462,7 +1613,8 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   s.wall_s = wall_s;
   s.real_time_factor = wall_s > 0 ? s.sim_s / wall_s : 0;
   s.process_cpu_s = process_cpu_seconds() - process_cpu0;
-  s.camera_cpu_s = to_seconds(t.camera_cpu);
+  s.camera_cpu_s = to_seconds(t.camera_cpu + (t.prefetch ? t.prefetch->cpu_ns() : 0));
+  s.camera_frames_ahead = t.frames_ahead;
   s.lidar_cpu_s = to_seconds(t.lidar_cpu);
   s.sensor_cpu_s = s.camera_cpu_s + s.lidar_cpu_s;
   const auto stages_cpu = [](RoleInstance& role) {

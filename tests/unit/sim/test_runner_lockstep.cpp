@@ -53,6 +53,39 @@ TEST(TeamRunner, SameSeedGivesByteIdenticalRecordings) {
             slurp(fs::path(::testing::TempDir()) / "run_b" / "camera" / "frame_000001_rgb.png"));
 }
 
+// With two threads the camera's next frame is rendered ahead, on a thread of its own, from a copy of the
+// quadrotor stepped to the next exposure; with one, every frame renders when due. Every recording,
+// the full camera frames and the binary scans included, is the same either way.
+TEST(TeamRunner, FramesRenderedAheadEqualFramesRenderedWhenDue) {
+  RunOptions o = small_run("ahead1", 4);
+  o.record = RecordLevel::kFull;
+  o.duration_s = 3;
+  o.camera_hz = 3;  // a period off the 50 Hz physics grid: the exposure falls on the next physics step
+  o.threads = 1;
+  auto one = run_team(o);
+  ASSERT_TRUE(one.ok()) << one.error().message;
+  o.out_dir = (fs::path(::testing::TempDir()) / "ahead2").string();
+  o.threads = 2;
+  auto two = run_team(o);
+  ASSERT_TRUE(two.ok()) << two.error().message;
+  ASSERT_EQ(one->camera_frames, two->camera_frames);
+  ASSERT_GE(one->camera_frames, 9u);
+  EXPECT_EQ(one->camera_frames_ahead, 0u);
+  EXPECT_EQ(two->camera_frames_ahead, two->camera_frames - 1) << "every frame after the first was rendered ahead";
+  const fs::path a = fs::path(::testing::TempDir()) / "ahead1", b = fs::path(::testing::TempDir()) / "ahead2";
+  std::size_t files = 0;
+  for (const auto& e : fs::recursive_directory_iterator(a)) {
+    if (!e.is_regular_file()) continue;
+    const fs::path rel = fs::relative(e.path(), a);
+    const std::string name = rel.filename().string();
+    if (name.rfind("summary", 0) == 0 || name == "report.md" || name.find("mission_log") != std::string::npos) continue;  // wall time, CPU
+    ASSERT_TRUE(fs::exists(b / rel)) << rel;
+    EXPECT_EQ(slurp(e.path()), slurp(b / rel)) << rel << " differs between one thread and two";
+    ++files;
+  }
+  EXPECT_GE(files, 2u * one->camera_frames + 10u) << "every frame's PNGs, the CSVs and the scans were compared";
+}
+
 TEST(TeamRunner, DifferentSeedsGiveDifferentNoise) {
   auto a = run_team(small_run("seed_a", 1));
   auto b = run_team(small_run("seed_b", 2));

@@ -242,6 +242,7 @@ struct RunSummary {
   double process_cpu_s{0};
   std::vector<std::pair<std::string, double>> robot_cpu_s;
   std::uint64_t camera_frames{0};
+  std::uint64_t camera_frames_ahead{0};  // of them, rendered ahead on a thread of their own (two threads or more)
   std::uint64_t gps_fixes{0};
   std::uint64_t vo_samples{0};
   std::uint64_t vo_segments{0};
