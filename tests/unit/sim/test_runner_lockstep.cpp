@@ -5,6 +5,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <utility>
 
 #include "airground/sim/runner.hpp"
 
@@ -35,6 +36,18 @@ RunOptions small_run(const std::string& dir, std::uint64_t seed) {
   return o;
 }
 
+// The same run on one thread (into `o.out_dir`) and on two (into the temp folder `dir2`).
+std::pair<RunSummary, RunSummary> on_one_thread_and_two(RunOptions o, const std::string& dir2) {
+  o.threads = 1;
+  auto one = run_team(o);
+  EXPECT_TRUE(one.ok()) << one.error().message;
+  o.out_dir = (fs::path(::testing::TempDir()) / dir2).string();
+  o.threads = 2;
+  auto two = run_team(o);
+  EXPECT_TRUE(two.ok()) << two.error().message;
+  return {one.ok() ? one.value() : RunSummary{}, two.ok() ? two.value() : RunSummary{}};
+}
+
 const char* kStreams[] = {"truth_uav.csv", "gps_uav.csv", "vo_uav.csv", "camera_frames.csv", "truth_ugv1.csv",
                           "odom_ugv1.csv", "lidar_ugv1.csv", "truth_ugv2.csv", "odom_ugv2.csv", "lidar_ugv2.csv"};
 
@@ -61,13 +74,10 @@ TEST(TeamRunner, FramesRenderedAheadEqualFramesRenderedWhenDue) {
   o.record = RecordLevel::kFull;
   o.duration_s = 3;
   o.camera_hz = 3;  // a period off the 50 Hz physics grid: the exposure falls on the next physics step
-  o.threads = 1;
-  auto one = run_team(o);
-  ASSERT_TRUE(one.ok()) << one.error().message;
-  o.out_dir = (fs::path(::testing::TempDir()) / "ahead2").string();
-  o.threads = 2;
-  auto two = run_team(o);
-  ASSERT_TRUE(two.ok()) << two.error().message;
+  const auto [one_s, two_s] = on_one_thread_and_two(o, "ahead2");
+  ASSERT_FALSE(HasFailure());
+  const RunSummary* one = &one_s;
+  const RunSummary* two = &two_s;
   ASSERT_EQ(one->camera_frames, two->camera_frames);
   ASSERT_GE(one->camera_frames, 9u);
   EXPECT_EQ(one->camera_frames_ahead, 0u);
@@ -123,14 +133,11 @@ TEST(TeamRunner, CpuFiguresCountEveryThread) {
   o.record = RecordLevel::kNone;
   o.lidar_columns = 1024;
   o.camera_hz = 5;
-  o.threads = 1;
-  auto one = run_team(o);
-  ASSERT_TRUE(one.ok()) << one.error().message;
-  o.out_dir = (fs::path(::testing::TempDir()) / "cpu2").string();
-  o.threads = 2;
-  auto two = run_team(o);
-  ASSERT_TRUE(two.ok()) << two.error().message;
-  for (const RunSummary* s : {&one.value(), &two.value()}) {
+  const auto [one_s, two_s] = on_one_thread_and_two(o, "cpu2");
+  ASSERT_FALSE(HasFailure());
+  const RunSummary* one = &one_s;
+  const RunSummary* two = &two_s;
+  for (const RunSummary* s : {one, two}) {
     EXPECT_GT(s->camera_cpu_s, 0.0);
     EXPECT_GT(s->lidar_cpu_s, 0.0);
     EXPECT_DOUBLE_EQ(s->sensor_cpu_s, s->camera_cpu_s + s->lidar_cpu_s);
