@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -26,8 +27,42 @@ struct Row {
   int seed{0};
   double targets_total{0}, targets_visited{0}, mission_time_s{0}, loc_mean{-1}, loc_p95{-1}, odom_mean{0};
   double false_visits{0}, failed_goals{0}, collisions{0}, bytes{0}, rtf{0};
+  double repeat_visits{-1};                // visits of a region someone had visited already; -1: unknown
+  double first_visit_s{-1}, last_visit_s{-1};  // from visits.csv; -1: none or no file
   bool completed{false};
 };
+
+// The first and last visit times of a run's visits.csv (t_s in the first column). A line that does not
+// start with a number is reported by file and line and skipped.
+void read_visit_times(const fs::path& file, Row& r) {
+  std::ifstream in(file);
+  if (!in) return;
+  std::string line;
+  for (int n = 1; std::getline(in, line); ++n) {
+    if (n == 1 || line.empty()) continue;  // the header
+    char* end = nullptr;
+    const double t = std::strtod(line.c_str(), &end);
+    if (end == line.c_str() || *end != ',' || !std::isfinite(t)) {
+      std::fprintf(stderr, "study: %s:%d: no visit time in the first column, line skipped\n", file.c_str(), n);
+      continue;
+    }
+    if (r.first_visit_s < 0 || t < r.first_visit_s) r.first_visit_s = t;
+    r.last_visit_s = std::max(r.last_visit_s, t);
+  }
+}
+
+// Mean of `field` over the runs of one team size and range that have it (>= 0); NaN if none.
+template <typename F>
+double mean_of(const std::vector<Row>& rows, int ugvs, double range, F field) {
+  double sum = 0;
+  int n = 0;
+  for (const Row& r : rows)
+    if (r.ugvs == ugvs && r.range == range && field(r) >= 0) {
+      sum += field(r);
+      ++n;
+    }
+  return n > 0 ? sum / n : std::nan("");
+}
 }  // namespace
 
 Result<std::string> summarise_study(const std::string& dir) {
@@ -60,6 +95,13 @@ Result<std::string> summarise_study(const std::string& dir) {
     r.bytes = num("bytes_on_air", 0);
     r.rtf = num("realtime_factor", 0);
     r.completed = j.contains("completed") && j["completed"].is_boolean() && j["completed"].get<bool>();
+    if (j.contains("robots") && j["robots"].is_array() && j.contains("regions_visited") && j["regions_visited"].is_number()) {
+      double visits = 0;
+      for (const auto& robot : j["robots"])
+        if (robot.is_object() && robot.contains("visited") && robot["visited"].is_number()) visits += robot["visited"].get<double>();
+      r.repeat_visits = std::max(0.0, visits - j["regions_visited"].get<double>());
+    }
+    read_visit_times(e.path() / "visits.csv", r);
     rows.push_back(r);
   }
   if (ec) return Error::make(ErrorCode::kIo, "cannot list " + (fs::path(dir) / "runs").string() + ": " + ec.message());
@@ -69,11 +111,13 @@ Result<std::string> summarise_study(const std::string& dir) {
   const fs::path out(dir);
   std::ofstream csv(out / "study.csv");
   csv << "run,ugvs,comm_range_m,seed,targets_total,targets_visited,completed,mission_time_s,loc_error_mean_m,loc_error_p95_m,"
-         "odom_only_error_mean_m,false_visits,failed_goals,collisions,bytes_on_air,realtime_factor\n";
+         "odom_only_error_mean_m,false_visits,failed_goals,collisions,bytes_on_air,realtime_factor,repeat_visits,first_visit_s,"
+         "last_visit_s\n";
   for (const Row& r : rows)
     csv << r.name << "," << r.ugvs << "," << r.range << "," << r.seed << "," << r.targets_total << "," << r.targets_visited << ","
         << (r.completed ? 1 : 0) << "," << r.mission_time_s << "," << r.loc_mean << "," << r.loc_p95 << "," << r.odom_mean << ","
-        << r.false_visits << "," << r.failed_goals << "," << r.collisions << "," << r.bytes << "," << r.rtf << "\n";
+        << r.false_visits << "," << r.failed_goals << "," << r.collisions << "," << r.bytes << "," << r.rtf << "," << r.repeat_visits
+        << "," << r.first_visit_s << "," << r.last_visit_s << "\n";
   // Summary figures.
   std::size_t all_reached = 0, zero_false = 0;
   double loc_sum = 0, loc_max = 0, odom_sum = 0;
@@ -163,13 +207,40 @@ Result<std::string> summarise_study(const std::string& dir) {
     }
     md << "\n";
   }
+  // The same grid for the visits: when the first region was reached, and how many visits went to a region
+  // someone had reached already (their news had not reached the robot).
+  const auto grid = [&](const char* title, auto field, int decimals) {
+    md << "\n" << title << "\n\n| robots |";
+    for (const auto& [range, m] : by_range) md << " range " << static_cast<int>(range) << " m |";
+    md << "\n|---|";
+    for (std::size_t i = 0; i < by_range.size(); ++i) md << "---|";
+    md << "\n";
+    for (const int u : sizes) {
+      md << "| " << u << " |";
+      for (const auto& [range, m] : by_range) {
+        const double v = mean_of(rows, u, range, field);
+        if (std::isnan(v)) md << " – |";
+        else {
+          std::snprintf(line, sizeof line, " %.*f |", decimals, v);
+          md << line;
+        }
+      }
+      md << "\n";
+    }
+  };
+  grid("First visit [s] by team size (mean over seeds, from each run's visits.csv):", [](const Row& r) { return r.first_visit_s; }, 0);
+  grid("Repeat visits by team size (visits to a region another robot had visited already; mean over seeds):",
+       [](const Row& r) { return r.repeat_visits; }, 1);
   md << "\n![mission time](mission_time.png)\n\n![pose error](pose_error.png)\n\n![targets](targets.png)\n\n"
-     << "| run | robots | range [m] | seed | targets | done | mission time [s] | loc error mean / p95 [m] | odometry only [m] | false visits | failed goals | collisions | MB on air | RTF |\n"
-     << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+     << "| run | robots | range [m] | seed | targets | done | mission time [s] | loc error mean / p95 [m] | odometry only [m] | false visits | repeat visits | first / last visit [s] | failed goals | collisions | MB on air | RTF |\n"
+     << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const Row& r : rows) {
-    std::snprintf(line, sizeof line, "| %s | %d | %.0f | %d | %.0f / %.0f | %s | %.0f | %.2f / %.2f | %.1f | %.0f | %.0f | %.0f | %.1f | %.2f |\n", r.name.c_str(), r.ugvs,
-                  r.range, r.seed, r.targets_visited, r.targets_total, r.completed ? "yes" : "cap", r.mission_time_s, r.loc_mean, r.loc_p95, r.odom_mean,
-                  r.false_visits, r.failed_goals, r.collisions, r.bytes / 1e6, r.rtf);
+    char repeat[32] = "–", visits[48] = "–";
+    if (r.repeat_visits >= 0) std::snprintf(repeat, sizeof repeat, "%.0f", r.repeat_visits);
+    if (r.first_visit_s >= 0) std::snprintf(visits, sizeof visits, "%.0f / %.0f", r.first_visit_s, r.last_visit_s);
+    std::snprintf(line, sizeof line, "| %s | %d | %.0f | %d | %.0f / %.0f | %s | %.0f | %.2f / %.2f | %.1f | %.0f | %s | %s | %.0f | %.0f | %.1f | %.2f |\n",
+                  r.name.c_str(), r.ugvs, r.range, r.seed, r.targets_visited, r.targets_total, r.completed ? "yes" : "cap", r.mission_time_s,
+                  r.loc_mean, r.loc_p95, r.odom_mean, r.false_visits, repeat, visits, r.failed_goals, r.collisions, r.bytes / 1e6, r.rtf);
     md << line;
   }
   std::ofstream f(out / "study.md");

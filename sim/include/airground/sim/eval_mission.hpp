@@ -80,8 +80,10 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
 
 namespace ag::sim {
 
-// Reads DIR/runs/*/metrics.json of a study and writes DIR/study.csv, DIR/study.md and the plots
-// (mission_time.png, pose_error.png, targets.png); returns the summary printed at the end.
+// Reads DIR/runs/*/metrics.json (and visits.csv where present: first and last visit times) of a study
+// and writes DIR/study.csv, DIR/study.md and the plots (mission_time.png, pose_error.png, targets.png);
+// returns the summary printed at the end. Repeat visits: the robots' visits (robots[].visited) beyond
+// the regions visited, i.e. visits to a region another robot had reached already.
 Result<std::string> summarise_study(const std::string& dir);
 
 }  // namespace ag::sim
