@@ -68,7 +68,7 @@ ClassDistanceFields::ClassDistanceFields(const DistanceFieldParams& params, cons
     quantise_[d2] = static_cast<std::uint8_t>(std::min(255.0, std::round(d / quantum_m_)));
   }
 
-  max_out_ = std::max(p_.tile_cells + 2 * margin_, p_.full_block_tiles * p_.tile_cells);
+  max_out_ = p_.full_block_tiles * p_.tile_cells + 2 * margin_;  // a group of tiles in update() and its margins
   const auto in = static_cast<std::size_t>(max_out_ + 2 * margin_);
   src_.resize(in * in);
   g_.resize(static_cast<std::size_t>(channels_.count()) * static_cast<std::size_t>(max_out_) * in);
@@ -101,11 +101,18 @@ bool ClassDistanceFields::set_tile(std::int32_t tx, std::int32_t ty, std::uint64
   if (tile_version_[t] == version) return false;
   tile_version_[t] = version;
   const auto w = static_cast<std::size_t>(width_);
+  bool changed = false;
   for (std::size_t r = 0; r < tc; ++r) {
     std::uint8_t* row = &cells_[((static_cast<std::size_t>(ly) * tc + r) * w + static_cast<std::size_t>(lx) * tc) * kStride];
-    for (std::size_t c = 0; c < tc; ++c) row[c * kStride + kStride - 1] = cls[r * tc + c];
+    for (std::size_t c = 0; c < tc; ++c) {
+      std::uint8_t& cell = row[c * kStride + kStride - 1];
+      changed |= cell != cls[r * tc + c];
+      cell = cls[r * tc + c];
+    }
   }
-  if (tile_dirty_[t] == 0) {
+  // A new version with the same classes (the ortho-map re-sends a tile a keyframe touched without
+  // changing its labels) leaves the fields as they are.
+  if (changed && tile_dirty_[t] == 0) {
     tile_dirty_[t] = 1;
     dirty_[(dirty_head_ + n_dirty_) % dirty_.size()] = static_cast<std::uint32_t>(t);
     ++n_dirty_;
@@ -113,18 +120,52 @@ bool ClassDistanceFields::set_tile(std::int32_t tx, std::int32_t ty, std::uint64
   return true;
 }
 
+double ClassDistanceFields::rect_cost(std::int32_t tiles_w, std::int32_t tiles_h) const noexcept {
+  const double tc = p_.tile_cells, m = margin_;
+  const double in_w = tiles_w * tc + 4.0 * m, in_h = tiles_h * tc + 4.0 * m, out_h = tiles_h * tc + 2.0 * m;
+  return in_w * in_h + out_h * in_w;  // pass 1 runs over the input rectangle, pass 2 along the output rows
+}
+
 std::size_t ClassDistanceFields::update(std::size_t max_tiles) noexcept {
+  const std::int32_t tc = p_.tile_cells, block = p_.full_block_tiles;
+  const auto tiles_x = static_cast<std::uint32_t>(extent_.tiles_x);
+  const double one = rect_cost(1, 1);
+  const double budget = max_tiles >= n_dirty_ ? std::numeric_limits<double>::infinity() : static_cast<double>(max_tiles) * one;
+  double spent = 0.0;
   std::size_t done = 0;
-  const std::int32_t tc = p_.tile_cells;
-  while (n_dirty_ > 0 && done < max_tiles) {
-    const std::uint32_t t = dirty_[dirty_head_];
-    dirty_head_ = (dirty_head_ + 1) % dirty_.size();
-    --n_dirty_;
-    tile_dirty_[t] = 0;
-    const auto lx = static_cast<std::int32_t>(t % static_cast<std::uint32_t>(extent_.tiles_x));
-    const auto ly = static_cast<std::int32_t>(t / static_cast<std::uint32_t>(extent_.tiles_x));
-    recompute_rect(lx * tc - margin_, ly * tc - margin_, (lx + 1) * tc + margin_, (ly + 1) * tc + margin_);
-    ++done;
+  while (n_dirty_ > 0 && (done == 0 || spent + one <= budget)) {
+    // The oldest changed tile, grouped with the later ones that share one rectangle of at most block x
+    // block tiles with it when one pass over the union costs no more than a pass of its own (adjacent
+    // tiles share their margins), within what is left of the budget.
+    const std::uint32_t seed = dirty_[dirty_head_];
+    std::int32_t bx0 = static_cast<std::int32_t>(seed % tiles_x), by0 = static_cast<std::int32_t>(seed / tiles_x);
+    std::int32_t bx1 = bx0, by1 = by0;
+    tile_dirty_[seed] = 2;
+    std::size_t group = 1;
+    const double cap = std::max(budget - spent, one);
+    for (std::size_t i = 1; i < n_dirty_; ++i) {
+      const std::uint32_t t = dirty_[(dirty_head_ + i) % dirty_.size()];
+      const auto tx = static_cast<std::int32_t>(t % tiles_x), ty = static_cast<std::int32_t>(t / tiles_x);
+      const std::int32_t nx0 = std::min(bx0, tx), ny0 = std::min(by0, ty), nx1 = std::max(bx1, tx), ny1 = std::max(by1, ty);
+      if (nx1 - nx0 >= block || ny1 - ny0 >= block) continue;
+      const double c = rect_cost(nx1 - nx0 + 1, ny1 - ny0 + 1);
+      if (c > rect_cost(bx1 - bx0 + 1, by1 - by0 + 1) + one || c > cap) continue;
+      bx0 = nx0, by0 = ny0, bx1 = nx1, by1 = ny1;
+      tile_dirty_[t] = 2;
+      ++group;
+    }
+    // Take the group out of the ring, keeping the others in order of change.
+    std::size_t kept = 0;
+    for (std::size_t i = 0; i < n_dirty_; ++i) {
+      const std::uint32_t t = dirty_[(dirty_head_ + i) % dirty_.size()];
+      if (tile_dirty_[t] == 2) tile_dirty_[t] = 0;
+      else dirty_[(dirty_head_ + kept++) % dirty_.size()] = t;
+    }
+    n_dirty_ = kept;
+    if (n_dirty_ == 0) dirty_head_ = 0;
+    recompute_rect(bx0 * tc - margin_, by0 * tc - margin_, (bx1 + 1) * tc + margin_, (by1 + 1) * tc + margin_);
+    spent += rect_cost(bx1 - bx0 + 1, by1 - by0 + 1);
+    done += group;
   }
   return done;
 }

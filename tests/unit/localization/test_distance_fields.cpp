@@ -137,6 +137,67 @@ TEST(ClassDistanceFields, IncrementalTileUpdatesEqualAFullRecompute) {
   }
 }
 
+TEST(ClassDistanceFields, NeighbouringChangedTilesGoTogetherWithinTheBudgetAndEqualAFullRecompute) {
+  SyntheticWorld w = random_blocks(10, 31, 0.05);
+  DistanceFieldParams p;  // 64-cell tiles, 25 m truncation, groups within 4 x 4 tiles
+  const LocalizationChannels ch = LocalizationChannels::per_class();
+  ClassDistanceFields inc(p, ch, w.extent());
+  test::load_world(w, inc);
+  std::uint64_t version = 2;
+  const auto change = [&](int tx, int ty, ClassId id) {
+    w.fill_rect(tx * 32.0 + 4, ty * 32.0 + 4, tx * 32.0 + 14, ty * 32.0 + 12, id, 4.0F);
+    ASSERT_TRUE(inc.set_tile(tx, ty, version++, w.tile(tx, ty)));
+  };
+  // A 2 x 2 square of tiles (as a survey line and its neighbour change), then two far apart.
+  change(2, 2, ClassId::kBuilding);
+  change(3, 2, ClassId::kRoad);
+  change(8, 8, ClassId::kWater);
+  change(2, 3, ClassId::kGrass);
+  change(3, 3, ClassId::kBuilding);
+  change(0, 9, ClassId::kRoad);
+  ASSERT_EQ(inc.pending_tiles(), 6U);
+  // The work of two lone tiles does the whole square: one pass shares the four tiles' margins.
+  EXPECT_EQ(inc.update(2), 4U);
+  EXPECT_EQ(inc.pending_tiles(), 2U);
+  // The far ones are not grouped (a rectangle spanning them costs more than two passes): one each.
+  EXPECT_EQ(inc.update(1), 1U);
+  EXPECT_EQ(inc.update(1), 1U);
+  EXPECT_EQ(inc.pending_tiles(), 0U);
+  ClassDistanceFields full(p, ch, w.extent());
+  test::load_world(w, full);
+  const std::size_t bytes = (inc.outside_index() + 1) * static_cast<std::size_t>(inc.stride());
+  ASSERT_EQ(0, std::memcmp(inc.cells(), full.cells(), bytes));
+
+  // Many tiles at once, folded in with small budgets: the same fields again.
+  TestRng rng(4);
+  for (int k = 0; k < 30; ++k)
+    change(static_cast<int>(rng.uniform() * 10), static_cast<int>(rng.uniform() * 10), static_cast<ClassId>(static_cast<int>(rng.uniform() * 6.0)));
+  while (inc.pending_tiles() > 0) {
+    const std::size_t before = inc.pending_tiles();
+    EXPECT_GE(inc.update(3), 1U);
+    EXPECT_LT(inc.pending_tiles(), before);
+  }
+  ClassDistanceFields full2(p, ch, w.extent());
+  test::load_world(w, full2);
+  ASSERT_EQ(0, std::memcmp(inc.cells(), full2.cells(), bytes));
+}
+
+TEST(ClassDistanceFields, ANewVersionWithTheSameClassesChangesNothing) {
+  SyntheticWorld w = random_blocks(4, 9, 0.0);
+  DistanceFieldParams p;
+  const LocalizationChannels ch = LocalizationChannels::per_class();
+  ClassDistanceFields f(p, ch, w.extent());
+  test::load_world(w, f);
+  ASSERT_TRUE(f.set_tile(1, 2, 7, w.tile(1, 2)));  // accepted: the version is new
+  EXPECT_EQ(f.tile_version(1, 2), 7U);
+  EXPECT_EQ(f.pending_tiles(), 0U);  // but nothing to recompute
+  // One cell differs: pending.
+  std::vector<std::uint8_t> t = w.tile(1, 2);
+  t[100] = t[100] == raw(ClassId::kRoad) ? raw(ClassId::kGrass) : raw(ClassId::kRoad);
+  ASSERT_TRUE(f.set_tile(1, 2, 8, t));
+  EXPECT_EQ(f.pending_tiles(), 1U);
+}
+
 TEST(ClassDistanceFields, OnlyTheChangedTileAndItsMarginAreRewritten) {
   SyntheticWorld w = random_blocks(8, 3, 0.0);
   DistanceFieldParams p;

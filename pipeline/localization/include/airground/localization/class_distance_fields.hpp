@@ -29,7 +29,8 @@ struct DistanceFieldParams {
   int tile_cells{64};           // [cells] tile edge of the aerial map
   double truncation_m{25.0};    // [m] distances are clamped here (their code: 50 px)
   bool unknown_is_source{true}; // unknown cells count as sources of every channel (optimistic distances)
-  int full_block_tiles{4};      // recompute_all() works in blocks of this many tiles squared
+  int full_block_tiles{4};      // recompute_all() works in blocks of this many tiles squared; update() groups
+                                // changed tiles within such a block
 };
 
 inline constexpr ParamSpec kDistanceFieldParamSpecs[] = {
@@ -54,10 +55,13 @@ class ClassDistanceFields {
 
   // Copies one tile's class ids (tile_cells^2, row-major, row 0 = south). Returns false when the tile is
   // outside the extent, the size is wrong, or the version equals the stored one. The fields around it
-  // are stale until update(). Never allocates.
+  // are stale until update(); a new version with the same class ids changes no field and is not pending.
+  // Never allocates.
   bool set_tile(std::int32_t tx, std::int32_t ty, std::uint64_t version, std::span<const std::uint8_t> cls) noexcept;
-  // Recomputes the fields around up to `max_tiles` changed tiles (oldest change first); returns the
-  // number of tiles done. Never allocates.
+  // Recomputes the fields around the changed tiles, oldest change first, for at most the work of
+  // `max_tiles` tiles done one by one: neighbouring changed tiles (within full_block_tiles) go in one
+  // rectangle, which shares their margins, so more tiles may be done for that work. Returns the number
+  // of tiles done (at least one when any is pending). Never allocates.
   std::size_t update(std::size_t max_tiles = SIZE_MAX) noexcept;
   // Recomputes every field from the classes (and clears the changed set). Never allocates.
   void recompute_all() noexcept;
@@ -91,6 +95,8 @@ class ClassDistanceFields {
  private:
   // Recomputes the output rectangle [x0, x1) x [y0, y1) (cells, clamped to the extent).
   void recompute_rect(std::int32_t x0, std::int32_t y0, std::int32_t x1, std::int32_t y1) noexcept;
+  // The work of recompute_rect() around a rectangle of tiles_w x tiles_h tiles [cell visits].
+  [[nodiscard]] double rect_cost(std::int32_t tiles_w, std::int32_t tiles_h) const noexcept;
 
   DistanceFieldParams p_;
   LocalizationChannels channels_;
