@@ -72,6 +72,7 @@ ClassDistanceFields::ClassDistanceFields(const DistanceFieldParams& params, cons
   const auto in = static_cast<std::size_t>(max_out_ + 2 * margin_);
   src_.resize(in * in);
   g_.resize(static_cast<std::size_t>(channels_.count()) * static_cast<std::size_t>(max_out_) * in);
+  run_.resize(static_cast<std::size_t>(channels_.count()) * in);
   env_v_.resize(in + 1);
   env_z_.resize(in + 2);
   env_f_.resize(in + 1);
@@ -81,7 +82,7 @@ ClassDistanceFields::ClassDistanceFields(const DistanceFieldParams& params, cons
 std::size_t ClassDistanceFields::memory_bytes() const noexcept {
   return sizeof(*this) + cells_.capacity() + tile_version_.capacity() * sizeof(std::uint64_t) + tile_dirty_.capacity() +
          dirty_.capacity() * sizeof(std::uint32_t) + quantise_.capacity() + src_.capacity() +
-         g_.capacity() * sizeof(std::int16_t) + env_v_.capacity() * sizeof(std::int32_t) +
+         g_.capacity() * sizeof(std::int16_t) + run_.capacity() * sizeof(std::int16_t) + env_v_.capacity() * sizeof(std::int32_t) +
          env_z_.capacity() * sizeof(double) + env_f_.capacity() * sizeof(std::int32_t);
 }
 
@@ -210,33 +211,31 @@ void ClassDistanceFields::recompute_rect(std::int32_t x0, std::int32_t y0, std::
     }
   }
 
-  // Pass 1: vertical distance to the nearest source in each input column, for the output rows.
-  const std::int16_t none = static_cast<std::int16_t>(m + 1);
+  // Pass 1: vertical distance to the nearest source in each input column, for the output rows: a run
+  // length per column swept down the rows, then up, a whole row at a time (contiguous, vectorisable).
+  // The downward sweep stops at the last output row, the upward one at the first.
+  const auto none = static_cast<std::int16_t>(m + 1);
   const std::size_t plane = static_cast<std::size_t>(oh) * uiw;
-  for (std::int32_t xi = 0; xi < iw; ++xi) {
-    std::array<std::int32_t, kMaxChannels> run{};
-    run.fill(m + 1);
-    for (std::int32_t yi = 0; yi < ih; ++yi) {
-      const std::uint8_t bits = src_[static_cast<std::size_t>(yi) * uiw + static_cast<std::size_t>(xi)];
+  for (int up = 0; up < 2; ++up) {
+    std::fill_n(run_.begin(), static_cast<std::size_t>(n_ch) * uiw, none);
+    for (std::int32_t step = 0; step < ih - m; ++step) {
+      const std::int32_t yi = up ? ih - 1 - step : step;
+      const std::uint8_t* bits = &src_[static_cast<std::size_t>(yi) * uiw];
       const std::int32_t yo = yi - m;
+      const bool out_row = yo >= 0 && yo < oh;
       for (int k = 0; k < n_ch; ++k) {
-        auto& r = run[static_cast<std::size_t>(k)];
-        r = (bits >> k) & 1U ? 0 : std::min(r + 1, m + 1);
-        if (yo >= 0 && yo < oh)
-          g_[static_cast<std::size_t>(k) * plane + static_cast<std::size_t>(yo) * uiw + static_cast<std::size_t>(xi)] =
-              static_cast<std::int16_t>(r);
-      }
-    }
-    run.fill(m + 1);
-    for (std::int32_t yi = ih - 1; yi >= 0; --yi) {
-      const std::uint8_t bits = src_[static_cast<std::size_t>(yi) * uiw + static_cast<std::size_t>(xi)];
-      const std::int32_t yo = yi - m;
-      for (int k = 0; k < n_ch; ++k) {
-        auto& r = run[static_cast<std::size_t>(k)];
-        r = (bits >> k) & 1U ? 0 : std::min(r + 1, m + 1);
-        if (yo >= 0 && yo < oh) {
-          std::int16_t& g = g_[static_cast<std::size_t>(k) * plane + static_cast<std::size_t>(yo) * uiw + static_cast<std::size_t>(xi)];
-          g = std::min(g, static_cast<std::int16_t>(r));
+        std::int16_t* run = &run_[static_cast<std::size_t>(k) * uiw];
+        const auto bit = static_cast<std::uint8_t>(1U << static_cast<unsigned>(k));
+        for (std::size_t xi = 0; xi < uiw; ++xi) {
+          const auto next = static_cast<std::int16_t>(run[xi] + 1);
+          run[xi] = (bits[xi] & bit) != 0 ? std::int16_t{0} : (next < none ? next : none);
+        }
+        if (!out_row) continue;
+        std::int16_t* g = &g_[static_cast<std::size_t>(k) * plane + static_cast<std::size_t>(yo) * uiw];
+        if (up) {
+          for (std::size_t xi = 0; xi < uiw; ++xi) g[xi] = std::min(g[xi], run[xi]);
+        } else {
+          std::copy_n(run, uiw, g);
         }
       }
     }

@@ -116,6 +116,7 @@ class ClassDistanceFields {
   // scratch of one rectangle
   std::vector<std::uint8_t> src_;   // [in_row][in_col] channel bits
   std::vector<std::int16_t> g_;     // [channel][out_row][in_col] vertical distance [cells], > margin = none
+  std::vector<std::int16_t> run_;   // [channel][in_col] the sweeps' run lengths [cells]
   std::vector<std::int32_t> env_v_;
   std::vector<double> env_z_;
   std::vector<std::int32_t> env_f_;
