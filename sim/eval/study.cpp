@@ -187,11 +187,16 @@ Result<std::string> summarise_study(const std::string& dir) {
   // Mission time by team size and range (mean over the seeds done), the paper's main figure as a table.
   std::set<int> sizes;
   for (const Row& r : rows) sizes.insert(r.ugvs);
-  md << "\n\nMission time [s] by team size (mean over seeds; runs in brackets; `cap`: a run hit the time cap):\n\n| robots |";
-  for (const auto& [range, m] : by_range) md << " range " << static_cast<int>(range) << " m |";
-  md << "\n|---|";
-  for (std::size_t i = 0; i < by_range.size(); ++i) md << "---|";
+  // A grid's title and header: one column per range.
+  const auto grid_header = [&](const char* title) {
+    md << "\n" << title << "\n\n| robots |";
+    for (const auto& [range, m] : by_range) md << " range " << static_cast<int>(range) << " m |";
+    md << "\n|---|";
+    for (std::size_t i = 0; i < by_range.size(); ++i) md << "---|";
+    md << "\n";
+  };
   md << "\n";
+  grid_header("Mission time [s] by team size (mean over seeds; runs in brackets; `cap`: a run hit the time cap):");
   for (const int u : sizes) {
     md << "| " << u << " |";
     for (const auto& [range, m] : by_range) {
@@ -210,11 +215,7 @@ Result<std::string> summarise_study(const std::string& dir) {
   // The same grid for the visits: when the first region was reached, and how many visits went to a region
   // someone had reached already (their news had not reached the robot).
   const auto grid = [&](const char* title, auto field, int decimals) {
-    md << "\n" << title << "\n\n| robots |";
-    for (const auto& [range, m] : by_range) md << " range " << static_cast<int>(range) << " m |";
-    md << "\n|---|";
-    for (std::size_t i = 0; i < by_range.size(); ++i) md << "---|";
-    md << "\n";
+    grid_header(title);
     for (const int u : sizes) {
       md << "| " << u << " |";
       for (const auto& [range, m] : by_range) {
