@@ -143,6 +143,7 @@ std::size_t ClassDistanceFields::update(std::size_t max_tiles) noexcept {
     std::int32_t bx1 = bx0, by1 = by0;
     tile_dirty_[seed] = 2;
     std::size_t group = 1;
+    double cost = one;  // of the group's rectangle so far
     const double cap = std::max(budget - spent, one);
     for (std::size_t i = 1; i < n_dirty_; ++i) {
       const std::uint32_t t = dirty_[(dirty_head_ + i) % dirty_.size()];
@@ -150,8 +151,9 @@ std::size_t ClassDistanceFields::update(std::size_t max_tiles) noexcept {
       const std::int32_t nx0 = std::min(bx0, tx), ny0 = std::min(by0, ty), nx1 = std::max(bx1, tx), ny1 = std::max(by1, ty);
       if (nx1 - nx0 >= block || ny1 - ny0 >= block) continue;
       const double c = rect_cost(nx1 - nx0 + 1, ny1 - ny0 + 1);
-      if (c > rect_cost(bx1 - bx0 + 1, by1 - by0 + 1) + one || c > cap) continue;
+      if (c > cost + one || c > cap) continue;
       bx0 = nx0, by0 = ny0, bx1 = nx1, by1 = ny1;
+      cost = c;
       tile_dirty_[t] = 2;
       ++group;
     }
@@ -165,7 +167,7 @@ std::size_t ClassDistanceFields::update(std::size_t max_tiles) noexcept {
     n_dirty_ = kept;
     if (n_dirty_ == 0) dirty_head_ = 0;
     recompute_rect(bx0 * tc - margin_, by0 * tc - margin_, (bx1 + 1) * tc + margin_, (by1 + 1) * tc + margin_);
-    spent += rect_cost(bx1 - bx0 + 1, by1 - by0 + 1);
+    spent += cost;
     done += group;
   }
   return done;
