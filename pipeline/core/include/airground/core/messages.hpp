@@ -45,6 +45,16 @@ struct VoMsg {
   Pose3 pose;                // body pose in the segment's frame [odometry units, rad]; roll/pitch gravity-aligned
 };
 
+// Channel "attitude" (ring): the autopilot's attitude estimate (PX4 / ArduPilot EKF, MAVLink ATTITUDE),
+// converted from the autopilot's FRD body in NED to REP-103: body FLU in the local ENU frame.
+inline constexpr std::size_t kAttitudeRing = 128;
+struct AttitudeMsg {
+  TimeNs stamp{0};       // [ns] sample time on this computer's clock
+  TimeNs published{0};   // [ns]
+  double roll{0}, pitch{0}, yaw{0};  // [rad] body FLU in ENU (ZYX: yaw about up, then pitch, then roll)
+  double roll_rate{0}, pitch_rate{0}, yaw_rate{0};  // [rad/s] about the body FLU axes
+};
+
 // Channel "gps" (ring): one GNSS fix converted to the map frame (local ENU around the mission datum).
 struct GpsMsg {
   TimeNs stamp{0};
