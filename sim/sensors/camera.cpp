@@ -9,6 +9,7 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include "airground/platform/config.hpp"
 
@@ -41,9 +42,34 @@ constexpr ParamSpec kShadingParams[] = {
     ParamSpec::boolean("detail_texture", kDefaultShading.detail_texture, "world-fixed fine texture for stereo"),
     ParamSpec::real("max_range_m", kDefaultShading.max_range_m, 1.0, 1.0e6, "m", "longest ray; beyond is sky"),
 };
+constexpr CameraSensor kDefaultSensor{};
+constexpr ParamSpec kSensorParams[] = {
+    ParamSpec::boolean("noise", kDefaultSensor.noise, "photon shot and read noise, gain, 8-bit quantisation"),
+    ParamSpec::real("full_well_e", kDefaultSensor.full_well_e, 100.0, 1.0e6, "e-", "full-well capacity per sensor pixel"),
+    ParamSpec::real("read_noise_e", kDefaultSensor.read_noise_e, 0.0, 1000.0, "e-", "read (temporal dark) noise rms per sensor pixel"),
+    ParamSpec::integer("sensor_width_px", kDefaultSensor.sensor_width_px, 16, 16384, "px",
+                       "native sensor width; a rendered pixel averages (this / width)^2 sensor pixels"),
+    ParamSpec::real("full_scale_exposure_s", kDefaultSensor.full_scale_exposure_s, 1.0e-6, 1.0, "s",
+                    "exposure at gain 1 that fills the well on a white sun-lit surface"),
+    ParamSpec::boolean("auto_exposure", kDefaultSensor.auto_exposure, "exposure and gain follow the frame mean"),
+    ParamSpec::real("exposure_s", kDefaultSensor.exposure_s, 1.0e-6, 1.0, "s", "fixed exposure; the auto-exposure's first"),
+    ParamSpec::real("gain", kDefaultSensor.gain, 1.0, 256.0, "", "fixed gain; the auto-exposure's first"),
+    ParamSpec::real("exposure_min_s", kDefaultSensor.exposure_min_s, 1.0e-6, 1.0, "s", "shortest exposure"),
+    ParamSpec::real("exposure_max_s", kDefaultSensor.exposure_max_s, 1.0e-6, 1.0, "s", "longest exposure; then gain"),
+    ParamSpec::real("gain_max", kDefaultSensor.gain_max, 1.0, 256.0, "", "highest gain"),
+    ParamSpec::real("ae_target", kDefaultSensor.ae_target, 0.05, 0.95, "", "frame mean aimed at, share of full scale"),
+    ParamSpec::real("ae_speed", kDefaultSensor.ae_speed, 0.05, 1.0, "", "share of the log error corrected per frame"),
+    ParamSpec::real("ae_tolerance", kDefaultSensor.ae_tolerance, 0.0, 0.5, "", "relative error within which exposure is held"),
+    ParamSpec::boolean("motion_blur", kDefaultSensor.motion_blur, "average sub-exposure samples along the motion"),
+    ParamSpec::integer("blur_max_samples", kDefaultSensor.blur_max_samples, 1, 63, "", "most sub-exposure samples per pixel (odd)"),
+    ParamSpec::boolean("vignetting", kDefaultSensor.vignetting, "cos^k illumination falloff toward the corners"),
+    ParamSpec::real("corner_illumination", kDefaultSensor.corner_illumination, 0.05, 1.0, "",
+                    "illumination at the farthest image corner relative to the centre"),
+};
 constexpr ParamSection kCameraSchema[] = {
     {"camera", kCameraParams, "simulated nadir camera intrinsics (OpenCV model)"},
     {"camera_shading", kShadingParams, "lighting and texture of the simulated camera"},
+    {"camera_sensor", kSensorParams, "noise, exposure, motion blur and vignetting of the simulated camera"},
 };
 
 Result<Config> load_camera_config(std::string_view yaml, std::string_view origin) {
@@ -83,6 +109,50 @@ Result<CameraShading> shading_from(const Result<Config>& cfg) {
   sh.max_range_m = s.real("max_range_m");
   return sh;
 }
+
+Result<CameraSensor> sensor_from(const Result<Config>& cfg, std::string_view origin) {
+  if (!cfg) return cfg.error();
+  const SectionView s(cfg.value(), "camera_sensor");
+  CameraSensor c;
+  c.noise = s.boolean("noise");
+  c.full_well_e = s.real("full_well_e");
+  c.read_noise_e = s.real("read_noise_e");
+  c.sensor_width_px = static_cast<int>(s.integer("sensor_width_px"));
+  c.full_scale_exposure_s = s.real("full_scale_exposure_s");
+  c.auto_exposure = s.boolean("auto_exposure");
+  c.exposure_s = s.real("exposure_s");
+  c.gain = s.real("gain");
+  c.exposure_min_s = s.real("exposure_min_s");
+  c.exposure_max_s = s.real("exposure_max_s");
+  c.gain_max = s.real("gain_max");
+  c.ae_target = s.real("ae_target");
+  c.ae_speed = s.real("ae_speed");
+  c.ae_tolerance = s.real("ae_tolerance");
+  c.motion_blur = s.boolean("motion_blur");
+  c.blur_max_samples = static_cast<int>(s.integer("blur_max_samples"));
+  c.vignetting = s.boolean("vignetting");
+  c.corner_illumination = s.real("corner_illumination");
+  if (auto st = c.check(); !st)
+    return Error::make(ErrorCode::kConfig, "config error: " + std::string(origin) + ": " + st.error().message);
+  return c;
+}
+
+// splitmix64's finaliser: a counter-based hash, so any pixel's noise is known without a sequence.
+inline std::uint64_t mix64(std::uint64_t z) noexcept {
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+  return z ^ (z >> 31);
+}
+
+// Zero-mean unit-variance noise from one hash: the sum of four 16-bit uniforms (Irwin-Hall), whose
+// variance is exact and which costs no log or sqrt; its tails end at 3.5 sigma.
+inline double unit_noise(std::uint64_t h) noexcept {
+  const auto u = [h](int shift) { return static_cast<double>((h >> shift) & 0xFFFFu); };
+  constexpr double kScale = 1.7320508075688772 / 65536.0;  // sqrt(3) / 2^16
+  return (u(0) + u(16) + u(32) + u(48) + 2.0 - 2.0 * 65536.0) * kScale;
+}
+
+constexpr int kMaxBlurSamples = 63;
 
 // The OpenCV distortion of normalized coordinates and its Jacobian.
 struct Distorted {
@@ -214,11 +284,70 @@ Result<CameraShading> CameraShading::load_string(std::string_view yaml, std::str
 Result<CameraShading> CameraShading::load_file(const std::string& path) {
   return shading_from(load_camera_config_file(path));
 }
+Result<CameraSensor> CameraSensor::load_string(std::string_view yaml, std::string_view origin) {
+  return sensor_from(load_camera_config(yaml, origin), origin);
+}
+Result<CameraSensor> CameraSensor::load_file(const std::string& path) {
+  return sensor_from(load_camera_config_file(path), path);
+}
+
+Status CameraSensor::check() const {
+  const auto bad = [](const std::string& what) { return Error::make(ErrorCode::kInvalidArgument, what); };
+  const auto num = [](double v) { return std::to_string(v); };
+  if (!(full_well_e > 0.0) || !(read_noise_e >= 0.0) || sensor_width_px <= 0 || !(full_scale_exposure_s > 0.0))
+    return bad("camera_sensor: full_well_e, sensor_width_px and full_scale_exposure_s must be positive, read_noise_e >= 0");
+  if (!(exposure_min_s > 0.0) || !(exposure_min_s <= exposure_max_s))
+    return bad("camera_sensor.exposure_min_s = " + num(exposure_min_s) + " must be positive and <= exposure_max_s = " +
+               num(exposure_max_s));
+  if (!(exposure_s >= exposure_min_s && exposure_s <= exposure_max_s))
+    return bad("camera_sensor.exposure_s = " + num(exposure_s) + " is out of range [exposure_min_s, exposure_max_s] = [" +
+               num(exposure_min_s) + ", " + num(exposure_max_s) + "] s");
+  if (!(gain_max >= 1.0) || !(gain >= 1.0 && gain <= gain_max))
+    return bad("camera_sensor.gain = " + num(gain) + " is out of range [1, gain_max] = [1, " + num(gain_max) + "]");
+  if (!(ae_target > 0.0 && ae_target < 1.0) || !(ae_speed > 0.0 && ae_speed <= 1.0) || !(ae_tolerance >= 0.0))
+    return bad("camera_sensor: ae_target must lie in (0, 1), ae_speed in (0, 1], ae_tolerance >= 0");
+  if (blur_max_samples < 1 || blur_max_samples > kMaxBlurSamples || blur_max_samples % 2 == 0)
+    return bad("camera_sensor.blur_max_samples = " + std::to_string(blur_max_samples) + " must be odd, in [1, " +
+               std::to_string(kMaxBlurSamples) + "]");
+  if (!(corner_illumination > 0.0 && corner_illumination <= 1.0))
+    return bad("camera_sensor.corner_illumination = " + num(corner_illumination) + " is out of range (0, 1]");
+  return ok_status();
+}
+
+CameraAutoExposure::CameraAutoExposure(const CameraSensor& sensor) noexcept
+    : sensor_(sensor), next_{sensor.exposure_s, sensor.gain} {}
+
+void CameraAutoExposure::observe(const CameraFrame& frame) noexcept {
+  if (!sensor_.auto_exposure || frame.rgb.empty()) return;
+  std::uint64_t sum = 0;  // integer: the mean does not depend on summation order
+  for (int r = 0; r < frame.rgb.rows; ++r) {
+    const std::uint8_t* p = frame.rgb.ptr<std::uint8_t>(r);
+    const int n = frame.rgb.cols * frame.rgb.channels();
+    for (int i = 0; i < n; ++i) sum += p[i];
+  }
+  const double count = static_cast<double>(frame.rgb.total()) * frame.rgb.channels();
+  last_mean_ = static_cast<double>(sum) / (255.0 * count);
+  const CameraExposure used = frame.shot.exposure;
+  const double ratio = sensor_.ae_target / std::max(last_mean_, 0.5 / 255.0);  // a black frame: as if half a level
+  if (std::abs(std::log(ratio)) <= std::log1p(sensor_.ae_tolerance)) {
+    next_ = used;
+    return;
+  }
+  const double want = used.exposure_s * used.gain * std::pow(ratio, sensor_.ae_speed);  // [s] at gain 1
+  // Exposure first (gain adds noise), up to its limit; then gain.
+  next_.exposure_s = std::clamp(want, sensor_.exposure_min_s, sensor_.exposure_max_s);
+  next_.gain = std::clamp(want / next_.exposure_s, 1.0, sensor_.gain_max);
+}
 
 CameraRenderer::CameraRenderer(const World& world, const CameraModel& model, const CameraShading& shading,
                                std::shared_ptr<const HeightfieldRaycaster> raycaster)
-    : world_(world), model_(model), shading_(shading), raycaster_(std::move(raycaster)) {
+    : CameraRenderer(world, model, shading, CameraSensor{}, std::move(raycaster)) {}
+
+CameraRenderer::CameraRenderer(const World& world, const CameraModel& model, const CameraShading& shading,
+                               const CameraSensor& sensor, std::shared_ptr<const HeightfieldRaycaster> raycaster)
+    : world_(world), model_(model), shading_(shading), sensor_(sensor), raycaster_(std::move(raycaster)) {
   if (auto st = model_.check(); !st) throw std::invalid_argument("CameraRenderer: " + st.error().message);
+  if (auto st = sensor_.check(); !st) throw std::invalid_argument("CameraRenderer: " + st.error().message);
   const GridGeometry& g = world.grid();
   if (world.class_id.type() != CV_8UC1 || world.class_id.rows != g.height || world.class_id.cols != g.width ||
       world.albedo.type() != CV_8UC3 || world.albedo.rows != g.height || world.albedo.cols != g.width)
@@ -243,6 +372,36 @@ CameraRenderer::CameraRenderer(const World& world, const CameraModel& model, con
       p[2] = static_cast<float>(inv);
     }
   }
+
+  if (sensor_.vignetting) {
+    // cos(theta)^k with k such that the corner farthest off the axis gets corner_illumination.
+    float cos_corner = 1.0f;
+    const std::array<std::pair<int, int>, 4> corners{{{0, 0}, {model_.width - 1, 0}, {0, model_.height - 1}, {model_.width - 1, model_.height - 1}}};
+    for (const auto& [c, r] : corners) {
+      const float z = pixel_ray(c, r).z();
+      if (z > 0.0f) cos_corner = std::min(cos_corner, z);
+    }
+    const double k = cos_corner < 1.0f ? std::log(sensor_.corner_illumination) / std::log(static_cast<double>(cos_corner)) : 0.0;
+    vignette_.assign(n, 1.0f);
+    for (std::size_t i = 0; i < n; ++i)
+      if (rays_[3 * i + 2] > 0.0f) vignette_[i] = static_cast<float>(std::pow(static_cast<double>(rays_[3 * i + 2]), k));
+  }
+}
+
+float CameraRenderer::vignetting(int col, int row) const noexcept {
+  if (vignette_.empty() || col < 0 || row < 0 || col >= model_.width || row >= model_.height) return 1.0f;
+  return vignette_[static_cast<std::size_t>(row) * static_cast<std::size_t>(model_.width) + static_cast<std::size_t>(col)];
+}
+
+double CameraRenderer::blur_length_px(const Pose3& pose, const CameraShot& shot) const noexcept {
+  const GridGeometry& g = world_.grid();
+  const std::int32_t col = g.col(pose.x), row = g.row(pose.y);
+  const double ground = g.contains(col, row) ? static_cast<double>(world_.terrain.at<float>(row, col)) : 0.0;
+  const double h = std::max(pose.z - ground, 1.0);  // [m] above the ground at the nadir
+  const double t = shot.exposure.exposure_s, f = std::max(model_.fx, model_.fy);
+  const double r_corner = std::hypot(std::max(model_.cx, model_.width - 1 - model_.cx), std::max(model_.cy, model_.height - 1 - model_.cy));
+  const double v_h = std::hypot(shot.velocity.x(), shot.velocity.y());
+  return t * (v_h * f / h + std::abs(shot.velocity.z()) * r_corner / h + std::abs(shot.yaw_rate) * r_corner);
 }
 
 // U(B), an upper bound on the shadow height over block B, from the exact recursion along the sun's
@@ -313,15 +472,33 @@ Eigen::Vector3f CameraRenderer::pixel_ray(int col, int row) const noexcept {
 }
 
 void CameraRenderer::prepare(const Pose3& body_pose_in_map, CameraFrame& out, std::int64_t stamp_ns) const {
+  CameraShot shot;
+  shot.exposure = {sensor_.exposure_s, sensor_.gain};
+  prepare(body_pose_in_map, out, stamp_ns, shot);
+}
+
+void CameraRenderer::prepare(const Pose3& body_pose_in_map, CameraFrame& out, std::int64_t stamp_ns, const CameraShot& shot) const {
   out.rgb.create(model_.height, model_.width, CV_8UC3);
   out.cls.create(model_.height, model_.width, CV_8UC1);
   out.depth.create(model_.height, model_.width, CV_32FC1);
   out.pose = body_pose_in_map;
   out.stamp_ns = stamp_ns;
+  out.shot = shot;
+  out.blur_samples = 1;
+  if (sensor_.motion_blur) {
+    // About two samples per pixel of blur, odd so that the middle one is the frame's pose.
+    const double len = blur_length_px(body_pose_in_map, shot);
+    if (len >= 0.5) out.blur_samples = std::min(sensor_.blur_max_samples, 2 * static_cast<int>(std::ceil(len)) + 1);
+  }
 }
 
 void CameraRenderer::render(const Pose3& body_pose_in_map, CameraFrame& out, std::int64_t stamp_ns) const {
   prepare(body_pose_in_map, out, stamp_ns);
+  render_rows(body_pose_in_map, 0, model_.height, out);
+}
+
+void CameraRenderer::render(const Pose3& body_pose_in_map, CameraFrame& out, std::int64_t stamp_ns, const CameraShot& shot) const {
+  prepare(body_pose_in_map, out, stamp_ns, shot);
   render_rows(body_pose_in_map, 0, model_.height, out);
 }
 
@@ -339,13 +516,126 @@ void CameraRenderer::render_rows(const Pose3& pose, int row_begin, int row_end, 
   const double sun_flat = shading_.ambient + (1.0 - shading_.ambient) * sun_.z();  // a lit flat top renders at albedo
   const double pixel_angle = 1.0 / std::max(model_.fx, model_.fy);
 
-  // Tiles of kTile x kTile pixels. All rays of a tile leave the eye downward inside a thin cone: the
-  // cells under the cone between the highest surface (or the eye) and a height P are known from a block
-  // max query; when they are all lower than P, no ray of the tile meets anything above P, and each cast
-  // starts at P (the same hits as a cast from the eye, most of the descent skipped).
+  // Sub-exposure samples, evenly spread over the exposure: the camera moved and yawed; the middle one
+  // (time 0) is the frame's pose and gives the class and depth.
+  const CameraShot& shot = out.shot;
+  const int samples = std::clamp(out.blur_samples, 1, kMaxBlurSamples) | 1;
+  const int mid = samples / 2;
+  std::array<Eigen::Vector3d, kMaxBlurSamples> eyes;
+  std::array<Eigen::Matrix3d, kMaxBlurSamples> rots;
+  for (int i = 0; i < samples; ++i) {
+    const double tau = ((i + 0.5) / samples - 0.5) * shot.exposure.exposure_s;
+    const auto si = static_cast<std::size_t>(i);
+    if (i == mid) {
+      eyes[si] = eye;
+      rots[si] = map_from_camera;
+    } else {
+      eyes[si] = eye + tau * shot.velocity;
+      rots[si] = Eigen::AngleAxisd(shot.yaw_rate * tau, Eigen::Vector3d::UnitZ()).toRotationMatrix() * map_from_camera;
+    }
+  }
+  double ex_lo = kInf, ex_hi = -kInf, ey_lo = kInf, ey_hi = -kInf, ez_lo = kInf, ez_hi = -kInf;
+  for (int i = 0; i < samples; ++i) {
+    const Eigen::Vector3d& e = eyes[static_cast<std::size_t>(i)];
+    ex_lo = std::min(ex_lo, e.x()), ex_hi = std::max(ex_hi, e.x());
+    ey_lo = std::min(ey_lo, e.y()), ey_hi = std::max(ey_hi, e.y());
+    ez_lo = std::min(ez_lo, e.z()), ez_hi = std::max(ez_hi, e.z());
+  }
+
+  // The sensor: exposure factor (rendered value 255 = full well), noise in DN at gain 1 (variance
+  // a * signal + b), vignetting. The ideal camera skips it all and rounds the rendered value.
+  const double exposure_factor = shot.exposure.exposure_s / sensor_.full_scale_exposure_s;
+  const double gain = shot.exposure.gain;
+  const double binned = std::pow(static_cast<double>(sensor_.sensor_width_px) / model_.width, 2.0);  // sensor pixels per pixel
+  const double full_well = sensor_.full_well_e * binned;
+  const double noise_a = 255.0 / full_well;
+  const double noise_b = std::pow(255.0 / full_well, 2.0) * sensor_.read_noise_e * sensor_.read_noise_e * binned;
+  const bool ideal = !sensor_.noise && vignette_.empty() && samples == 1 && exposure_factor * gain == 1.0;
+  const std::uint64_t frame_key = mix64(shot.seed ^ mix64(shot.frame + 0x632BE59BD9B4E019ULL));
+  const double inv_samples = 1.0 / samples;
+
+  // Albedo x texture x light of a hit, in rendered units (a lit flat top at its albedo).
+  const auto shade = [&](const RayHit& hit, const Eigen::Vector3d& dw, double rad[3]) noexcept {
+    // Steps lower than kGroundStep (terrain sampled into flat cells, curbs) are shaded as ground.
+    const Eigen::Vector3d& p = hit.point;
+    const float s_hit = rc.surface(hit.col, hit.row);
+    bool wall = hit.vertical_face;
+    if (wall) {
+      const std::int32_t nc = hit.col + static_cast<std::int32_t>(hit.normal.x());
+      const std::int32_t nr = hit.row - static_cast<std::int32_t>(hit.normal.y());
+      wall = !g.contains(nc, nr) || s_hit - rc.surface(nc, nr) >= kGroundStep;
+    }
+    const Eigen::Vector3d normal = wall ? hit.normal : Eigen::Vector3d::UnitZ();
+
+    // Albedo: bilinear between cell centres on the ground and tops, blending only cells of about the
+    // same surface (a roof edge does not take the street's colour); the wall's own cell on sides.
+    double alb[3] = {0, 0, 0};
+    const cv::Vec3b& own = world_.albedo.at<cv::Vec3b>(hit.row, hit.col);
+    if (wall) {
+      for (int k = 0; k < 3; ++k) alb[k] = own[k];
+    } else {
+      const double u = (p.x() - g.origin_x) * inv_res - 0.5, v = (g.origin_y - p.y()) * inv_res - 0.5;
+      const double fu = std::floor(u), fv = std::floor(v);
+      const double tu = u - fu, tv = v - fv;
+      const auto i0 = static_cast<std::int32_t>(fu), j0 = static_cast<std::int32_t>(fv);
+      double wsum = 0.0;
+      for (int dj = 0; dj < 2; ++dj) {
+        for (int di = 0; di < 2; ++di) {
+          const std::int32_t i = std::clamp(i0 + di, 0, g.width - 1), j = std::clamp(j0 + dj, 0, g.height - 1);
+          if (std::abs(rc.surface(i, j) - s_hit) > kGroundStep) continue;
+          const double wgt = (di != 0 ? tu : 1.0 - tu) * (dj != 0 ? tv : 1.0 - tv);
+          const cv::Vec3b& a = world_.albedo.at<cv::Vec3b>(j, i);
+          for (int k = 0; k < 3; ++k) alb[k] += wgt * a[k];
+          wsum += wgt;
+        }
+      }
+      if (wsum > 1e-9) {
+        const double inv = 1.0 / wsum;
+        for (double& a : alb) a *= inv;
+      } else {
+        for (int k = 0; k < 3; ++k) alb[k] = own[k];
+      }
+    }
+
+    float factor = 1.0f;
+    if (shading_.detail_texture) {
+      const double cos_view = std::max(0.2, std::abs(normal.dot(dw)));
+      const double footprint = hit.range * pixel_angle / cos_view;
+      if (!wall) {
+        factor = detail_factor(p.x(), p.y(), footprint);
+      } else if (normal.x() != 0.0) {
+        factor = detail_factor(p.y(), p.z(), footprint);
+      } else {
+        factor = detail_factor(p.x(), p.z(), footprint);
+      }
+    }
+
+    double light = shading_.ambient;
+    const double cos_sun = normal.dot(sun_);
+    if (cos_sun > 0.0) {
+      bool lit = true;
+      if (shading_.shadows) {
+        // From just off the surface (above the cell's top for ground), toward the sun; skipped where
+        // the sun ceiling proves nothing can shade that height.
+        const Eigen::Vector3d from = wall ? Eigen::Vector3d(p + 1e-3 * normal)
+                                          : Eigen::Vector3d(p.x(), p.y(), static_cast<double>(s_hit) + kShadowBias);
+        if (from.z() < zmax && (!shading_.shadow_culling || from.z() <= static_cast<double>(sun_ceiling(hit.col, hit.row))))
+          lit = !rc.cast(from, sun_, (zmax - from.z()) / sun_.z() + 1.0).hit;
+      }
+      if (lit) light += (1.0 - shading_.ambient) * cos_sun;
+    }
+    const double gain_light = static_cast<double>(factor) * light / sun_flat;
+    for (int k = 0; k < 3; ++k) rad[k] = alb[k] * gain_light;
+  };
+
+  // Tiles of kTile x kTile pixels. All rays of a tile (every sub-exposure sample's) leave their eyes
+  // downward inside a thin cone: the cells under the cone between the highest surface (or the eyes) and
+  // a height P are known from a block max query; when they are all lower than P, no ray of the tile
+  // meets anything above P, and each cast starts at P (the same hits as a cast from the eye, most of the
+  // descent skipped).
   constexpr int kTile = 8;
   constexpr double kMargin = 0.01;  // [m] above the highest surface found
-  const double ez = eye.z(), ztop = std::min(ez, zmax);
+  const double ztop = std::min(ez_hi, zmax);
   std::array<Eigen::Vector3d, kTile * kTile> dirs;
   for (int tr = row_begin; tr < row_end; tr += kTile) {
     const int tr1 = std::min(tr + kTile, row_end);
@@ -355,6 +645,15 @@ void CameraRenderer::render_rows(const Pose3& pose, int row_begin, int row_end, 
       // Map-frame directions, and the tile's range of horizontal offset per metre of descent.
       double kx_lo = kInf, kx_hi = -kInf, ky_lo = kInf, ky_hi = -kInf;
       bool down = true;
+      const auto extend = [&](const Eigen::Vector3d& d) noexcept {
+        if (!(d.z() < 0.0)) {
+          down = false;
+          return;
+        }
+        const double kx = d.x() / -d.z(), ky = d.y() / -d.z();
+        kx_lo = std::min(kx_lo, kx), kx_hi = std::max(kx_hi, kx);
+        ky_lo = std::min(ky_lo, ky), ky_hi = std::max(ky_hi, ky);
+      };
       for (int r = tr; r < tr1; ++r) {
         const float* ray = rays_.data() + 3 * (static_cast<std::size_t>(r) * static_cast<std::size_t>(model_.width) +
                                                static_cast<std::size_t>(tc));
@@ -363,22 +662,20 @@ void CameraRenderer::render_rows(const Pose3& pose, int row_begin, int row_end, 
           Eigen::Vector3d& d = dirs[static_cast<std::size_t>((r - tr) * kTile + c)];
           if (!(dc.z() > 0.0)) continue;  // no ray: sky, not cast
           d = map_from_camera * dc;
-          if (!(d.z() < 0.0)) {
-            down = false;
-            continue;
-          }
-          const double kx = d.x() / -d.z(), ky = d.y() / -d.z();
-          kx_lo = std::min(kx_lo, kx), kx_hi = std::max(kx_hi, kx);
-          ky_lo = std::min(ky_lo, ky), ky_hi = std::max(ky_hi, ky);
+          extend(d);
+          for (int i = 0; i < samples; ++i)
+            if (i != mid) extend(rots[static_cast<std::size_t>(i)] * dc);
         }
       }
       double proven = kInf;  // every ray of the tile is free above this height (+inf: nothing known)
       if (shading_.tile_start && down && kx_lo <= kx_hi) {
-        // Cells under the tile's rays while they descend from ztop to height z (one cell of margin).
+        // Cells under the tile's rays while they descend from ztop to height z (one cell of margin): a ray
+        // point below zmax lies s = (its eye's height - its height) times its offset per metre away.
+        const double s_lo = std::max(0.0, ez_lo - zmax);
         const auto highest = [&](double z) noexcept {
-          const double a = ez - ztop, b = ez - z;
-          const double x_lo = eye.x() + std::min(a * kx_lo, b * kx_lo), x_hi = eye.x() + std::max(a * kx_hi, b * kx_hi);
-          const double y_lo = eye.y() + std::min(a * ky_lo, b * ky_lo), y_hi = eye.y() + std::max(a * ky_hi, b * ky_hi);
+          const double s_hi = ez_hi - z;
+          const double x_lo = ex_lo + std::min(s_lo * kx_lo, s_hi * kx_lo), x_hi = ex_hi + std::max(s_lo * kx_hi, s_hi * kx_hi);
+          const double y_lo = ey_lo + std::min(s_lo * ky_lo, s_hi * ky_lo), y_hi = ey_hi + std::max(s_lo * ky_hi, s_hi * ky_hi);
           const double u_lo = (x_lo - g.origin_x) * inv_res, u_hi = (x_hi - g.origin_x) * inv_res;
           const double v_lo = (g.origin_y - y_hi) * inv_res, v_hi = (g.origin_y - y_lo) * inv_res;
           constexpr double kBig = 1e9;  // keeps the casts to int defined
@@ -388,7 +685,7 @@ void CameraRenderer::render_rows(const Pose3& pose, int row_begin, int row_end, 
               static_cast<std::int32_t>(std::floor(std::clamp(u_hi, -kBig, kBig))) + 1,
               static_cast<std::int32_t>(std::floor(std::clamp(v_hi, -kBig, kBig))) + 1));
         };
-        proven = ztop;  // nothing is above zmax, and no ray point is above the eye
+        proven = ztop;  // nothing is above zmax, and no ray point is above its eye
         double cand = highest(ztop) + kMargin;
         for (int it = 0; it < 6 && cand < proven; ++it) {
           const double m = highest(cand);
@@ -401,106 +698,63 @@ void CameraRenderer::render_rows(const Pose3& pose, int row_begin, int row_end, 
           }
         }
       }
+      const auto cast = [&](const Eigen::Vector3d& from, const Eigen::Vector3d& dw) noexcept {
+        if (proven < from.z()) {
+          const double t_start = std::max(0.0, (proven - from.z()) / dw.z() - 1e-6);
+          return rc.cast_from(from, dw, shading_.max_range_m, t_start, false);
+        }
+        return rc.cast(from, dw, shading_.max_range_m);
+      };
 
       for (int r = tr; r < tr1; ++r) {
-    auto* rgb = out.rgb.ptr<cv::Vec3b>(r);
-    auto* cls = out.cls.ptr<std::uint8_t>(r);
-    auto* depth = out.depth.ptr<float>(r);
-    const float* ray = rays_.data() + 3 * (static_cast<std::size_t>(r) * static_cast<std::size_t>(model_.width) +
-                                           static_cast<std::size_t>(tc));
-    for (int c = tc; c < tc1; ++c, ray += 3) {
-      const Eigen::Vector3d dc(ray[0], ray[1], ray[2]);
-      const Eigen::Vector3d& dw = dirs[static_cast<std::size_t>((r - tr) * kTile + (c - tc))];
-      RayHit hit;
-      if (dc.z() > 0.0) {
-        if (proven < ez) {
-          const double t_start = std::max(0.0, (proven - ez) / dw.z() - 1e-6);
-          hit = rc.cast_from(eye, dw, shading_.max_range_m, t_start, false);
-        } else {
-          hit = rc.cast(eye, dw, shading_.max_range_m);
-        }
-      }
-      if (!hit.hit) {
-        rgb[c] = cv::Vec3b(0, 0, 0);
-        cls[c] = raw(ClassId::kUnknown);
-        depth[c] = 0.0f;
-        continue;
-      }
-      depth[c] = static_cast<float>(hit.range * dc.z());
-      cls[c] = world_.class_id.at<std::uint8_t>(hit.row, hit.col);
-
-      // Steps lower than kGroundStep (terrain sampled into flat cells, curbs) are shaded as ground.
-      const Eigen::Vector3d& p = hit.point;
-      const float s_hit = rc.surface(hit.col, hit.row);
-      bool wall = hit.vertical_face;
-      if (wall) {
-        const std::int32_t nc = hit.col + static_cast<std::int32_t>(hit.normal.x());
-        const std::int32_t nr = hit.row - static_cast<std::int32_t>(hit.normal.y());
-        wall = !g.contains(nc, nr) || s_hit - rc.surface(nc, nr) >= kGroundStep;
-      }
-      const Eigen::Vector3d normal = wall ? hit.normal : Eigen::Vector3d::UnitZ();
-
-      // Albedo: bilinear between cell centres on the ground and tops, blending only cells of about the
-      // same surface (a roof edge does not take the street's colour); the wall's own cell on sides.
-      double alb[3] = {0, 0, 0};
-      const cv::Vec3b& own = world_.albedo.at<cv::Vec3b>(hit.row, hit.col);
-      if (wall) {
-        for (int k = 0; k < 3; ++k) alb[k] = own[k];
-      } else {
-        const double u = (p.x() - g.origin_x) * inv_res - 0.5, v = (g.origin_y - p.y()) * inv_res - 0.5;
-        const double fu = std::floor(u), fv = std::floor(v);
-        const double tu = u - fu, tv = v - fv;
-        const auto i0 = static_cast<std::int32_t>(fu), j0 = static_cast<std::int32_t>(fv);
-        double wsum = 0.0;
-        for (int dj = 0; dj < 2; ++dj) {
-          for (int di = 0; di < 2; ++di) {
-            const std::int32_t i = std::clamp(i0 + di, 0, g.width - 1), j = std::clamp(j0 + dj, 0, g.height - 1);
-            if (std::abs(rc.surface(i, j) - s_hit) > kGroundStep) continue;
-            const double wgt = (di != 0 ? tu : 1.0 - tu) * (dj != 0 ? tv : 1.0 - tv);
-            const cv::Vec3b& a = world_.albedo.at<cv::Vec3b>(j, i);
-            for (int k = 0; k < 3; ++k) alb[k] += wgt * a[k];
-            wsum += wgt;
+        auto* rgb = out.rgb.ptr<cv::Vec3b>(r);
+        auto* cls = out.cls.ptr<std::uint8_t>(r);
+        auto* depth = out.depth.ptr<float>(r);
+        const float* ray = rays_.data() + 3 * (static_cast<std::size_t>(r) * static_cast<std::size_t>(model_.width) +
+                                               static_cast<std::size_t>(tc));
+        for (int c = tc; c < tc1; ++c, ray += 3) {
+          const Eigen::Vector3d dc(ray[0], ray[1], ray[2]);
+          const Eigen::Vector3d& dw = dirs[static_cast<std::size_t>((r - tr) * kTile + (c - tc))];
+          RayHit hit;
+          if (dc.z() > 0.0) hit = cast(eye, dw);
+          double rad[3] = {0, 0, 0};  // sky: no light
+          if (!hit.hit) {
+            cls[c] = raw(ClassId::kUnknown);
+            depth[c] = 0.0f;
+          } else {
+            depth[c] = static_cast<float>(hit.range * dc.z());
+            cls[c] = world_.class_id.at<std::uint8_t>(hit.row, hit.col);
+            shade(hit, dw, rad);
           }
+          if (ideal) {
+            rgb[c] = cv::Vec3b(cv::saturate_cast<std::uint8_t>(rad[0]), cv::saturate_cast<std::uint8_t>(rad[1]),
+                               cv::saturate_cast<std::uint8_t>(rad[2]));
+            continue;
+          }
+          if (samples > 1 && dc.z() > 0.0) {  // the other sub-exposure samples: light only
+            for (int i = 0; i < samples; ++i) {
+              if (i == mid) continue;
+              const Eigen::Vector3d di = rots[static_cast<std::size_t>(i)] * dc;
+              const RayHit hi = cast(eyes[static_cast<std::size_t>(i)], di);
+              if (!hi.hit) continue;
+              double ri[3];
+              shade(hi, di, ri);
+              for (int k = 0; k < 3; ++k) rad[k] += ri[k];
+            }
+            for (double& x : rad) x *= inv_samples;
+          }
+          const std::size_t pix = static_cast<std::size_t>(r) * static_cast<std::size_t>(model_.width) + static_cast<std::size_t>(c);
+          const double vig = vignette_.empty() ? 1.0 : static_cast<double>(vignette_[pix]);
+          std::uint8_t dn[3];
+          for (int k = 0; k < 3; ++k) {
+            double s = rad[k] * vig * exposure_factor;  // [DN at gain 1] = electrons * 255 / full well
+            if (sensor_.noise)
+              s += std::sqrt(std::max(s, 0.0) * noise_a + noise_b) * unit_noise(mix64(frame_key + (3 * pix + static_cast<std::size_t>(k)) * 0x9E3779B97F4A7C15ULL));
+            s = std::clamp(s, 0.0, 255.0);  // the well holds no more (and no fewer than zero) electrons
+            dn[k] = cv::saturate_cast<std::uint8_t>(s * gain);
+          }
+          rgb[c] = cv::Vec3b(dn[0], dn[1], dn[2]);
         }
-        if (wsum > 1e-9) {
-          const double inv = 1.0 / wsum;
-          for (double& a : alb) a *= inv;
-        } else {
-          for (int k = 0; k < 3; ++k) alb[k] = own[k];
-        }
-      }
-
-      float factor = 1.0f;
-      if (shading_.detail_texture) {
-        const double cos_view = std::max(0.2, std::abs(normal.dot(dw)));
-        const double footprint = hit.range * pixel_angle / cos_view;
-        if (!wall) {
-          factor = detail_factor(p.x(), p.y(), footprint);
-        } else if (normal.x() != 0.0) {
-          factor = detail_factor(p.y(), p.z(), footprint);
-        } else {
-          factor = detail_factor(p.x(), p.z(), footprint);
-        }
-      }
-
-      double light = shading_.ambient;
-      const double cos_sun = normal.dot(sun_);
-      if (cos_sun > 0.0) {
-        bool lit = true;
-        if (shading_.shadows) {
-          // From just off the surface (above the cell's top for ground), toward the sun; skipped where
-          // the sun ceiling proves nothing can shade that height.
-          const Eigen::Vector3d from = wall ? Eigen::Vector3d(p + 1e-3 * normal)
-                                            : Eigen::Vector3d(p.x(), p.y(), static_cast<double>(s_hit) + kShadowBias);
-          if (from.z() < zmax && (!shading_.shadow_culling || from.z() <= static_cast<double>(sun_ceiling(hit.col, hit.row))))
-            lit = !rc.cast(from, sun_, (zmax - from.z()) / sun_.z() + 1.0).hit;
-        }
-        if (lit) light += (1.0 - shading_.ambient) * cos_sun;
-      }
-      const double gain = static_cast<double>(factor) * light / sun_flat;
-      rgb[c] = cv::Vec3b(cv::saturate_cast<std::uint8_t>(alb[0] * gain), cv::saturate_cast<std::uint8_t>(alb[1] * gain),
-                         cv::saturate_cast<std::uint8_t>(alb[2] * gain));
-    }
       }
     }
   }
