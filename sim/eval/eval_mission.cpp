@@ -20,6 +20,7 @@
 #include "airground/mission/mission_file.hpp"
 #include "airground/mission/stages.hpp"
 #include "airground/platform/role_instance.hpp"
+#include "airground/sim/eval_scoring.hpp"
 #include "airground/sim/generator.hpp"
 #include "airground/sim/map_export.hpp"
 #include "airground/sim/plot.hpp"
@@ -34,8 +35,9 @@ namespace fs = std::filesystem;
 struct Sample {
   double t{0};
   Pose2 truth, odom;
+  bool have_est{false};  // the robot had published a pose
   bool tracking{false};
-  double err{-1};
+  double err{-1};        // [m] its estimate against the truth at the estimate's stamp, tracking or not
   const char* loc{"none"};  // localization status
 };
 
@@ -46,6 +48,8 @@ struct Visit {
   double est_x{0}, est_y{0};
   bool have_goal{false};  // the goal the robot was sent to (a region's goal moves as the map grows)
   double goal_x{0}, goal_y{0};
+  double true_x{0}, true_y{0};  // [m] where the robot truly stood when it marked the visit
+  double radius{3.0};           // [m] its visit radius
 };
 struct Claim {
   std::uint32_t region{mission::kNoRegion};
@@ -57,13 +61,6 @@ struct StateChange {
   mission::ClaimState state{mission::ClaimState::kIdle};
   std::uint32_t region{mission::kNoRegion};
 };
-
-double percentile(std::vector<double> v, double q) {
-  if (v.empty()) return -1;
-  std::sort(v.begin(), v.end());
-  const std::size_t k = std::min(v.size() - 1, static_cast<std::size_t>(std::ceil(q * static_cast<double>(v.size()))) - (q > 0 ? 1 : 0));
-  return v[k];
-}
 
 cv::Scalar state_colour(mission::ClaimState s) {
   switch (s) {
@@ -259,9 +256,29 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
     x.odom = s.odometry_in_map;
     static constexpr const char* kLoc[] = {"no-map", "converging", "tracking", "lost"};
     if (s.localization_received) x.loc = kLoc[static_cast<int>(s.localization->status) & 3];
-    if (s.localization_received && s.localization->status == LocalizationStatus::kTracking) {
-      x.tracking = true;
+    if (s.localization_received) {
+      x.have_est = true;
+      x.tracking = s.localization->status == LocalizationStatus::kTracking;
       x.err = std::hypot(s.localization->pose.x - s.truth_at_localization.x, s.localization->pose.y - s.truth_at_localization.y);
+    }
+    // Visits are read here, after the robot's own stages ran in this tick (its 5 Hz mission stage with
+    // them), so the truth is the robot's pose when it marked the visit.
+    const auto ui = static_cast<std::size_t>(s.ugv);
+    if (const auto* ms = find_stage<const mission::MissionStage>(s.role)) {
+      const mission::VisitedRecord& v = ms->manager().own_visited();
+      for (std::uint16_t k = visits_seen[ui]; k < v.count; ++k) {
+        Visit vis{x.t, s.ugv, v.entries[k].region_id, v.entries[k].x, v.entries[k].y};
+        if (last_claim[ui].region == vis.region) {
+          vis.have_goal = true;
+          vis.goal_x = last_claim[ui].goal_x;
+          vis.goal_y = last_claim[ui].goal_y;
+        }
+        vis.true_x = s.truth.x;
+        vis.true_y = s.truth.y;
+        vis.radius = ms->manager().params().visit_radius_m;
+        visits.push_back(vis);
+      }
+      visits_seen[ui] = v.count;
     }
     killed[static_cast<std::size_t>(s.ugv)] = s.killed;
     last_sample[static_cast<std::size_t>(s.ugv)] = x;
@@ -292,17 +309,6 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
       // Back at its start with nothing left; a new region can still send it out again.
       if (st.done && done_at[i] < 0) done_at[i] = t;
       if (!st.done) done_at[i] = -1;
-      const mission::VisitedRecord& v = mg.own_visited();
-      for (std::uint16_t k = visits_seen[i]; k < v.count; ++k) {
-        Visit vis{t, static_cast<int>(i), v.entries[k].region_id, v.entries[k].x, v.entries[k].y};
-        if (last_claim[i].region == vis.region) {
-          vis.have_goal = true;
-          vis.goal_x = last_claim[i].goal_x;
-          vis.goal_y = last_claim[i].goal_y;
-        }
-        visits.push_back(vis);
-      }
-      visits_seen[i] = v.count;
       if (st.state == mission::ClaimState::kGoing && st.region_id != mission::kNoRegion) last_claim[i] = Claim{st.region_id, st.goal_x, st.goal_y};
     }
     if (o.during) o.during(t);
@@ -372,33 +378,41 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
   }
   m.completed = all_done;
   m.mission_time_s = all_done ? last_done : sum.sim_s;
-  // A visit is true when the robot's true path came within 3 m of the region's goal.
+  // A visit is true when the robot's true position at the moment it marked it was within its visit radius
+  // of the goal; a true visit to a region with no target within 10 m is a non-target visit, counted apart.
   std::vector<bool> target_hit(targets.size(), false);
   std::map<std::uint32_t, bool> region_visited;
-  std::vector<bool> visit_false(visits.size(), false);
+  std::vector<VisitVerdict> verdict(visits.size(), VisitVerdict::kFalse);
+  auto targets_near = [&](const mission::RegionRecord& rg) {
+    std::vector<std::size_t> near;
+    for (std::size_t ti = 0; ti < targets.size(); ++ti) {
+      double dmin = std::hypot(targets[ti].x - static_cast<double>(rg.cx), targets[ti].y - static_cast<double>(rg.cy));
+      for (const Pose2& c : targets[ti].car_poses) dmin = std::min(dmin, std::hypot(c.x - static_cast<double>(rg.cx), c.y - static_cast<double>(rg.cy)));
+      if (dmin <= 10.0) near.push_back(ti);
+    }
+    return near;
+  };
   for (std::size_t k = 0; k < visits.size(); ++k) {
     const Visit& v = visits[k];
     const auto it = regions.find(v.region);
     const double gx = v.have_goal ? v.goal_x : it != regions.end() ? static_cast<double>(it->second.goal_x) : v.est_x;
     const double gy = v.have_goal ? v.goal_y : it != regions.end() ? static_cast<double>(it->second.goal_y) : v.est_y;
-    double closest = 1e18;
-    for (const Sample& s : samples[static_cast<std::size_t>(v.robot)]) closest = std::min(closest, std::hypot(s.truth.x - gx, s.truth.y - gy));
-    if (closest > 3.0) {
-      visit_false[k] = true;
+    const std::vector<std::size_t> near = it != regions.end() ? targets_near(it->second) : std::vector<std::size_t>{};
+    verdict[k] = judge_visit(v.true_x, v.true_y, gx, gy, v.radius, !near.empty());
+    if (verdict[k] == VisitVerdict::kFalse) {
       ++m.false_visits;
       continue;
     }
     region_visited[v.region] = true;
-    if (it == regions.end()) continue;
-    for (std::size_t ti = 0; ti < targets.size(); ++ti) {
-      double dmin = std::hypot(targets[ti].x - static_cast<double>(it->second.cx), targets[ti].y - static_cast<double>(it->second.cy));
-      for (const Pose2& c : targets[ti].car_poses) dmin = std::min(dmin, std::hypot(c.x - static_cast<double>(it->second.cx), c.y - static_cast<double>(it->second.cy)));
-      if (dmin <= 10.0) target_hit[ti] = true;
+    if (verdict[k] == VisitVerdict::kNonTarget) {
+      ++m.non_target_visits;
+      continue;
     }
+    for (const std::size_t ti : near) target_hit[ti] = true;
   }
   m.regions_visited = static_cast<std::uint32_t>(region_visited.size());
   for (const bool h : target_hit) m.targets_visited += h ? 1U : 0U;
-  std::vector<double> all_err;
+  LocErrorScore team_loc(kLocGoodRadiusM);
   double odom_sum = 0;
   std::size_t odom_n = 0;
   for (int i = 0; i < n; ++i) {
@@ -415,35 +429,34 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
     mr.final_state = mission::to_string(status[ui].state);
     m.takeovers += status[ui].takeovers;
     m.clashes_lost += status[ui].clashes_lost;
-    std::vector<double> err;
+    std::vector<LocErrorSample> loc;
     double od = 0;
     for (const Sample& s : samples[ui]) {
-      if (s.tracking) err.push_back(s.err);
+      loc.push_back(LocErrorSample{s.have_est, s.tracking, s.err});
       od += std::hypot(s.odom.x - s.truth.x, s.odom.y - s.truth.y);
       if (mr.first_tracking_s < 0 && s.tracking) mr.first_tracking_s = s.t;
     }
-    for (std::size_t k = 0; k < visits.size(); ++k)
-      if (visits[k].robot == i && visit_false[k]) ++mr.false_visits;
-    if (!err.empty()) {
-      double sm = 0;
-      for (double e : err) sm += e;
-      mr.loc_error_mean_m = sm / static_cast<double>(err.size());
-      mr.loc_error_p95_m = percentile(err, 0.95);
+    for (std::size_t k = 0; k < visits.size(); ++k) {
+      if (visits[k].robot != i) continue;
+      if (verdict[k] == VisitVerdict::kFalse) ++mr.false_visits;
+      if (verdict[k] == VisitVerdict::kNonTarget) ++mr.non_target_visits;
     }
+    LocErrorScore own(kLocGoodRadiusM);
+    own.add_robot(loc);
+    team_loc.add_robot(loc);
+    mr.loc = own.stats();
+    mr.loc_error_mean_m = mr.loc.mean_m;
+    mr.loc_error_p95_m = mr.loc.p95_m;
     mr.odom_only_error_mean_m = samples[ui].empty() ? 0.0 : od / static_cast<double>(samples[ui].size());
     odom_sum += od;
     odom_n += samples[ui].size();
-    all_err.insert(all_err.end(), err.begin(), err.end());
     m.collisions += rs.collisions;
     m.failed_goals += status[ui].failed_own;
     m.robots.push_back(mr);
   }
-  if (!all_err.empty()) {
-    double sm = 0;
-    for (double e : all_err) sm += e;
-    m.loc_error_mean_m = sm / static_cast<double>(all_err.size());
-    m.loc_error_p95_m = percentile(all_err, 0.95);
-  }
+  m.loc = team_loc.stats();
+  m.loc_error_mean_m = m.loc.mean_m;
+  m.loc_error_p95_m = m.loc.p95_m;
   m.odom_only_error_mean_m = odom_n ? odom_sum / static_cast<double>(odom_n) : 0.0;
   if (!raster.cls.empty()) m.map_class_accuracy = class_accuracy(w, raster);
 
@@ -475,7 +488,8 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
       if (!sm.empty()) cv::circle(bgr, px(sm.back().truth.x, sm.back().truth.y), 5, c, cv::FILLED, cv::LINE_AA);
     }
     for (std::size_t k = 0; k < visits.size(); ++k)
-      cv::drawMarker(bgr, px(visits[k].est_x, visits[k].est_y), visit_false[k] ? cv::Scalar(0, 0, 255) : cv::Scalar(0, 120, 0), cv::MARKER_STAR, 12, 2);
+      cv::drawMarker(bgr, px(visits[k].est_x, visits[k].est_y), verdict[k] == VisitVerdict::kFalse ? cv::Scalar(0, 0, 255)
+                     : verdict[k] == VisitVerdict::kNonTarget ? cv::Scalar(200, 120, 0) : cv::Scalar(0, 120, 0), cv::MARKER_STAR, 12, 2);
     cv::imwrite((out / "mission_map.png").string(), bgr);
   }
   {
@@ -526,13 +540,14 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
   }
   {
     std::ofstream v(out / "visits.csv");
-    v << "t_s,robot,region,est_x_m,est_y_m,goal_x_m,goal_y_m,true_visit\n";
+    v << "t_s,robot,region,est_x_m,est_y_m,goal_x_m,goal_y_m,true_x_m,true_y_m,visit_radius_m,true_visit,verdict\n";
     for (std::size_t k = 0; k < visits.size(); ++k) {
       const auto it = regions.find(visits[k].region);
       const double gx = visits[k].have_goal ? visits[k].goal_x : it != regions.end() ? static_cast<double>(it->second.goal_x) : 0.0;
       const double gy = visits[k].have_goal ? visits[k].goal_y : it != regions.end() ? static_cast<double>(it->second.goal_y) : 0.0;
       v << visits[k].t << ",ugv" << visits[k].robot + 1 << "," << visits[k].region << "," << visits[k].est_x << "," << visits[k].est_y << "," << gx
-        << "," << gy << "," << (visit_false[k] ? 0 : 1) << "\n";
+        << "," << gy << "," << visits[k].true_x << "," << visits[k].true_y << "," << visits[k].radius << ","
+        << (verdict[k] == VisitVerdict::kFalse ? 0 : 1) << "," << verdict_name(verdict[k]) << "\n";
     }
     std::ofstream rc(out / "regions.csv");
     rc << "region,cx_m,cy_m,goal_x_m,goal_y_m,cells,goal_valid,visited,target\n";
@@ -561,8 +576,13 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
     << ",\n  \"mission_time_s\": " << m.mission_time_s << ",\n  \"completed\": " << (m.completed ? "true" : "false")
     << ",\n  \"time_cap_s\": " << m.time_cap_s << ",\n  \"survey_estimate_s\": " << m.survey_estimate_s
     << ",\n  \"loc_error_mean_m\": " << m.loc_error_mean_m << ",\n  \"loc_error_p95_m\": " << m.loc_error_p95_m
+    << ",\n  \"loc_error_max_m\": " << m.loc.max_m << ",\n  \"loc_error_tracking_mean_m\": " << m.loc.tracking_mean_m
+    << ",\n  \"loc_error_tracking_p95_m\": " << m.loc.tracking_p95_m << ",\n  \"loc_error_tracking_max_m\": " << m.loc.tracking_max_m
+    << ",\n  \"tracking_fraction\": " << m.loc.tracking_fraction << ",\n  \"within_3m_fraction\": " << m.loc.within_fraction
+    << ",\n  \"loc_samples_scored\": " << m.loc.samples
     << ",\n  \"odom_only_error_mean_m\": " << m.odom_only_error_mean_m << ",\n  \"collisions\": " << m.collisions
     << ",\n  \"failed_goals\": " << m.failed_goals << ",\n  \"false_visits\": " << m.false_visits
+    << ",\n  \"non_target_visits\": " << m.non_target_visits << ",\n  \"scoring\": \"strict\""
     << ",\n  \"takeovers\": " << m.takeovers << ",\n  \"clashes_lost\": " << m.clashes_lost
     << ",\n  \"map_class_accuracy\": " << m.map_class_accuracy << ",\n  \"bytes_on_air\": " << m.bytes_on_air
     << ",\n  \"realtime_factor\": " << m.realtime_factor << ",\n  \"sim_s\": " << m.sim_s << ",\n  \"wall_s\": " << m.wall_s
@@ -571,13 +591,17 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
     const MissionRobot& x = m.robots[i];
     j << (i ? "," : "") << "\n    {\"name\": \"" << x.name << "\", \"distance_m\": " << x.distance_m << ", \"collisions\": " << x.collisions
       << ", \"visited\": " << x.visited << ", \"failed\": " << x.failed << ", \"false_visits\": " << x.false_visits
+      << ", \"non_target_visits\": " << x.non_target_visits
       << ", \"loc_error_mean_m\": " << x.loc_error_mean_m << ", \"loc_error_p95_m\": " << x.loc_error_p95_m
+      << ", \"loc_error_max_m\": " << x.loc.max_m << ", \"loc_error_tracking_mean_m\": " << x.loc.tracking_mean_m
+      << ", \"loc_error_tracking_p95_m\": " << x.loc.tracking_p95_m << ", \"tracking_fraction\": " << x.loc.tracking_fraction
+      << ", \"within_3m_fraction\": " << x.loc.within_fraction
       << ", \"odom_only_error_mean_m\": " << x.odom_only_error_mean_m << ", \"first_tracking_s\": " << x.first_tracking_s
       << ", \"done_s\": " << x.done_s << ", \"killed_s\": " << x.killed_s << ", \"final_state\": \"" << x.final_state << "\"}";
   }
   j << "\n  ]\n}\n";
   std::ofstream md(out / "report.md");
-  char line[512];
+  char line[1536];
   md << "# airground mission report\n\nWorld `" << o.world << "`, seed " << o.seed << ": 1 quadrotor at " << o.uav_altitude_m << " m, " << n
      << " ground robots (initial guesses up to " << o.init_error_m << " m off), radio range "
      << (o.comm_range_m > 0 ? std::to_string(static_cast<int>(o.comm_range_m)) + " m" : std::string("default")) << ". "
@@ -586,20 +610,27 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
      << static_cast<int>(std::lround(m.time_cap_s)) << " s.\n\n";
   std::snprintf(line, sizeof line,
                 "| figure | value |\n|---|---|\n| targets visited | **%u of %u** |\n| regions found / visited | %u / %u |\n| mission time | %.0f s |\n"
-                "| localization error (tracking) mean / p95 | %.2f / %.2f m |\n| wheel odometry alone, mean error | %.1f m |\n| false visits | %u |\n"
+                "| localization error mean / p95 / max (every sample after the first good one) | %.2f / %.2f / %.2f m |\n"
+                "| ... tracking samples only, mean / p95 | %.2f / %.2f m |\n| tracking / within 3 m (share of those samples) | %.1f %% / %.1f %% |\n"
+                "| wheel odometry alone, mean error | %.1f m |\n| false visits / non-target visits | %u / %u |\n"
                 "| failed goals | %u |\n| collisions | %llu |\n| quadrotor map class accuracy | %.3f |\n| radio payload on air | %.1f MB |\n"
                 "| real-time factor | %.2fx (%.0f s simulated in %.0f s) |\n\n",
                 m.targets_visited, m.targets_total, m.regions_found, m.regions_visited, m.mission_time_s, m.loc_error_mean_m, m.loc_error_p95_m,
-                m.odom_only_error_mean_m, m.false_visits, m.failed_goals, static_cast<unsigned long long>(m.collisions), m.map_class_accuracy,
+                m.loc.max_m, m.loc.tracking_mean_m, m.loc.tracking_p95_m, 100 * m.loc.tracking_fraction, 100 * m.loc.within_fraction,
+                m.odom_only_error_mean_m, m.false_visits, m.non_target_visits, m.failed_goals, static_cast<unsigned long long>(m.collisions), m.map_class_accuracy,
                 static_cast<double>(m.bytes_on_air) / 1e6, m.realtime_factor, m.sim_s, m.wall_s);
   md << line << "![mission](mission_map.png)\n\nTrails: true paths of the ground robots; orange circles: regions the quadrotor found "
-     << "(diamonds: their goals, green once visited); stars: where a robot marked a visit (red if its true path never came within 3 m "
-     << "of the goal); yellow crosses: the world's targets.\n\n| robot | distance [m] | visited | failed | false visits | loc error mean / p95 [m] | "
-     << "odometry-only mean [m] | first tracking [s] | done [s] | state |\n|---|---|---|---|---|---|---|---|---|---|\n";
+     << "(diamonds: their goals, green once visited); stars: where a robot marked a visit (red: a false visit, its true position at that "
+     << "moment was not within its visit radius of the goal; blue: a true visit to a region with no target near); yellow crosses: the "
+     << "world's targets. Localization error: the robot's published pose against the truth at its stamp, every 0.2 s from its first "
+     << "good sample (tracking, within 3 m) on, whether tracking or not.\n\n| robot | distance [m] | visited | failed | false / non-target visits | "
+     << "loc error mean / p95 / max [m] | tracking / within 3 m | odometry-only mean [m] | first tracking [s] | done [s] | state |\n"
+     << "|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const MissionRobot& x : m.robots) {
-    std::snprintf(line, sizeof line, "| %s%s | %.0f | %u | %u | %u | %.2f / %.2f | %.1f | %.0f | %.0f | %s |\n", x.name.c_str(), x.killed_s >= 0 ? " (powered off)" : "",
-                  x.distance_m, x.visited, x.failed, x.false_visits, x.loc_error_mean_m, x.loc_error_p95_m, x.odom_only_error_mean_m, x.first_tracking_s, x.done_s,
-                  x.final_state.c_str());
+    std::snprintf(line, sizeof line, "| %s%s | %.0f | %u | %u | %u / %u | %.2f / %.2f / %.2f | %.1f %% / %.1f %% | %.1f | %.0f | %.0f | %s |\n", x.name.c_str(),
+                  x.killed_s >= 0 ? " (powered off)" : "", x.distance_m, x.visited, x.failed, x.false_visits, x.non_target_visits, x.loc_error_mean_m,
+                  x.loc_error_p95_m, x.loc.max_m, 100 * x.loc.tracking_fraction, 100 * x.loc.within_fraction, x.odom_only_error_mean_m,
+                  x.first_tracking_s, x.done_s, x.final_state.c_str());
     md << line;
   }
   md << "\n![pose error](pose_error.png)\n\n![odometry error](odometry_error.png)\n\n![claims](claims_timeline.png)\n\n![traffic](comms_traffic.png)\n\n"

@@ -138,7 +138,10 @@ TEST(TeamMission, RegionInvestigationWithTheBaseStationAndOneRobotPoweredOff) {
   {
     SCOPED_TRACE("LocalizationStaysWithinTheBoundWhileOdometryAloneDrifts");
     EXPECT_GE(m.loc_error_mean_m, 0) << "no tracking sample";
-    EXPECT_LE(m.loc_error_mean_m, kLocErrorBoundM);
+    EXPECT_LE(m.loc_error_mean_m, kLocErrorBoundM) << "every sample after each robot's first good one, tracking or not";
+    EXPECT_LE(m.loc.tracking_mean_m, m.loc_error_mean_m + 1e-9) << "the tracking-only figure leaves the excursions out";
+    EXPECT_GE(m.loc.within_fraction, 0.9) << "within 3 m of the truth most of the time once localized";
+    EXPECT_GT(m.loc.tracking_fraction, 0.0);
     EXPECT_GT(m.odom_only_error_mean_m, 3 * m.loc_error_mean_m) << "the map is what keeps the robots localized";
     for (const MissionRobot& r : m.robots) EXPECT_GT(r.first_tracking_s, 0) << r.name << " never tracked";
   }
@@ -184,7 +187,8 @@ TEST(TeamMission, RegionInvestigationWithTheBaseStationAndOneRobotPoweredOff) {
     std::stringstream ss;
     ss << j.rdbuf();
     for (const char* k : {"targets_total", "targets_visited", "mission_time_s", "loc_error_mean_m", "loc_error_p95_m", "odom_only_error_mean_m",
-                          "collisions", "failed_goals", "false_visits", "map_class_accuracy", "bytes_on_air", "realtime_factor"})
+                          "collisions", "failed_goals", "false_visits", "map_class_accuracy", "bytes_on_air", "realtime_factor",
+                          "non_target_visits", "loc_error_max_m", "loc_error_tracking_mean_m", "tracking_fraction", "within_3m_fraction"})
       EXPECT_NE(ss.str().find(std::string("\"") + k + "\""), std::string::npos) << k;
   }
 }

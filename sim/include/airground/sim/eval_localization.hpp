@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "airground/platform/result.hpp"
+#include "airground/sim/eval_scoring.hpp"
 #include "airground/sim/runner.hpp"
 #include "airground/sim/world.hpp"
 
@@ -47,21 +48,27 @@ struct EvalLocalizationOptions {
 // Scored over the samples (10 Hz) taken after the robot began to drive. A sample is "good" when the
 // robot's "localization" channel has been published, its status is tracking, its stamp is at most
 // stale_after_s old, and its position is within convergence_radius_m of the true pose at that stamp.
+// The error figures are over every sample from the first good one on, good or not: one excursion past the
+// radius counts in them instead of restarting them (it only makes `converged` later).
 struct LocalizationMetrics {
   bool converged{false};              // some sample is good and every later one is too
   double convergence_time_s{-1};      // [s] from the start of driving to the first of those good samples
   double convergence_distance_m{-1};  // [m] driven by then
-  double loc_error_mean_m{-1};        // over the samples from convergence on: |estimate - truth at its stamp|
+  double loc_error_mean_m{-1};        // [m] over the samples from the first good one on: |estimate - truth at its stamp|
   double loc_error_p95_m{-1};         // 95th percentile (nearest rank) of the same
   double loc_error_max_m{-1};
-  double yaw_error_mean_deg{-1};      // mean |yaw error| over the same samples
+  LocErrorStats loc;                  // the same, with the tracking-only figures, tracking and within-radius fractions
+  double converged_error_mean_m{-1};  // [m] over the samples from convergence on only (the old figure)
+  double yaw_error_mean_deg{-1};      // mean |yaw error| over the samples from the first good one on
   double odom_only_error_mean_m{0};   // wheel odometry aligned with the true pose at the start, over the same
                                       // samples (all samples after the start of driving when not converged)
   double odom_only_error_final_m{0};  // ... at the last sample
   bool localization_published{false}; // the channel was ever published (false: no localization stage)
   double first_tracking_s{-1};        // [s] driving time of the first good sample
   std::uint64_t divergences{0};       // good -> not good transitions after the first good sample
-  double tracking_fraction{0};        // good samples / samples after the start of driving
+  double good_fraction{0};            // good samples / samples after the start of driving
+  double tracking_fraction{0};        // tracking (and fresh) samples / samples from the first good one on
+  double within_fraction{0};          // samples within convergence_radius_m / samples from the first good one on
   std::uint64_t samples{0}, samples_scored{0};
   double route_length_m{0}, distance_m{0}, released_s{0}, sim_s{0}, wall_s{0};
   std::uint64_t tiles_published{0}, scans_published{0};

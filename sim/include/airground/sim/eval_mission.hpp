@@ -10,11 +10,13 @@
 #include <vector>
 
 #include "airground/platform/result.hpp"
+#include "airground/sim/eval_scoring.hpp"
 #include "airground/sim/runner.hpp"
 
 namespace ag::sim {
 
 inline constexpr double kMinMissionCapS = 1800;  // [s] the shortest default mission cap
+inline constexpr double kLocGoodRadiusM = 3.0;   // [m] a tracking sample this close to the truth starts the scoring
 
 struct MissionOptions {
   std::string world{"default"};
@@ -47,7 +49,9 @@ struct MissionRobot {
   double distance_m{0};
   std::uint64_t collisions{0};
   std::uint32_t visited{0}, failed{0}, false_visits{0};
-  double loc_error_mean_m{-1}, loc_error_p95_m{-1};
+  std::uint32_t non_target_visits{0};  // true visits to regions with no target near
+  double loc_error_mean_m{-1}, loc_error_p95_m{-1};  // [m] = loc.mean_m / loc.p95_m (every sample after the first good one)
+  LocErrorStats loc;
   double odom_only_error_mean_m{0};
   double first_tracking_s{-1};
   double done_s{-1};    // [s] back at its start with nothing left
@@ -60,10 +64,14 @@ struct MissionMetrics {
   std::uint32_t regions_found{0}, regions_visited{0};
   double mission_time_s{0};        // [s] until every robot still running was back (or the cap)
   bool completed{false};           // every running robot finished its mission before the cap
-  double loc_error_mean_m{-1}, loc_error_p95_m{-1};  // [m] tracking samples of every robot
+  // [m] every robot's samples from its first good one (tracking, within kLocGoodRadiusM) on, tracking or not;
+  // loc has the max, the tracking-only figures, tracking_fraction and within_3m_fraction beside them.
+  double loc_error_mean_m{-1}, loc_error_p95_m{-1};
+  LocErrorStats loc;
   double odom_only_error_mean_m{0};
   std::uint64_t collisions{0};
   std::uint32_t failed_goals{0}, false_visits{0};
+  std::uint32_t non_target_visits{0};  // true visits to regions with no target within 10 m (not false, not targets)
   std::uint32_t takeovers{0}, clashes_lost{0};
   double map_class_accuracy{0};
   std::uint64_t bytes_on_air{0};   // [B] payload bytes the radio carried (every copy)
