@@ -46,7 +46,7 @@ Result<std::unique_ptr<RoleInstance>> RoleInstance::create(const RoleDescription
     r->stages_.push_back(StageSlot{&spec, spec.make(), &perf});
   }
   for (auto& slot : r->stages_) {
-    StageContext ctx{config, r->channels_, clock, r->perf_, r->name_, slot.spec->name};
+    StageContext ctx{config, r->channels_, clock, r->perf_, r->name_, slot.spec->name, &slot.perf->device};
     Status st = slot.stage->init(ctx);
     if (!st) {
       return Error::make(st.error().code, r->name_ + "/" + std::string(slot.spec->name) + ": init failed: " + st.error().message);

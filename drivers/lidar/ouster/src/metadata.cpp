@@ -14,15 +14,20 @@ const char* to_string(UdpProfile p) noexcept {
   switch (p) {
     case UdpProfile::kLegacy: return "LEGACY";
     case UdpProfile::kRng19Rfl8Sig16Nir16: return "RNG19_RFL8_SIG16_NIR16";
+    case UdpProfile::kRng19Rfl8Sig16Nir16Dual: return "RNG19_RFL8_SIG16_NIR16_DUAL";
+    case UdpProfile::kRng15Rfl8Nir8: return "RNG15_RFL8_NIR8";
   }
   return "?";
 }
 
 Result<UdpProfile> parse_udp_profile(std::string_view text) {
-  if (text == "LEGACY") return UdpProfile::kLegacy;
-  if (text == "RNG19_RFL8_SIG16_NIR16") return UdpProfile::kRng19Rfl8Sig16Nir16;
-  return Error::make(ErrorCode::kConfig, "unsupported udp_profile_lidar '" + std::string(text) +
-                                             "' (supported: LEGACY, RNG19_RFL8_SIG16_NIR16)");
+  std::string supported;
+  for (UdpProfile p : kSupportedProfiles) {
+    if (text == to_string(p)) return p;
+    supported += (supported.empty() ? "" : ", ") + std::string(to_string(p));
+  }
+  return Error::make(ErrorCode::kConfig, "udp_profile_lidar '" + std::string(text) +
+                                             "' is not a packet profile this decoder supports (supported: " + supported + ")");
 }
 
 Result<LidarMode> parse_lidar_mode(std::string_view text) {
@@ -106,7 +111,10 @@ Result<SensorInfo> parse(const json& j) {
   if (!m) return m.error();
   s.mode = m.value();
 
-  if (const json* v = find_any(j, {{"udp_profile_lidar"}, {"config_params", "udp_profile_lidar"}, {"lidar_data_format", "udp_profile_lidar"}})) {
+  // What the packets are: the data format (flat 2.x "data_format", nested "lidar_data_format") first,
+  // then what was asked of the sensor; a file with none is a legacy sensor.
+  if (const json* v = find_any(j, {{"data_format", "udp_profile_lidar"}, {"lidar_data_format", "udp_profile_lidar"},
+                                   {"config_params", "udp_profile_lidar"}, {"udp_profile_lidar"}})) {
     if (!v->is_string()) return Error::make(ErrorCode::kConfig, "udp_profile_lidar is not a string");
     auto p = parse_udp_profile(v->get<std::string>());
     if (!p) return p.error();
@@ -125,6 +133,10 @@ Result<SensorInfo> parse(const json& j) {
   const int beams = static_cast<int>(s.beam_altitude_deg.size());
 
   const json* fmt = find_any(j, {{"data_format"}, {"lidar_data_format"}});
+  if (find(j, {"sensor_info"}) != nullptr || find(j, {"lidar_data_format"}) != nullptr) s.layout = "nested";
+  else if (fmt != nullptr && find(*fmt, {"udp_profile_lidar"}) != nullptr) s.layout = "flat-2.x";
+  else if (fmt != nullptr) s.layout = "legacy";
+  else s.layout = "reduced";
   const json empty = json::object();
   if (fmt == nullptr) fmt = &empty;
   auto ppc = read_int(find(*fmt, {"pixels_per_column"}), "pixels_per_column", 16, 128, beams);
@@ -133,7 +145,9 @@ Result<SensorInfo> parse(const json& j) {
   if (s.pixels_per_column != beams)
     return Error::make(ErrorCode::kConfig, "pixels_per_column = " + std::to_string(s.pixels_per_column) + " but the file has " +
                                                std::to_string(beams) + " beam angles");
-  auto cpp = read_int(find(*fmt, {"columns_per_packet"}), "columns_per_packet", 1, 64, 16);
+  const json* cpp_v = find(*fmt, {"columns_per_packet"});
+  if (cpp_v == nullptr) cpp_v = find(j, {"config_params", "columns_per_packet"});
+  auto cpp = read_int(cpp_v, "columns_per_packet", 1, kMaxColumnsPerPacketSupported, 16);
   if (!cpp) return cpp.error();
   s.columns_per_packet = cpp.value();
   auto cpf = read_int(find(*fmt, {"columns_per_frame"}), "columns_per_frame", 512, 4096, s.mode.columns);

@@ -24,16 +24,75 @@ const char* to_string(DecodeStatus s) noexcept {
   return "?";
 }
 
+namespace {
+std::size_t pixel_size_of(UdpProfile p) noexcept {
+  switch (p) {
+    case UdpProfile::kLegacy:
+    case UdpProfile::kRng19Rfl8Sig16Nir16: return 12;
+    case UdpProfile::kRng19Rfl8Sig16Nir16Dual: return 16;
+    case UdpProfile::kRng15Rfl8Nir8: return 4;
+  }
+  return 12;
+}
+
+// One column's pixels, one function per profile so the per-pixel loop has no profile branch.
+template <UdpProfile P>
+void decode_pixels(const std::uint8_t* px, int ppc, Pixel* out) noexcept {
+  for (int r = 0; r < ppc; ++r) {
+    Pixel& q = out[r];
+    if constexpr (P == UdpProfile::kLegacy) {
+      const auto w = le<std::uint32_t>(px);
+      q.range_mm = w & 0x000FFFFFu;
+      q.flags = static_cast<std::uint8_t>(w >> 28);
+      q.reflectivity = le<std::uint16_t>(px + 4);
+      q.signal = le<std::uint16_t>(px + 6);
+      q.nir = le<std::uint16_t>(px + 8);
+      px += 12;
+    } else if constexpr (P == UdpProfile::kRng19Rfl8Sig16Nir16) {
+      const auto w = le<std::uint32_t>(px);
+      q.range_mm = w & 0x0007FFFFu;
+      q.flags = static_cast<std::uint8_t>((w >> 19) & 0x1Fu);
+      q.reflectivity = px[4];
+      q.signal = le<std::uint16_t>(px + 6);
+      q.nir = le<std::uint16_t>(px + 8);
+      px += 12;
+    } else if constexpr (P == UdpProfile::kRng19Rfl8Sig16Nir16Dual) {
+      const auto w = le<std::uint32_t>(px);
+      const auto w2 = le<std::uint32_t>(px + 4);
+      q.range_mm = w & 0x0007FFFFu;
+      q.flags = static_cast<std::uint8_t>((w >> 19) & 0x1Fu);
+      q.reflectivity = static_cast<std::uint16_t>(w >> 24);
+      q.range2_mm = w2 & 0x0007FFFFu;
+      q.flags2 = static_cast<std::uint8_t>((w2 >> 19) & 0x1Fu);
+      q.reflectivity2 = static_cast<std::uint8_t>(w2 >> 24);
+      q.signal = le<std::uint16_t>(px + 8);
+      q.signal2 = le<std::uint16_t>(px + 10);
+      q.nir = le<std::uint16_t>(px + 12);
+      px += 16;
+    } else {
+      const auto w = le<std::uint16_t>(px);
+      q.range_mm = static_cast<std::uint32_t>(w & 0x7FFFu) << 3;  // units of 8 mm
+      q.flags = static_cast<std::uint8_t>(w >> 15);
+      q.reflectivity = px[2];
+      q.signal = 0;
+      q.nir = static_cast<std::uint16_t>(px[3] << 4);  // units of 16 photons
+      px += 4;
+    }
+  }
+}
+}  // namespace
+
 PacketFormat::PacketFormat(const SensorInfo& info) noexcept
     : profile_(info.profile),
       cols_(info.columns_per_packet > kMaxColumnsPerPacket ? kMaxColumnsPerPacket : info.columns_per_packet),
       ppc_(info.pixels_per_column > kMaxPixelsPerColumn ? kMaxPixelsPerColumn : info.pixels_per_column),
       cpf_(info.mode.columns) {
   const bool legacy = profile_ == UdpProfile::kLegacy;
-  header_ = legacy ? 0 : 32;
-  footer_ = legacy ? 0 : 32;
+  header_ = legacy ? 0 : kPacketHeaderSize;
+  footer_ = legacy ? 0 : kPacketFooterSize;
   col_header_ = legacy ? 16 : 12;
-  column_size_ = col_header_ + 12 * static_cast<std::size_t>(ppc_) + (legacy ? 4 : 0);
+  pixel_size_ = pixel_size_of(profile_);
+  column_size_ = col_header_ + pixel_size_ * static_cast<std::size_t>(ppc_) + (legacy ? 4 : 0);
   packet_size_ = header_ + column_size_ * static_cast<std::size_t>(cols_) + footer_;
 }
 
@@ -45,6 +104,8 @@ DecodeStatus PacketFormat::decode_lidar(std::span<const std::uint8_t> bytes, Lid
   if (!legacy) {
     if (le<std::uint16_t>(p) != 1) return DecodeStatus::kBadPacketType;
     packet_frame = le<std::uint16_t>(p + 2);
+    std::memcpy(out.header.data(), p + 4, out.header.size());
+    std::memcpy(out.footer.data(), p + packet_size_ - footer_, out.footer.size());
   }
   out.columns = cols_;
   int valid = 0, bad = 0;
@@ -57,7 +118,7 @@ DecodeStatus PacketFormat::decode_lidar(std::span<const std::uint8_t> bytes, Lid
     if (legacy) {
       o.frame_id = le<std::uint16_t>(col + 10);
       o.encoder_count = le<std::uint32_t>(col + 12);
-      o.valid = le<std::uint32_t>(col + col_header_ + 12 * static_cast<std::size_t>(ppc_)) == 0xFFFFFFFFu;
+      o.valid = le<std::uint32_t>(col + col_header_ + pixel_size_ * static_cast<std::size_t>(ppc_)) == 0xFFFFFFFFu;
     } else {
       o.frame_id = packet_frame;
       o.encoder_count = 0;
@@ -68,19 +129,11 @@ DecodeStatus PacketFormat::decode_lidar(std::span<const std::uint8_t> bytes, Lid
       ++bad;
     }
     const std::uint8_t* px = col + col_header_;
-    for (int r = 0; r < ppc_; ++r, px += 12) {
-      Pixel& q = o.pixels[static_cast<std::size_t>(r)];
-      if (legacy) {
-        q.range_mm = le<std::uint32_t>(px) & 0x000FFFFFu;
-        q.reflectivity = le<std::uint16_t>(px + 4);
-        q.signal = le<std::uint16_t>(px + 6);
-        q.nir = le<std::uint16_t>(px + 8);
-      } else {
-        q.range_mm = le<std::uint32_t>(px) & 0x0007FFFFu;
-        q.reflectivity = px[4];
-        q.signal = le<std::uint16_t>(px + 6);
-        q.nir = le<std::uint16_t>(px + 8);
-      }
+    switch (profile_) {
+      case UdpProfile::kLegacy: decode_pixels<UdpProfile::kLegacy>(px, ppc_, o.pixels.data()); break;
+      case UdpProfile::kRng19Rfl8Sig16Nir16: decode_pixels<UdpProfile::kRng19Rfl8Sig16Nir16>(px, ppc_, o.pixels.data()); break;
+      case UdpProfile::kRng19Rfl8Sig16Nir16Dual: decode_pixels<UdpProfile::kRng19Rfl8Sig16Nir16Dual>(px, ppc_, o.pixels.data()); break;
+      case UdpProfile::kRng15Rfl8Nir8: decode_pixels<UdpProfile::kRng15Rfl8Nir8>(px, ppc_, o.pixels.data()); break;
     }
     if (o.valid) {
       ++valid;

@@ -2,6 +2,7 @@
 #include "airground/drivers/ouster/stage.hpp"
 
 #include <cmath>
+#include <cstdio>
 #include <string>
 
 #include "airground/platform/log.hpp"
@@ -24,6 +25,8 @@ Status OusterStage::init(StageContext& ctx) {
   if (src != "udp" && src != "pcap" && src != "none")
     return Error::make(ErrorCode::kConfig, "config error: " + where + "source must be udp, pcap or none, got '" + src + "'");
   if (src == "none") return ok_status();
+  if (ctx.device != nullptr) device_ = ctx.device;
+  device_->describe("frames", {"wrong_size", "bad_type", "no_valid_column", "source"});
   auto absent = [&](const std::string& why) {
     ++c_.device_errors;
     AG_LOG_ERROR("lidar", "%s; no scans from this sensor (the robot keeps running)", why.c_str());
@@ -32,6 +35,10 @@ Status OusterStage::init(StageContext& ctx) {
   };
   if (v.text("metadata").empty()) return absent(where + "metadata names no sensor metadata JSON");
   auto info = read_metadata_file(v.text("metadata"));
+  // A file that is not there or not JSON is an absent sensor; one that says what the decoder cannot
+  // read (an unsupported profile, a bad mode) is a wrong configuration and stops the robot.
+  if (!info && info.error().code == ErrorCode::kConfig)
+    return Error::make(ErrorCode::kConfig, "config error: " + where + "metadata: " + info.error().message);
   if (!info) return absent(where + "metadata: " + info.error().message);
   const SensorInfo& s = info.value();
   const auto lidar_port = static_cast<std::uint16_t>(v.integer("lidar_port") != 0 ? v.integer("lidar_port") : s.udp_port_lidar);
@@ -61,6 +68,14 @@ Status OusterStage::init(StageContext& ctx) {
   buf_.assign(kMaxPacketSize, 0);
   mount_ = Pose3{v.real("mount_x_m"), v.real("mount_y_m"), v.real("mount_z_m"), 0, 0, v.real("mount_yaw_rad")};
   max_packets_ = static_cast<int>(v.integer("max_packets_per_step"));
+  pcap_ = src == "pcap";
+  lidar_port_ = lidar_port;
+  imu_port_ = imu_port;
+  expected_size_ = fmt_->lidar_packet_size();
+  profile_ = s.profile;
+  AG_LOG_INFO("lidar", "%s %s, %s, %dx%d, profile %s (%zu B packets), %s port %u", s.prod_line.empty() ? "Ouster" : s.prod_line.c_str(),
+              s.firmware.c_str(), s.layout.c_str(), s.mode.columns, s.mode.frequency_hz, to_string(s.profile), expected_size_,
+              pcap_ ? "pcap" : "udp", static_cast<unsigned>(lidar_port));
   return ok_status();
 }
 
@@ -92,6 +107,8 @@ void OusterStage::publish(const LidarFrame& f, TimeNs now) noexcept {
   m.count = n;
   ++c_.scans;
   if (!f.complete()) ++c_.scans_incomplete;
+  device_->unit_received(f.complete(), now);
+  at_last_frame_ = c_;
   if (out_.push(m) != 0) ++c_.ring_full;
 }
 
@@ -101,23 +118,84 @@ void OusterStage::step(TimeNs now) noexcept {
     std::size_t n = 0;
     TimeNs t = 0;
     const PacketKind k = source_->next(buf_, n, t);
-    if (k == PacketKind::kNone || k == PacketKind::kEnd) break;
+    if (k == PacketKind::kNone) break;
+    if (k == PacketKind::kEnd) {
+      if (!replay_ended_) {
+        replay_ended_ = true;
+        if (c_.scans == 0) warn_silence(now);  // a capture that gave nothing says why, once
+        else
+          AG_LOG_INFO("lidar", "capture replayed to its end: %llu frames (%llu incomplete), %llu decode errors",
+                      static_cast<unsigned long long>(c_.scans), static_cast<unsigned long long>(c_.scans_incomplete),
+                      static_cast<unsigned long long>(c_.decode_errors));
+      }
+      break;
+    }
     if (k == PacketKind::kError) {
       ++c_.source_errors;
+      device_->error(static_cast<std::size_t>(LidarError::kSource));
       continue;
     }
+    c_.bytes += n;
+    device_->received_bytes(n);
     const std::span<const std::uint8_t> bytes(buf_.data(), n);
     if (k == PacketKind::kImu) {
       ++c_.imu_packets;
-      if (decode_imu(bytes, imu_) != DecodeStatus::kOk) ++c_.decode_errors;
+      if (decode_imu(bytes, imu_) != DecodeStatus::kOk) {
+        ++c_.decode_errors;
+        ++c_.wrong_size;
+        device_->error(static_cast<std::size_t>(LidarError::kWrongSize));
+      }
       continue;
     }
     ++c_.packets;
-    if (fmt_->decode_lidar(bytes, *pkt_) != DecodeStatus::kOk) {
+    const DecodeStatus st = fmt_->decode_lidar(bytes, *pkt_);
+    if (st != DecodeStatus::kOk) {
       ++c_.decode_errors;
+      LidarError kind = LidarError::kNoValidColumn;
+      if (st == DecodeStatus::kWrongSize) {
+        ++c_.wrong_size;
+        c_.last_wrong_size = n;
+        kind = LidarError::kWrongSize;
+      } else if (st == DecodeStatus::kBadPacketType) {
+        ++c_.bad_type;
+        kind = LidarError::kBadType;
+      } else {
+        ++c_.no_valid_column;
+      }
+      device_->error(static_cast<std::size_t>(kind));
       continue;
     }
     if (const LidarFrame* f = assembler_->add(*pkt_)) publish(*f, now);
+  }
+  if (!replay_ended_ && silence_.check(*device_, now)) warn_silence(now);
+}
+
+// One warning per silence, naming the likely cause from what did arrive since the last frame.
+void OusterStage::warn_silence(TimeNs now) noexcept {
+  ++c_.silence_warnings;
+  char what[64];
+  if (replay_ended_) std::snprintf(what, sizeof what, "the capture ended with no lidar frame");
+  else std::snprintf(what, sizeof what, "no lidar frame for %.0f s", static_cast<double>(silence_.silent_for(now)) * 1e-9);
+  const OusterStageCounters& b = at_last_frame_;
+  const std::uint64_t lidar = c_.packets - b.packets, imu = c_.imu_packets - b.imu_packets;
+  const std::uint64_t wrong = c_.wrong_size - b.wrong_size, bad_type = c_.bad_type - b.bad_type;
+  if (lidar == 0 && imu == 0) {
+    AG_LOG_WARN("lidar", "%s: no packets at all on UDP ports %u/%u (sensor off or not sending to this host: "
+                "check its udp_dest, the cable, a firewall)", what, static_cast<unsigned>(lidar_port_), static_cast<unsigned>(imu_port_));
+  } else if (lidar == 0) {
+    AG_LOG_WARN("lidar", "%s: %llu IMU packets on port %u but no lidar packets on port %u "
+                "(wrong lidar port: the sensor's udp_port_lidar or lidar.lidar_port)", what, static_cast<unsigned long long>(imu),
+                static_cast<unsigned>(imu_port_), static_cast<unsigned>(lidar_port_));
+  } else if (wrong != 0) {
+    AG_LOG_WARN("lidar", "%s: %llu lidar packets of %zu B refused, profile %s expects %zu B "
+                "(wrong profile or another sensor's metadata: fetch the sensor's own)", what, static_cast<unsigned long long>(wrong),
+                c_.last_wrong_size, to_string(profile_), expected_size_);
+  } else if (bad_type != 0) {
+    AG_LOG_WARN("lidar", "%s: %llu packets on port %u are not lidar packets (wrong port?)", what,
+                static_cast<unsigned long long>(bad_type), static_cast<unsigned>(lidar_port_));
+  } else {
+    AG_LOG_WARN("lidar", "%s: %llu lidar packets decoded but no revolution completed "
+                "(columns flagged invalid: the sensor starting up or a column window)", what, static_cast<unsigned long long>(lidar));
   }
 }
 

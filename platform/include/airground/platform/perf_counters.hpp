@@ -10,6 +10,7 @@
 #include <vector>
 #include <memory>
 
+#include "airground/platform/device_counters.hpp"
 #include "airground/platform/time.hpp"
 
 namespace ag {
@@ -51,6 +52,7 @@ struct StagePerf {
   std::atomic<std::uint64_t> overruns{0};  // step() took longer than its budget
   std::atomic<std::uint64_t> slips{0};     // whole releases skipped because the stage started a period late
   std::atomic<TimeNs> exec_total{0};       // sum of every step()'s execution time (one writer, like the rest)
+  DeviceCounters device;                   // what a device stage received (inactive for the others)
 
   void count(std::atomic<std::uint64_t>& c, std::uint64_t n = 1) noexcept {
     c.store(c.load(std::memory_order_relaxed) + n, std::memory_order_relaxed);

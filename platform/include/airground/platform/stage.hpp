@@ -21,6 +21,7 @@ struct StageContext {
   const PerfRegistry& perf;
   std::string_view instance;  // the robot this stage belongs to ("uav", "ugv1", ...)
   std::string_view stage_name;
+  DeviceCounters* device{nullptr};  // this stage's own device counters (a device stage describes and fills them)
 
   [[nodiscard]] SectionView params() const { return SectionView(config, stage_name); }
 };

@@ -22,6 +22,12 @@ struct SchedulerStatus {
     float exec_p50_us{0}, exec_p99_us{0}, exec_max_us{0};  // [µs]
     float late_p99_us{0};                                   // [µs] wake-up lateness
     float budget_us{0};                                     // [µs]
+    // A device stage's own counters (device_unit empty for the others).
+    std::array<char, 20> device_unit{};                     // "frames", "fixes", "images", "samples"
+    float device_rate_hz{0};                                // [1/s] units over the last report period
+    std::uint64_t device_complete{0}, device_incomplete{0};
+    std::uint64_t device_errors{0};                         // decode errors, all kinds
+    std::uint64_t device_bytes{0};
   };
   TimeNs sample_time_ns{0};   // [ns] when the counters were read
   TimeNs publish_time_ns{0};  // [ns]
@@ -45,6 +51,7 @@ class StatusStage final : public Stage {
   [[nodiscard]] const SchedulerStatus& last() const noexcept { return msg_; }
 
  private:
+  void log_device(std::size_t i, const SchedulerStatus::StageLine& l) const noexcept;
   const PerfRegistry* perf_{nullptr};
   const Clock* clock_{nullptr};
   LatestWriter<SchedulerStatus> out_;
@@ -53,6 +60,8 @@ class StatusStage final : public Stage {
   std::int64_t log_every_{10};
   std::uint64_t reported_overruns_{0};
   std::uint64_t reported_slips_{0};
+  std::array<std::uint64_t, SchedulerStatus::kMaxStages> prev_units_{};
+  TimeNs prev_sample_{0};
 };
 
 }  // namespace ag

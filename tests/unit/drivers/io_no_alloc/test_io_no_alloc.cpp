@@ -8,6 +8,8 @@
 
 #include <gtest/gtest.h>
 
+#include <memory>
+#include <string>
 #include <vector>
 
 #include "../../../common/counting_new.hpp"
@@ -89,6 +91,43 @@ TEST(DriversIoNoAllocation, OusterPcapAndUdpDecodeAssembleXyz) {
   ::close(tx);
   EXPECT_EQ(frames, 1);
   EXPECT_EQ(imu, 11);
+}
+
+// The FW 2.2+ profiles (RNG15 and dual captures): decode, assemble (both returns), XYZ and re-encode.
+TEST(DriversIoNoAllocation, OusterCurrentProfilesDecodeAssembleXyzEncode) {
+  const std::string dir = std::string(AG_TEST_DATA_DIR) + "/ouster/";
+  for (const char* name : {"OS-0-128-U1_v2.3.0_1024x10", "OS-0-32-U1_v2.2.0_1024x10"}) {
+    SCOPED_TRACE(name);
+    auto info = ouster::read_metadata_file(dir + name + ".json");
+    ASSERT_TRUE(info.ok()) << info.error().message;
+    auto src = ouster::PcapPacketSource::open(dir + name + ".pcap");
+    ASSERT_TRUE(src.ok());
+    const ouster::PacketFormat fmt(info.value());
+    ouster::FrameAssembler assembler(info.value());
+    const ouster::XyzLut lut(info.value());
+    std::vector<float> xyz(3 * 1024 * info.value().beam_altitude_deg.size());
+    std::vector<std::uint8_t> buf(ouster::kMaxPacketSize), out(fmt.lidar_packet_size());
+    auto pkt = std::make_unique<ouster::LidarPacket>();
+    int frames = 0;
+    {
+      AllocationWindow w;
+      for (;;) {
+        std::size_t n = 0;
+        TimeNs t = 0;
+        const ouster::PacketKind k = src.value()->next(buf, n, t);
+        if (k == ouster::PacketKind::kEnd) break;
+        if (k != ouster::PacketKind::kLidar) continue;
+        ASSERT_EQ(fmt.decode_lidar(std::span(buf).first(n), *pkt), ouster::DecodeStatus::kOk);
+        if (const ouster::LidarFrame* f = assembler.add(*pkt)) {
+          lut.cartesian(*f, xyz.data());
+          EXPECT_EQ(ouster::encode_lidar_packet(fmt, *f, 0, out), out.size());
+          ++frames;
+        }
+      }
+      EXPECT_EQ(w.allocations(), 0u);
+    }
+    EXPECT_EQ(frames, 1);
+  }
 }
 
 TEST(DriversIoNoAllocation, UbloxStreamAndNavPvt) {

@@ -3,7 +3,10 @@
 // allocate.
 #include <gtest/gtest.h>
 
+#include <cstdio>
+#include <fstream>
 #include <memory>
+#include <sstream>
 
 #include "airground/drivers/ouster/stage.hpp"
 #include "airground/platform/role_instance.hpp"
@@ -107,6 +110,124 @@ TEST(OusterStage, AnAbsentSensorIsCountedNotFatalAndBadValuesNameTheKey) {
     ASSERT_FALSE(st.ok()) << bad;
     EXPECT_NE(st.error().message.find(std::string(bad).substr(0, std::string(bad).find('='))), std::string::npos) << st.error().message;
   }
+}
+
+// The captures of current sensors (FW 2.2/2.3 flat metadata, profile under data_format) replayed
+// through the stage: every return published, and the stage's own counters say what it received.
+TEST(OusterStage, CurrentSensorsCapturesPublishEveryReturn) {
+  struct Case {
+    const char* name;
+    std::uint32_t points;
+    std::uint16_t rings;
+  };
+  for (const Case& k : {Case{"OS-0-128-U1_v2.3.0_1024x10", 97299u, 128}, Case{"OS-0-32-U1_v2.2.0_1024x10", 21631u, 32}}) {
+    SCOPED_TRACE(k.name);
+    SimClock clock(0);
+    auto r = make_role(clock, {"ouster.source=pcap", "ouster.metadata=" + kDir + k.name + ".json", "ouster.pcap=" + kDir + k.name + ".pcap"});
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    auto* stage = dynamic_cast<OusterStage*>(r.value()->stages().front().stage.get());
+    ASSERT_NE(stage, nullptr);
+    {
+#if AG_COUNT_ALLOC
+      test_alloc::AllocationWindow w;
+#endif
+      stage->step(kNsPerS);
+#if AG_COUNT_ALLOC
+      EXPECT_EQ(w.allocations(), 0u) << "step() allocated";
+#endif
+    }
+    EXPECT_EQ(stage->counters().packets, 64u);
+    EXPECT_EQ(stage->counters().decode_errors, 0u);
+    EXPECT_EQ(stage->counters().scans, 1u);
+    EXPECT_EQ(stage->last_scan().count, k.points);
+    EXPECT_EQ(stage->last_scan().rings, k.rings);
+    const DeviceCounters& d = r.value()->perf().at(0).device;
+    EXPECT_TRUE(d.active.load());
+    EXPECT_STREQ(d.unit.data(), "frames");
+    EXPECT_EQ(d.complete.load(), 1u);
+    EXPECT_EQ(d.incomplete.load(), 0u);
+    EXPECT_EQ(d.error_total(), 0u);
+    EXPECT_EQ(d.bytes.load(), 64u * 8448u + 10u * 48u);
+    EXPECT_EQ(d.last_unit_ns.load(), kNsPerS);
+    stage->step(5 * kNsPerS);  // the capture is over: not a silent sensor
+    EXPECT_EQ(stage->counters().silence_warnings, 0u);
+  }
+}
+
+std::string slurp(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+std::string with_profile(const std::string& profile) {
+  std::string j = slurp(kDir + "OS-0-128-U1_v2.3.0_1024x10.json");
+  const std::string from = "\"RNG15_RFL8_NIR8\"";
+  const auto at = j.find(from);
+  EXPECT_NE(at, std::string::npos);
+  j.replace(at, from.size(), "\"" + profile + "\"");
+  const std::string path = ::testing::TempDir() + "ouster_" + profile + ".json";
+  std::ofstream(path) << j;
+  return path;
+}
+
+// An unsupported profile stops the robot at start-up, naming the profile, the file and the supported ones.
+TEST(OusterStage, AnUnsupportedProfileStopsTheRobotNamingIt) {
+  SimClock clock(0);
+  const std::string meta = with_profile("RNG15_RFL8_NIR8_ZONE16");
+  auto r = make_role(clock, {"ouster.source=pcap", "ouster.metadata=" + meta, "ouster.pcap=" + kDir + "OS-0-128-U1_v2.3.0_1024x10.pcap"});
+  ASSERT_FALSE(r.ok());
+  const std::string& m = r.error().message;
+  EXPECT_EQ(r.error().code, ErrorCode::kConfig);
+  EXPECT_NE(m.find("RNG15_RFL8_NIR8_ZONE16"), std::string::npos) << m;
+  EXPECT_NE(m.find(meta), std::string::npos) << m;
+  EXPECT_NE(m.find("ouster.metadata"), std::string::npos) << m;
+  EXPECT_NE(m.find("RNG19_RFL8_SIG16_NIR16_DUAL"), std::string::npos) << m;
+}
+
+// Metadata naming another supported profile than the packets': every packet refused as the wrong size,
+// counted by kind, and one warning that names the cause (here when the capture ends).
+TEST(OusterStage, AWrongProfileIsCountedAndWarnedOnce) {
+  SimClock clock(0);
+  auto r = make_role(clock, {"ouster.source=pcap", "ouster.metadata=" + with_profile("RNG19_RFL8_SIG16_NIR16"),
+                             "ouster.pcap=" + kDir + "OS-0-128-U1_v2.3.0_1024x10.pcap"});
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  auto* stage = dynamic_cast<OusterStage*>(r.value()->stages().front().stage.get());
+  ASSERT_NE(stage, nullptr);
+  stage->step(kNsPerS);
+  stage->step(5 * kNsPerS);
+  EXPECT_EQ(stage->counters().scans, 0u);
+  EXPECT_EQ(stage->counters().wrong_size, 64u);
+  EXPECT_EQ(stage->counters().last_wrong_size, 8448u);
+  EXPECT_EQ(stage->counters().silence_warnings, 1u);
+  const DeviceCounters& d = r.value()->perf().at(0).device;
+  EXPECT_EQ(d.errors[static_cast<std::size_t>(LidarError::kWrongSize)].load(), 64u);
+  EXPECT_EQ(d.units(), 0u);
+}
+
+// A live sensor that sends nothing: one warning after a few seconds, not one per step.
+TEST(OusterStage, ASilentSensorIsWarnedAboutOnce) {
+  SimClock clock(0);
+  auto r = make_role(clock, {"ouster.source=udp", "ouster.metadata=" + kDir + "OS-0-32-U1_v2.2.0_1024x10.json",
+                             "ouster.bind_address=127.0.0.1", "ouster.lidar_port=39517", "ouster.imu_port=39518"});
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  auto* stage = dynamic_cast<OusterStage*>(r.value()->stages().front().stage.get());
+  ASSERT_NE(stage, nullptr);
+  ASSERT_TRUE(stage->active());
+  for (TimeNs t = kNsPerS; t <= 10 * kNsPerS; t += kNsPerS / 2) {
+#if AG_COUNT_ALLOC
+    test_alloc::AllocationWindow w;
+#endif
+    stage->step(t);
+#if AG_COUNT_ALLOC
+    EXPECT_EQ(w.allocations(), 0u) << "step() allocated while warning";
+#endif
+    if (t < 4 * kNsPerS) {
+      EXPECT_EQ(stage->counters().silence_warnings, 0u) << t;
+    }
+  }
+  EXPECT_EQ(stage->counters().silence_warnings, 1u);
 }
 
 }  // namespace

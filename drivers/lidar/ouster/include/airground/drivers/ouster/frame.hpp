@@ -6,6 +6,7 @@
 // emitted is counted late and dropped.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -15,17 +16,27 @@ namespace ag::ouster {
 
 struct LidarFrame {
   int width{0}, height{0};
+  int columns_expected{0};  // the metadata's column window (width unless the sensor sends a window)
   std::uint16_t frame_id{0};
   int columns_received{0};
-  std::vector<std::uint32_t> range_mm;        // height * width
+  std::vector<std::uint32_t> range_mm;        // height * width, the first (strongest) return
   std::vector<std::uint16_t> reflectivity, signal, nir;
+  std::vector<std::uint8_t> flags;            // the profile's flag bits, as sent
+  // The second return (dual profile only; empty otherwise), height * width.
+  std::vector<std::uint32_t> range2_mm;
+  std::vector<std::uint16_t> signal2;
+  std::vector<std::uint8_t> reflectivity2, flags2;
   std::vector<std::uint64_t> column_timestamp_ns;  // width
   std::vector<std::uint8_t> column_valid;          // width, 1 = received and valid
+  // FW 2.2+ packet header bytes 4..31 and footer of the frame's first packet (the sensor repeats them).
+  std::array<std::uint8_t, kPacketHeaderSize - 4> packet_header{};
+  std::array<std::uint8_t, kPacketFooterSize> packet_footer{};
 
   LidarFrame() = default;
-  LidarFrame(int w, int h);
+  LidarFrame(int w, int h, bool second_return = false);
   void clear() noexcept;  // keeps the storage
-  [[nodiscard]] bool complete() const noexcept { return columns_received == width; }
+  [[nodiscard]] bool has_second_return() const noexcept { return !range2_mm.empty(); }
+  [[nodiscard]] bool complete() const noexcept { return columns_received == columns_expected; }
   [[nodiscard]] std::size_t index(int row, int col) const noexcept {
     return static_cast<std::size_t>(row) * static_cast<std::size_t>(width) + static_cast<std::size_t>(col);
   }
@@ -60,13 +71,15 @@ class FrameAssembler {
   LidarPacket pending_{};
   bool have_cur_{false}, have_last_{false}, have_pending_{false};
   std::uint16_t last_emitted_{0};
+  bool second_return_{false};
   AssemblerCounters c_;
 };
 
 // The inverse of decode_lidar, for a simulated sensor (HIL) and the tests: the packet carrying columns
 // first_column .. first_column + columns_per_packet - 1 of `f` (stamps from the frame, status valid
-// where the frame has the column; legacy encoder counts at 90112 ticks per turn). Returns the size, 0
-// when `out` is too small or the columns are outside the frame.
+// where the frame has the column; legacy encoder counts at 90112 ticks per turn; FW 2.2+ header and
+// footer bytes from the frame; RNG15 range rounded to 8 mm and NIR to 16 photons, reflectivity clipped to
+// 8 bits). Returns the size, 0 when `out` is too small or the columns are outside the frame.
 std::size_t encode_lidar_packet(const PacketFormat& fmt, const LidarFrame& f, int first_column, std::span<std::uint8_t> out) noexcept;
 std::size_t encode_imu_packet(const ImuSample& s, std::span<std::uint8_t> out) noexcept;
 

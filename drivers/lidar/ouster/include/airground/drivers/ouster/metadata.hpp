@@ -1,7 +1,8 @@
 // Ouster sensor metadata (the sensor's JSON, as `get_metadata` / the SDK write it): beam angles, lidar
-// mode, packet layout, beam-origin offset and the lidar-to-sensor transform. Three layouts are read:
-// the legacy flat file (FW 1.x-2.1), the reduced config (angles and mode only: the rest takes the
-// OS-1 defaults the Ouster SDK uses) and the nested FW 2.2+ file (beam_intrinsics, lidar_data_format...).
+// mode, packet layout, beam-origin offset and the lidar-to-sensor transform. Four layouts are read:
+// the legacy flat file (FW 1.x-2.1), the flat FW 2.x file (the same keys plus data_format.udp_profile_lidar),
+// the reduced config (angles and mode only: the rest takes the OS-1 defaults the Ouster SDK uses) and the
+// nested FW 2.2+/3.x file (sensor_info, beam_intrinsics, lidar_data_format, config_params...).
 #pragma once
 
 #include <array>
@@ -14,12 +15,20 @@
 
 namespace ag::ouster {
 
+inline constexpr int kMaxColumnsPerPacketSupported = 16;  // what the sensors send (1, 2, 4, 8, 16)
+
 enum class UdpProfile : std::uint8_t {
-  kLegacy = 0,             // FW <= 2.1: per-column frame id and encoder count, 12 B pixels
-  kRng19Rfl8Sig16Nir16 = 1 // FW 2.2+ "single return": 32 B packet header and footer, 12 B pixels
+  kLegacy = 0,                   // FW <= 2.1: per-column frame id and encoder count, 12 B pixels
+  kRng19Rfl8Sig16Nir16 = 1,      // FW 2.2+ single return: 32 B packet header and footer, 12 B pixels
+  kRng19Rfl8Sig16Nir16Dual = 2,  // FW 2.2+ dual return: 16 B pixels, both returns
+  kRng15Rfl8Nir8 = 3,            // FW 2.2+ low data rate: 4 B pixels, range in units of 8 mm
 };
+inline constexpr UdpProfile kSupportedProfiles[] = {UdpProfile::kLegacy, UdpProfile::kRng19Rfl8Sig16Nir16,
+                                                    UdpProfile::kRng19Rfl8Sig16Nir16Dual, UdpProfile::kRng15Rfl8Nir8};
 const char* to_string(UdpProfile p) noexcept;
+// The error (kConfig) names the text and every supported profile.
 Result<UdpProfile> parse_udp_profile(std::string_view text);
+[[nodiscard]] constexpr bool has_second_return(UdpProfile p) noexcept { return p == UdpProfile::kRng19Rfl8Sig16Nir16Dual; }
 
 struct LidarMode {
   int columns{1024};       // columns per frame (512, 1024, 2048, 4096)
@@ -41,7 +50,11 @@ struct SensorInfo {
   UdpProfile profile{UdpProfile::kLegacy};
   int pixels_per_column{64};         // beams
   int columns_per_packet{16};
-  int column_window_first{0}, column_window_last{1023};
+  int column_window_first{0}, column_window_last{1023};  // columns the sensor sends (wraps when first > last)
+  [[nodiscard]] int columns_in_window() const noexcept {
+    return column_window_first <= column_window_last ? column_window_last - column_window_first + 1
+                                                     : mode.columns - column_window_first + column_window_last + 1;
+  }
   std::vector<double> beam_altitude_deg;  // one per beam, top first
   std::vector<double> beam_azimuth_deg;
   std::vector<int> pixel_shift_by_row;    // destagger offsets (empty when unknown)
@@ -49,6 +62,7 @@ struct SensorInfo {
   Mat4 beam_to_lidar{};                   // filled from the beam-origin offset when the file has none
   Mat4 lidar_to_sensor{kDefaultLidarToSensor};
   Mat4 imu_to_sensor{kIdentity4};
+  std::string layout;                     // which metadata layout the file had: legacy, flat-2.x, reduced, nested
   std::uint16_t udp_port_lidar{7502}, udp_port_imu{7503};
 };
 

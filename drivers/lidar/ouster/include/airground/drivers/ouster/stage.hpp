@@ -35,12 +35,19 @@ inline constexpr ParamSpec kOusterStageParams[] = {
 
 struct OusterStageCounters {
   std::uint64_t packets{0}, imu_packets{0};
-  std::uint64_t decode_errors{0};      // wrong size, bad packet type, no valid column
+  std::uint64_t decode_errors{0};      // wrong size, bad packet type, no valid column (by kind below)
+  std::uint64_t wrong_size{0}, bad_type{0}, no_valid_column{0};
+  std::uint64_t bytes{0};              // lidar and IMU payload bytes received
   std::uint64_t source_errors{0};
   std::uint64_t scans{0}, scans_incomplete{0};
   std::uint64_t ring_full{0};
   std::uint64_t device_errors{0};      // no metadata, no socket, no capture: the stage publishes nothing
+  std::uint64_t silence_warnings{0};   // "no frames for a few seconds" warnings logged
+  std::size_t last_wrong_size{0};      // [B] the last lidar datagram refused for its size
 };
+
+// Device-counter error kinds of the lidar stage, in DeviceCounters order.
+enum class LidarError : std::size_t { kWrongSize = 0, kBadType = 1, kNoValidColumn = 2, kSource = 3 };
 
 class OusterStage final : public Stage {
  public:
@@ -59,6 +66,7 @@ class OusterStage final : public Stage {
 
  private:
   void publish(const LidarFrame& f, TimeNs now) noexcept;
+  void warn_silence(TimeNs now) noexcept;
   std::unique_ptr<PacketSource> source_;
   std::unique_ptr<PacketFormat> fmt_;
   std::unique_ptr<FrameAssembler> assembler_;
@@ -73,6 +81,15 @@ class OusterStage final : public Stage {
   bool classes_from_reflectivity_{false};
   ImuSample imu_{};
   OusterStageCounters c_;
+  OusterStageCounters at_last_frame_;   // counters when the last frame came (what the silence saw)
+  DeviceCounters own_device_;           // when the context has none (a stage built outside a role)
+  DeviceCounters* device_{&own_device_};
+  DeviceSilence silence_;
+  bool replay_ended_{false};
+  bool pcap_{false};
+  std::uint16_t lidar_port_{0}, imu_port_{0};
+  std::size_t expected_size_{0};
+  UdpProfile profile_{UdpProfile::kLegacy};
 };
 
 }  // namespace ag::ouster
