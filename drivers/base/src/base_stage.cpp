@@ -35,6 +35,10 @@ Status BaseStage::init(StageContext& ctx) {
   if (bp.left_node == bp.right_node)
     return Error::make(ErrorCode::kConfig, "config error: " + where + "left_node_id and right_node_id must differ");
   const std::string can_backend = v.text("can_backend");
+  if (ctx.device != nullptr) device_ = ctx.device;
+  device_->describe("samples", {"rx_errors", "error_frames", "tx_dropped", "ring_full"});
+  left_node_ = bp.left_node;
+  right_node_ = bp.right_node;
   if (can_backend == "inprocess") {
     can::InProcessCanLink* link = can::find_inprocess_link(ctx.instance);
     if (link == nullptr)
@@ -196,6 +200,8 @@ void BaseStage::step(TimeNs now) noexcept {
   WheelOdometryMsg o;
   while (base_->take_odometry(o)) {
     o.published = now;
+    device_->unit_received(true, now);
+    if (bus_ != nullptr) rx_at_last_sample_ = bus_->counters().rx;
     if (odom_out_.push(o) != 0) ++c_.odometry_ring_full;
     if (odom_log_ != nullptr)
       std::fprintf(odom_log_, "%lld,%.17g,%.17g,%.17g,%.17g,%.17g\n", static_cast<long long>(o.stamp), o.pose.x, o.pose.y, o.pose.yaw, o.v_mps,
@@ -223,6 +229,28 @@ void BaseStage::step(TimeNs now) noexcept {
   status_.watchdog_trips = base_->counters().watchdog_trips;
   status_.estop_assertions = latch_.assertions();
   status_out_.publish(status_);
+  note_device(now);
+}
+
+// The stage's device counters (bytes: received frames as 16-byte SocketCAN frames), and one warning when
+// the controllers give no odometry for a few seconds.
+void BaseStage::note_device(TimeNs now) noexcept {
+  if (bus_ == nullptr) return;
+  const can::CanBusCounters& b = bus_->counters();
+  device_->error_total(0, b.rx_errors);
+  device_->error_total(1, b.error_frames);
+  device_->error_total(2, b.tx_dropped);
+  device_->error_total(3, c_.odometry_ring_full);
+  device_->bytes.store(b.rx * 16u, std::memory_order_relaxed);
+  if ((replay_ != nullptr && replay_->finished()) || !silence_.check(*device_, now)) return;
+  ++c_.silence_warnings;
+  const double s = static_cast<double>(silence_.silent_for(now)) * 1e-9;
+  if (b.rx == rx_at_last_sample_)
+    AG_LOG_WARN("base", "no wheel odometry for %.0f s: no CAN frames at all (interface down, wrong bitrate, controllers unpowered)", s);
+  else
+    AG_LOG_WARN("base", "no wheel odometry for %.0f s: %llu CAN frames but no encoder estimates from nodes %u/%u "
+                "(wrong node ids: base.left_node_id, base.right_node_id)", s,
+                static_cast<unsigned long long>(b.rx - rx_at_last_sample_), static_cast<unsigned>(left_node_), static_cast<unsigned>(right_node_));
 }
 
 void BaseStage::stop() noexcept {

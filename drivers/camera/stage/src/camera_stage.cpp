@@ -104,6 +104,8 @@ Status CameraStage::init(StageContext& ctx) {
   vo_out_ = vw.value();
 
   const std::string& source = v.text("source");
+  if (ctx.device != nullptr) device_ = ctx.device;
+  if (source != "none") device_->describe("images", {"device", "bad_buffers", "bad_records", "ring_full"});
   if (source == "v4l2") {
     auto fmt = v4l2::parse_pixel_format(v.text("format"));
     if (!fmt) return Error::make(ErrorCode::kConfig, "config error: " + where_ + "format: " + fmt.error().message);
@@ -191,10 +193,30 @@ bool CameraStage::open_replay(TimeNs now, bool retry) {
 
 void CameraStage::step(TimeNs now) noexcept {
   switch (source_) {
-    case Source::kV4l2: step_v4l2(now); return;
-    case Source::kReplay: step_replay(now); return;
+    case Source::kV4l2: step_v4l2(now); break;
+    case Source::kReplay: step_replay(now); break;
     case Source::kNone: return;
   }
+  note_device(now);
+}
+
+// The stage's device counters, and one warning when an open source gives no image for a few seconds.
+void CameraStage::note_device(TimeNs now) noexcept {
+  device_->error_total(0, c_.device_errors);
+  device_->error_total(3, c_.ring_full);
+  if (cam_) device_->error_total(1, cam_->counters().error_buffers + cam_->counters().short_buffers);
+  device_->error_total(2, c_.replay.crc_errors + c_.replay.bad_records);
+  const bool open = (source_ == Source::kV4l2 && cam_) || (source_ == Source::kReplay && reader_ && !finished_);
+  if (!open || !silence_.check(*device_, now)) return;
+  ++c_.silence_warnings;
+  const double s = static_cast<double>(silence_.silent_for(now)) * 1e-9;
+  if (source_ == Source::kV4l2)
+    AG_LOG_WARN("camera", "%sdevice: no image for %.0f s from %s, which is open and streaming (%llu error/short buffers, %llu dropped): "
+                "no trigger, a USB bandwidth limit, or another process", where_.c_str(), s, cfg_.device.c_str(),
+                ull(cam_->counters().error_buffers + cam_->counters().short_buffers), ull(cam_->counters().dropped));
+  else
+    AG_LOG_WARN("camera", "%sreplay: no image for %.0f s from %s (%s)", where_.c_str(), s, replay_path_.c_str(),
+                reader_->is_fifo() ? "no writer on the FIFO yet, or it stopped writing" : "a file with no image records here");
 }
 
 void CameraStage::step_v4l2(TimeNs now) noexcept {
@@ -221,6 +243,8 @@ void CameraStage::step_v4l2(TimeNs now) noexcept {
       img_->seq = ++seq_;
       img_->labels = LabelSource::kNone;
       ++c_.frames_published;
+      device_->unit_received(true, now);
+      device_->received_bytes(f.data.size());
       if (cam_out_.push(*img_) != 0) ++c_.ring_full;
     }
     if (r == v4l2::CaptureResult::kError || cam_->state() == v4l2::Camera::State::kFailed) {
@@ -294,6 +318,8 @@ void CameraStage::step_replay(TimeNs now) noexcept {
       img_->stamp = stamp;
       img_->published = now;
       ++c_.frames_published;
+      device_->unit_received(true, now);
+      device_->received_bytes(sizeof(CameraImageMsg));
       (void)cam_out_.push(*img_);
       ++images;
     } else {

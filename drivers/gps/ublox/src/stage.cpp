@@ -52,6 +52,9 @@ Status UbloxStage::init(StageContext& ctx) {
   max_bytes_ = static_cast<int>(v.integer("max_bytes_per_step"));
   buf_.assign(1024, 0);
   if (src == "none") return ok_status();
+  if (ctx.device != nullptr) device_ = ctx.device;
+  device_->describe("fixes", {"bad_checksum", "malformed", "garbage_bytes", "read"});
+  device_name_ = src == "replay" ? v.text("replay") : v.text("device");
   auto absent = [&](const std::string& why) {
     ++c_.device_errors;
     AG_LOG_ERROR("gps", "%s; no fixes from this receiver (the robot keeps running)", why.c_str());
@@ -79,6 +82,9 @@ void UbloxStage::publish(TimeNs now, std::uint8_t fix_type, double lat, double l
   m.v_accuracy_m = vacc;
   last_ = m;
   ++c_.fixes_published;
+  device_->unit_received(fix_type != 0, now);  // complete: a usable fix; incomplete: the receiver has none
+  at_last_fix_ = c_;
+  stream_at_last_fix_ = parser_.counters();
   if (out_.push(m) != 0) ++c_.ring_full;
 }
 
@@ -92,6 +98,8 @@ void UbloxStage::step(TimeNs now) noexcept {
     }
     if (n == 0) break;
     total += static_cast<int>(n);
+    c_.bytes += static_cast<std::uint64_t>(n);
+    device_->received_bytes(static_cast<std::uint64_t>(n));
     std::span<const std::uint8_t> in(buf_.data(), static_cast<std::size_t>(n));
     while (!in.empty()) {
       StreamMessage m;
@@ -113,6 +121,34 @@ void UbloxStage::step(TimeNs now) noexcept {
       }
     }
   }
+  const StreamCounters& sc = parser_.counters();
+  device_->error_total(0, sc.ubx_bad_checksum + sc.nmea_bad_checksum);
+  device_->error_total(1, sc.ubx_oversize + sc.nmea_malformed);
+  device_->error_total(2, sc.garbage_bytes);
+  device_->error_total(3, c_.read_errors);
+  if (!source_->at_end() && silence_.check(*device_, now)) warn_silence(now);
+}
+
+// One warning per silence, naming the likely cause from what did arrive since the last fix.
+void UbloxStage::warn_silence(TimeNs now) noexcept {
+  ++c_.silence_warnings;
+  const double s = static_cast<double>(silence_.silent_for(now)) * 1e-9;
+  const StreamCounters& a = stream_at_last_fix_;
+  const StreamCounters& b = parser_.counters();
+  const std::uint64_t bytes = c_.bytes - at_last_fix_.bytes;
+  const std::uint64_t frames = (b.ubx_frames - a.ubx_frames) + (b.nmea_sentences - a.nmea_sentences);
+  const std::uint64_t bad = (b.ubx_bad_checksum - a.ubx_bad_checksum) + (b.nmea_bad_checksum - a.nmea_bad_checksum);
+  if (bytes == 0)
+    AG_LOG_WARN("gps", "no fix for %.0f s: no bytes at all from %s (wrong device, receiver unplugged or not powered)", s, device_name_.c_str());
+  else if (frames == 0 && bad == 0)
+    AG_LOG_WARN("gps", "no fix for %.0f s: %llu bytes from %s but no UBX or NMEA message (wrong baud rate: gps.baud)", s,
+                static_cast<unsigned long long>(bytes), device_name_.c_str());
+  else if (frames == 0)
+    AG_LOG_WARN("gps", "no fix for %.0f s: %llu messages with bad checksums from %s (noise on the line or wrong baud rate)", s,
+                static_cast<unsigned long long>(bad), device_name_.c_str());
+  else
+    AG_LOG_WARN("gps", "no fix for %.0f s: %llu messages from %s but no NAV-PVT or GGA (enable UBX-NAV-PVT on the receiver's port)", s,
+                static_cast<unsigned long long>(frames), device_name_.c_str());
 }
 
 }  // namespace ag::ublox

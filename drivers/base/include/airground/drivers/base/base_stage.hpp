@@ -71,6 +71,7 @@ struct BaseStageCounters {
   std::uint64_t led_errors{0};
   std::uint64_t odometry_ring_full{0};
   std::uint64_t device_errors{0};  // a CAN interface or GPIO line that could not be opened at start-up
+  std::uint64_t silence_warnings{0};  // "no odometry for a few seconds" warnings logged
 };
 
 class BaseStage final : public Stage {
@@ -114,6 +115,12 @@ class BaseStage final : public Stage {
   TimeNs last_cmd_stamp_{-1}, last_arm_stamp_{-1};
   bool started_{false};
   BaseStageCounters c_;
+  void note_device(TimeNs now) noexcept;
+  DeviceCounters own_device_;
+  DeviceCounters* device_{&own_device_};
+  DeviceSilence silence_;
+  std::uint64_t rx_at_last_sample_{0};
+  std::uint8_t left_node_{0}, right_node_{1};
 };
 
 }  // namespace ag::base

@@ -43,6 +43,7 @@ struct CameraStageCounters {
   std::uint64_t reopens{0};         // device or replay path opened by a retry after a fault
   std::uint64_t ring_full{0};       // live images some reader's ring refused (a replay waits for room instead)
   FrameStreamCounters replay;       // the replay reader's, as of the last step
+  std::uint64_t silence_warnings{0};  // "no image for a few seconds" warnings logged
 };
 
 // BGR of one size to RGB of another: area averaging when shrinking (each output pixel the mean of the
@@ -92,6 +93,7 @@ class CameraStage final : public Stage {
   void step_v4l2(TimeNs now) noexcept;
   void step_replay(TimeNs now) noexcept;
   void note_replay_faults(TimeNs now) noexcept;
+  void note_device(TimeNs now) noexcept;
 
   Source source_{Source::kNone};
   std::string where_;
@@ -120,6 +122,9 @@ class CameraStage final : public Stage {
   std::uint64_t faults_logged_{0};
   TimeNs last_fault_log_{0};
   CameraStageCounters c_;
+  DeviceCounters own_device_;
+  DeviceCounters* device_{&own_device_};
+  DeviceSilence silence_;
 };
 
 }  // namespace ag::camera

@@ -6,6 +6,7 @@
 
 #include <memory>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "airground/core/messages.hpp"
@@ -43,6 +44,8 @@ struct UbloxStageCounters {
   std::uint64_t read_errors{0};
   std::uint64_t ring_full{0};
   std::uint64_t device_errors{0};  // no device or recording: the stage publishes nothing
+  std::uint64_t bytes{0};          // read from the receiver
+  std::uint64_t silence_warnings{0};  // "no fix for a few seconds" warnings logged
 };
 
 class UbloxStage final : public Stage {
@@ -60,6 +63,7 @@ class UbloxStage final : public Stage {
 
  private:
   void publish(TimeNs now, std::uint8_t fix_type, double lat, double lon, double h, double hacc, double vacc) noexcept;
+  void warn_silence(TimeNs now) noexcept;
   std::unique_ptr<ByteSource> source_;
   std::unique_ptr<LocalEnu> enu_;
   StreamParser parser_;
@@ -69,6 +73,12 @@ class UbloxStage final : public Stage {
   bool seen_pvt_{false};
   GpsMsg last_{};
   UbloxStageCounters c_;
+  UbloxStageCounters at_last_fix_;
+  StreamCounters stream_at_last_fix_;
+  DeviceCounters own_device_;
+  DeviceCounters* device_{&own_device_};
+  DeviceSilence silence_;
+  std::string device_name_;  // for the warning (init-time string)
 };
 
 }  // namespace ag::ublox
