@@ -281,8 +281,8 @@ Result<HilResult> run_hil(const HilOptions& opt) {
   const GpsConfig gps_cfg;
   const VoConfig vo_cfg;
   const QuadrotorConfig quad_cfg;
-  // The Ouster metadata every ground robot's driver reads: the OS-1-64 of the fixture, in the
-  // RNG19_RFL8_SIG16_NIR16 profile (8-bit reflectivity: the class id) at the chosen lidar mode.
+  // The Ouster metadata every ground robot's driver reads: the OS-1-64 of the fixture, in the chosen
+  // packet profile (every profile has at least 8-bit reflectivity: the class id) at the chosen lidar mode.
   json meta;
   {
     std::ifstream mf_in(OusterBeamModel::default_metadata_path());
@@ -296,8 +296,11 @@ Result<HilResult> run_hil(const HilOptions& opt) {
   if (opt.lidar_columns != 512 && opt.lidar_columns != 1024 && opt.lidar_columns != 2048)
     return Error::make(ErrorCode::kInvalidArgument, "--lidar-columns must be 512, 1024 or 2048");
   meta["lidar_mode"] = std::to_string(opt.lidar_columns) + "x10";
-  meta["udp_profile_lidar"] = "RNG19_RFL8_SIG16_NIR16";
+  if (auto p = ouster::parse_udp_profile(opt.lidar_profile); !p)
+    return Error::make(ErrorCode::kInvalidArgument, "--lidar-profile: " + p.error().message);
+  meta["udp_profile_lidar"] = opt.lidar_profile;
   if (meta.contains("data_format")) {
+    meta["data_format"]["udp_profile_lidar"] = opt.lidar_profile;
     meta["data_format"]["columns_per_frame"] = opt.lidar_columns;
     meta["data_format"]["column_window"] = json::array({0, opt.lidar_columns - 1});
   }
@@ -330,7 +333,8 @@ Result<HilResult> run_hil(const HilOptions& opt) {
     if (!info) return info.error();
     u->info = info.value();
     u->fmt = std::make_unique<ouster::PacketFormat>(u->info);
-    u->frame = ouster::LidarFrame(u->info.mode.columns, static_cast<int>(u->info.beam_altitude_deg.size()));
+    u->frame = ouster::LidarFrame(u->info.mode.columns, static_cast<int>(u->info.beam_altitude_deg.size()),
+                                  ouster::has_second_return(u->info.profile));
     u->udp = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
     int sndbuf = 4 << 20;
     ::setsockopt(u->udp, SOL_SOCKET, SO_SNDBUF, &sndbuf, sizeof sndbuf);

@@ -6,6 +6,7 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <string>
 #include <vector>
 
 #include "airground/drivers/can/cannelloni.hpp"
@@ -82,6 +83,45 @@ int main() {
   std::printf("ouster  one 64x1024 frame (decode + assemble + XYZ): %.0f us = %.2f %% of the 100 ms period; copy of its 64 packets %.0f us (ratio %.1f)\n",
               t_frame * 1e6, t_frame / 0.1 * 100, t_copy * 1e6, t_frame / t_copy);
 
+  // Every profile on the same 64x1024 scene: the capture's frame encoded in each profile, then decoded,
+  // assembled and converted as above; the cost against LEGACY measured in this run.
+  ouster::LidarFrame scene;
+  {
+    ouster::FrameAssembler a(info.value());
+    for (const auto& p : lidar) {
+      (void)fmt.decode_lidar(p, *pkt);
+      if (const auto* f = a.add(*pkt)) scene = *f;
+    }
+  }
+  std::string profile_json;
+  double t_legacy = 0;
+  for (ouster::UdpProfile prof : ouster::kSupportedProfiles) {
+    ouster::SensorInfo si = info.value();
+    si.profile = prof;
+    const ouster::PacketFormat pf(si);
+    ouster::FrameAssembler pa(si);
+    std::vector<std::vector<std::uint8_t>> packets;
+    for (int c = 0; c < 1024; c += 16) {
+      packets.emplace_back(pf.lidar_packet_size());
+      (void)ouster::encode_lidar_packet(pf, scene, c, packets.back());
+    }
+    const bool legacy = prof == ouster::UdpProfile::kLegacy;
+    const double t = best_of(20, [&] {
+      ++fid;
+      for (auto& p : packets) {
+        if (legacy)
+          for (int c = 0; c < 16; ++c) std::memcpy(p.data() + static_cast<std::size_t>(c) * pf.column_size() + 10, &fid, 2);
+        else std::memcpy(p.data() + 2, &fid, 2);
+        (void)pf.decode_lidar(p, *pkt);
+        if (const auto* f = pa.add(*pkt)) lut.cartesian(*f, xyz.data());
+      }
+    });
+    if (legacy) t_legacy = t;
+    std::printf("ouster  64x1024 frame, %-28s %5zu B packets: %.0f us (%.2fx LEGACY)\n", ouster::to_string(prof), pf.lidar_packet_size(), t * 1e6,
+                t / t_legacy);
+    profile_json += ",\"ouster_frame_us_" + std::string(ouster::to_string(prof)) + "\":" + std::to_string(t * 1e6);
+  }
+
   // u-blox.
   std::ifstream in(data + "/gps/ublox-zed-f9p-rtk.log", std::ios::binary);
   std::vector<std::uint8_t> log((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -153,7 +193,7 @@ int main() {
     std::printf("v4l2    %s 1280x720 to BGR %.2f ms (%.1f %% of a 30 fps period); copy %.2f ms (ratio %.1f)\n", name, t_conv * 1e3,
                 t_conv / (1.0 / 30) * 100, t_vcopy * 1e3, t_conv / t_vcopy);
   }
-  ag::bench::append_result_line("{\"bench\":\"drivers\",\"ouster_frame_us\":" + std::to_string(t_frame * 1e6) +
+  ag::bench::append_result_line("{\"bench\":\"drivers\",\"ouster_frame_us\":" + std::to_string(t_frame * 1e6) + profile_json +
                                 ",\"ublox_mb_s\":" + std::to_string(static_cast<double>(stream.size()) / t_ubx * 1e-6) + "}");
   return 0;
 }

@@ -26,6 +26,7 @@ struct HilOptions {
   double max_duration_s{300};       // [s] wall clock; the mission is cut off (and reported) after this
   std::uint64_t seed{1};
   int lidar_columns{1024};          // 512, 1024 or 2048 (the sensor's lidar_mode, at 10 Hz)
+  std::string lidar_profile{"RNG19_RFL8_SIG16_NIR16"};  // the Ouster packet profile sent (any the driver supports)
   double lidar_mount_height_m{0.6};
   double camera_hz{5};
   bool progress{true};
