@@ -370,6 +370,8 @@ struct Team {
   TimeNs physics_period{0};                  // the world stage's release period
   std::unique_ptr<CameraPrefetch> prefetch;  // with more than one thread: the next frame, rendered ahead
   std::optional<Quadrotor> uav_ahead;        // scratch: the vehicle stepped ahead to the next exposure
+  CameraAutoExposure camera_ae;              // meters every frame, in order, before the next is prepared
+  double uav_yaw_rate{0};                    // [rad/s] over the last physics step: the camera's motion blur
   std::uint64_t frames_ahead{0};             // camera frames that were rendered ahead and used
   std::vector<TimeNs> job_cpu;           // scratch: one slot per sensor job of a release time (sized at start)
   std::vector<Delivery> deliveries;
@@ -750,6 +752,11 @@ void publish_image(Uav& a, TimeNs now) {
   (void)a.camera_out.push(m);
 }
 
+// A frame's exposure, motion (blur) and noise key: the same whether it is rendered ahead or when due.
+CameraShot camera_shot(const Team& t, const Quadrotor& q, double yaw_rate, std::uint64_t frame) {
+  return CameraShot{t.opt.seed, frame, t.camera_ae.next(), Eigen::Vector3d(q.vx(), q.vy(), q.vz()), yaw_rate};
+}
+
 // The world side of the lockstep tick: vehicles, odometry, GPS, VO, camera, LiDAR, radio, recording.
 class SimWorldStage final : public Stage {
  public:
@@ -889,7 +896,11 @@ void SimWorldStage::step(TimeNs now) noexcept {
   // Quadrotor: survey flight, GPS, visual odometry.
   if (t.uav) {
     Uav& a = *t.uav;
-    if (dt > 0) a.vehicle.step(dt);
+    if (dt > 0) {
+      const double yaw0 = a.vehicle.pose().yaw;
+      a.vehicle.step(dt);
+      t.uav_yaw_rate = wrap_angle(a.vehicle.pose().yaw - yaw0) / dt;
+    }
     const Pose3& p = a.vehicle.pose();
     if (t.opt.keep_uav_truth) a.truth.push_back(TruthSample{now, p});
     GpsFix fix;
@@ -939,14 +950,15 @@ void SimWorldStage::step(TimeNs now) noexcept {
     constexpr std::size_t kParts = kScanParts;
     const std::size_t jobs = static_cast<std::size_t>(bands) + (lidar_due ? kParts * t.ugvs.size() : 0);
     const Pose3 uav_pose = t.uav ? t.uav->vehicle.pose() : Pose3{};
-    bool ahead = false;  // this frame was started ahead for exactly this pose and instant
+    const CameraShot shot = camera_due ? camera_shot(t, t.uav->vehicle, t.uav_yaw_rate, t.uav->frames) : CameraShot{};
+    bool ahead = false;  // this frame was started ahead for exactly this pose, instant and shot
     if (camera_due && t.prefetch && t.prefetch->active()) {
-      ahead = t.prefetch->matches(uav_pose, now);
+      ahead = t.prefetch->matches(uav_pose, now) && t.uav->frame.shot == shot;
       if (!ahead) t.prefetch->finish();  // a stale guess (never seen): let it end, then render as usual
       else ++t.frames_ahead;
     }
     const TimeNs cpu0 = thread_cpu_now();
-    if (camera_due && !ahead) t.camera->prepare(uav_pose, t.uav->frame, now);
+    if (camera_due && !ahead) t.camera->prepare(uav_pose, t.uav->frame, now, shot);
     const TimeNs prepare_cpu = thread_cpu_now() - cpu0;
     std::function<void(std::size_t)> job = [&](std::size_t j) {
       if (static_cast<int>(j) < bands && ahead) {  // the prefetch counts its own CPU
@@ -978,6 +990,7 @@ void SimWorldStage::step(TimeNs now) noexcept {
       t.next_camera += t.camera_period;
       Uav& a = *t.uav;
       ++a.frames;
+      t.camera_ae.observe(a.frame);
       publish_image(a, now);
       if (a.frame_log) std::fprintf(a.frame_log.get(), "%.3f,%llu,%.3f,%.3f,%.3f,%.4f\n", to_seconds(now), static_cast<unsigned long long>(a.frames), uav_pose.x, uav_pose.y, uav_pose.z, uav_pose.yaw);
       const bool keep = t.opt.record == RecordLevel::kFull || (t.opt.record == RecordLevel::kLight && (a.frames - 1) % 20 == 0);
@@ -995,12 +1008,15 @@ void SimWorldStage::step(TimeNs now) noexcept {
         if (!t.uav_ahead) t.uav_ahead.emplace(a.vehicle);
         else *t.uav_ahead = a.vehicle;  // reuses the route's storage
         TimeNs due = now;
+        double yaw_rate = t.uav_yaw_rate;
         while (due < t.next_camera) {
           due += t.physics_period;
+          const double yaw0 = t.uav_ahead->pose().yaw;
           t.uav_ahead->step(to_seconds(t.physics_period));
+          yaw_rate = wrap_angle(t.uav_ahead->pose().yaw - yaw0) / to_seconds(t.physics_period);
         }
         const TimeNs c0 = thread_cpu_now();
-        t.camera->prepare(t.uav_ahead->pose(), a.frame, due);
+        t.camera->prepare(t.uav_ahead->pose(), a.frame, due, camera_shot(t, *t.uav_ahead, yaw_rate, a.frames));
         t.camera_cpu += thread_cpu_now() - c0;
         t.prefetch->start(t.uav_ahead->pose(), due);
       }
@@ -1223,6 +1239,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
 
   CameraModel cam_model;
   CameraShading shading;
+  CameraSensor cam_sensor;
   LidarNoise lidar_noise;
   if (!opt.config_dir.empty()) {
     const fs::path cam = fs::path(opt.config_dir) / "camera.yaml";
@@ -1233,6 +1250,9 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
       auto s = CameraShading::load_file(cam.string());
       if (!s) return s.error();
       shading = s.value();
+      auto se = CameraSensor::load_file(cam.string());
+      if (!se) return se.error();
+      cam_sensor = se.value();
     }
     const fs::path li = fs::path(opt.config_dir) / "lidar_noise.yaml";
     if (fs::exists(li)) {
@@ -1248,7 +1268,8 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   const World& w = *t.world;
   try {
     t.raycaster = std::make_shared<HeightfieldRaycaster>(w);
-    if (opt.uav) t.camera = std::make_unique<CameraRenderer>(w, cam_model, shading, t.raycaster);
+    if (opt.uav) t.camera = std::make_unique<CameraRenderer>(w, cam_model, shading, cam_sensor, t.raycaster);
+    t.camera_ae = CameraAutoExposure(cam_sensor);
     if (opt.ugvs > 0) t.lidar = std::make_unique<LidarSimulator>(w, beams.value(), lidar_noise, t.raycaster);
   } catch (const std::exception& e) {
     return Error::make(ErrorCode::kInvalidArgument, std::string("sensor set-up: ") + e.what());
