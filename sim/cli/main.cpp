@@ -38,6 +38,7 @@
 
 namespace fs = std::filesystem;
 int segment_cmd(int argc, char** argv);  // segment.cpp
+int lidar_info_cmd(int argc, char** argv);  // lidar_info.cpp
 using namespace ag;
 using namespace ag::sim;
 
@@ -64,6 +65,8 @@ constexpr const char* kUsage =
     "  airground-sim study --ugvs 1,2,3,5,10 --comm-range 50,150,1000 --seeds K --out DIR   (a grid of missions)\n"
     "  airground-sim segment --weights FILE --image IMAGE.png --out DIR [--threads N]   (ErfNet: logits.npy,\n"
     "                        classes.png; see segment --help)\n"
+    "  airground-sim lidar-info --pcap FILE --metadata FILE [--out DIR]   (an Ouster capture: sensor, profile,\n"
+    "                        frames, errors; the first frame as PNGs and PLY; see lidar-info --help)\n"
     "  airground-sim config --out DIR   (every simulator model's parameters with units and ranges, as\n"
     "                                    YAML files that 'run --config-dir DIR' reads back)\n\n"
     "--world W is a world directory or 'default' (the built-in 400 m world, seed 42).\n"
@@ -643,6 +646,8 @@ constexpr const char* kHilHelp =
     "  --bin-dir DIR          where airground-uav/-ugv/-base are (next to airground-sim)\n"
     "  --max-duration T       wall-clock seconds before the run is cut off (300)\n"
     "  --lidar-columns C      512, 1024 or 2048 (1024)\n"
+    "  --lidar-profile P      Ouster packet profile: LEGACY, RNG19_RFL8_SIG16_NIR16 (default),\n"
+    "                         RNG19_RFL8_SIG16_NIR16_DUAL or RNG15_RFL8_NIR8\n"
     "  --seed S               sensor noise (1)\n"
     "  --quiet                no progress lines\n";
 
@@ -654,6 +659,7 @@ int hil_cmd(const Args& a) {
   o.bin_dir = a.get("bin-dir");
   o.max_duration_s = number(a, "max-duration", o.max_duration_s);
   o.lidar_columns = static_cast<int>(number(a, "lidar-columns", o.lidar_columns));
+  o.lidar_profile = a.get("lidar-profile", o.lidar_profile);
   o.seed = static_cast<std::uint64_t>(number(a, "seed", static_cast<double>(o.seed)));
   o.progress = !a.has("quiet");
   if (o.mission_file.empty()) usage_error("hil needs --mission FILE.yaml");
@@ -983,6 +989,7 @@ int main(int argc, char** argv) {
   }();
   try {
     if (cmd == "segment") return segment_cmd(argc, argv);
+    if (cmd == "lidar-info") return lidar_info_cmd(argc, argv);
     if (cmd == "world") {
       if (argc < 3) usage_error("world needs generate, import or show");
       const std::string sub = argv[2];
