@@ -84,7 +84,9 @@ void round_trip(Rig& r, const LidarPacket& p) {
     for (int row = 0; row < f.height; ++row) {
       const Pixel& a = p.column[static_cast<std::size_t>(c)].pixels[static_cast<std::size_t>(row)];
       const Pixel& b = again.column[static_cast<std::size_t>(c)].pixels[static_cast<std::size_t>(row)];
-      if (a.range_mm != b.range_mm || a.reflectivity != b.reflectivity || a.flags != b.flags || a.range2_mm != b.range2_mm) std::abort();
+      if (a.range_mm != b.range_mm || a.reflectivity != b.reflectivity || a.flags != b.flags || a.nir != b.nir) std::abort();
+      // Second-return fields are the dual profile's only (the packet buffers are shared between rigs).
+      if (f.has_second_return() && (a.range2_mm != b.range2_mm || a.signal2 != b.signal2 || a.flags2 != b.flags2)) std::abort();
     }
 }
 }  // namespace
