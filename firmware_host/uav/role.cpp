@@ -7,6 +7,7 @@
 
 #include "airground/aerial_mapping/stages.hpp"
 #include "airground/drivers/camera/camera_stage.hpp"
+#include "airground/drivers/mavlink/stage.hpp"
 #include "airground/drivers/ublox/stage.hpp"
 #include "airground/mission/stages.hpp"
 #include "airground/platform/status_stage.hpp"
@@ -25,6 +26,9 @@ constexpr StageSpec kUavStages[] = {
     // frame-stream recording / FIFO with its visual odometry (the simulator's HIL mode).
     {"camera", &camera::CameraStage::make, 20.0, 15'000, 40, -1, camera::CameraStage::kParams,
      "nadir camera: V4L2 capture (or a frame-stream replay with its VO) on 'camera' and 'visual_odometry'"},
+    // The autopilot's attitude (the VO's gravity): ATTITUDE at 50 Hz over MAVLink, ~0.1 ms of parsing a step.
+    {"autopilot", &mavlink::AutopilotStage::make, 50.0, 2'000, 38, -1, mavlink::AutopilotStage::kParams,
+     "PX4 / ArduPilot attitude over MAVLink (TELEM2 serial, UDP onboard link or a .tlog), on 'attitude' in REP-103"},
     {"gps", &ublox::UbloxStage::make, 20.0, 2'000, 35, -1, ublox::UbloxStage::kParams,
      "u-blox GNSS: UBX NAV-PVT (NMEA GGA fallback) from the serial port or a recording, on 'gps' in the map frame"},
     {"pose_graph", &PoseGraphStage::make, 5.0, 150'000, 30, -1, PoseGraphStage::kParams,
