@@ -38,6 +38,8 @@
 
 namespace fs = std::filesystem;
 int segment_cmd(int argc, char** argv);  // segment.cpp
+int vo_cmd(int argc, char** argv);       // vo.cpp
+int eval_vo_cmd(int argc, char** argv);  // vo.cpp
 int lidar_info_cmd(int argc, char** argv);  // lidar_info.cpp
 using namespace ag;
 using namespace ag::sim;
@@ -56,6 +58,8 @@ constexpr const char* kUsage =
     "  airground-sim scan --world W --pose X Y YAW --out DIR [--columns 512|1024|2048] [--height 0.6]\n"
     "  airground-sim run --world W --ugvs N --seed S --duration T --out DIR [options]\n"
     "  airground-sim eval mapping --world W --seed S --out DIR [options]   (see eval mapping --help)\n"
+    "  airground-sim eval vo --world W --seed S --out DIR [options]   (the quadrotor's visual odometry; eval vo --help)\n"
+    "  airground-sim vo --images DIR --camera CAMERA.yaml --out DIR   (visual odometry over your own images)\n"
     "  airground-sim eval localization --world W --seed S --init-error 16 --map gt|online --out DIR [options]\n"
     "                                  (see eval localization --help)\n"
     "  airground-sim eval planning --world W --seed S --pairs 20 --out DIR   (see eval planning --help)\n"
@@ -1003,7 +1007,9 @@ int main(int argc, char** argv) {
       if (sub == "show") return world_show(a);
       usage_error("unknown world command '" + sub + "'");
     }
+    if (cmd == "vo") return vo_cmd(argc, argv);
     if (cmd == "eval") {
+      if (argc >= 3 && std::string(argv[2]) == "vo") return eval_vo_cmd(argc, argv);
       if (argc >= 3 && std::string(argv[2]) == "planning") {
         if (help) {
           std::fputs(kEvalPlanningHelp, stdout);
@@ -1025,7 +1031,7 @@ int main(int argc, char** argv) {
           std::fputs(kEvalLocalizationHelp, stdout);
           return 0;
         }
-        usage_error("eval needs 'mapping', 'localization' or 'planning'");
+        usage_error("eval needs 'mapping', 'vo', 'localization' or 'planning'");
       }
       if (help) {
         std::fputs(kEvalMappingHelp, stdout);

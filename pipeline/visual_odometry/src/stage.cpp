@@ -1,0 +1,104 @@
+// The vo stage: camera frames and the autopilot's attitude in, VoMsg out.
+#include "airground/visual_odometry/stage.hpp"
+
+#include <cmath>
+
+#include "airground/aerial_mapping/stages.hpp"
+#include "airground/core/pose_math.hpp"
+#include "airground/platform/log.hpp"
+
+namespace ag::vo {
+
+Status VoStage::init(StageContext& ctx) {
+  const SectionView v = ctx.params();
+  VoParams p;
+  p.camera = mapping::load_camera_calibration(ctx.config);
+  p.max_features = static_cast<int>(v.integer("max_features"));
+  p.keyframe_parallax_px = v.real("keyframe_parallax_px");
+  p.window_keyframes = static_cast<int>(v.integer("window_keyframes"));
+  p.min_pose_inliers = static_cast<int>(v.integer("min_pose_inliers"));
+  p.max_reprojection_px = v.real("max_reprojection_px");
+  p.gravity_sigma_rad = v.real("gravity_sigma_rad");
+  max_gap_ = static_cast<TimeNs>(v.real("attitude_max_gap_s") * 1e9);
+  max_wait_ = static_cast<TimeNs>(v.real("attitude_max_wait_s") * 1e9);
+  frames_per_step_ = static_cast<int>(v.integer("frames_per_step"));
+  vo_ = std::make_unique<VisualOdometry>(p);
+  clock_ = &ctx.clock;
+  auto cam = ctx.channels.ring_reader<CameraImageMsg, kCameraRing>("camera");
+  if (!cam) return cam.error();
+  camera_ = cam.value();
+  auto att = ctx.channels.ring_reader<AttitudeMsg, kAttitudeRing>("attitude");
+  if (!att) return att.error();
+  attitude_ = att.value();
+  auto out = ctx.channels.ring_writer<VoMsg, kVoRing>("visual_odometry");
+  if (!out) return out.error();
+  out_ = out.value();
+  return ok_status();
+}
+
+bool VoStage::attitude_at(TimeNs t, Eigen::Matrix3d& R) const noexcept {
+  if (history_size_ == 0) return false;
+  const std::size_t cap = history_.size();
+  const AttitudeMsg* before = nullptr;
+  const AttitudeMsg* after = nullptr;
+  for (std::size_t k = 0; k < history_size_; ++k) {  // newest first
+    const AttitudeMsg& m = history_[(history_head_ + cap - 1 - k) % cap];
+    if (m.stamp >= t) after = &m;
+    if (m.stamp <= t) {
+      before = &m;
+      break;
+    }
+  }
+  auto rot = [](const AttitudeMsg& m) { return rotation_matrix(m.roll, m.pitch, m.yaw); };
+  if (before && after && after->stamp - before->stamp <= 2 * max_gap_) {
+    const double a = after->stamp == before->stamp ? 0.0 : static_cast<double>(t - before->stamp) / static_cast<double>(after->stamp - before->stamp);
+    const Eigen::Quaterniond qa(rot(*before)), qb(rot(*after));
+    R = qa.slerp(a, qb).toRotationMatrix();
+    return true;
+  }
+  const AttitudeMsg* near = before ? before : after;
+  if (near && std::llabs(near->stamp - t) <= max_gap_) {
+    R = rot(*near);
+    return true;
+  }
+  return false;
+}
+
+void VoStage::step(TimeNs now) noexcept {
+  while (const AttitudeMsg* a = attitude_.front()) {
+    history_[history_head_] = *a;
+    history_head_ = (history_head_ + 1) % history_.size();
+    history_size_ = std::min(history_size_ + 1, history_.size());
+    ++c_.attitude_samples;
+    attitude_.pop();
+  }
+  const TimeNs newest_att = history_size_ ? history_[(history_head_ + history_.size() - 1) % history_.size()].stamp : -1;
+  for (int k = 0; k < frames_per_step_; ++k) {
+    const CameraImageMsg* img = camera_.front();
+    if (img == nullptr) break;
+    // The attitude after the frame is due shortly; wait for it a little (frames keep their order).
+    if (newest_att < img->stamp && history_size_ > 0 && now - img->stamp < max_wait_) break;
+    Eigen::Matrix3d R;
+    const bool have = attitude_at(img->stamp, R);
+    ++(have ? c_.frames_with_attitude : c_.frames_without_attitude);
+    const VoFrame f = vo_->process(img->stamp, img->rgb.data(), have ? std::optional<Eigen::Matrix3d>(R) : std::nullopt);
+    ++c_.frames;
+    VoMsg m;
+    m.stamp = img->stamp;
+    m.segment = f.segment;
+    m.tracking = f.tracking;
+    if (f.tracking) {
+      ++c_.tracked;
+      m.pose = to_pose3(f.body_in_segment);
+    } else {
+      ++c_.lost;
+    }
+    c_.keyframes += f.keyframe ? 1 : 0;
+    c_.segments += f.new_segment ? 1 : 0;
+    m.published = clock_->now();
+    if (out_.push(m) != 0) ++c_.frames_dropped_busy;
+    camera_.pop();
+  }
+}
+
+}  // namespace ag::vo

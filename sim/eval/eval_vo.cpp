@@ -1,0 +1,290 @@
+// eval vo: fly the survey, render every frame, run the quadrotor's VO on it with the autopilot's attitude
+// (the simulator's error model), score it against the true trajectory and write metrics and plots.
+#include "airground/sim/eval_vo.hpp"
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <cstdio>
+#include <cstdlib>
+#include <optional>
+
+#include "airground/core/camera.hpp"
+#include "airground/core/pose_math.hpp"
+#include "airground/platform/clock.hpp"
+#include "airground/platform/time.hpp"
+#include "airground/sim/rng.hpp"
+#include "airground/sim/camera.hpp"
+#include "airground/sim/plot.hpp"
+#include "airground/sim/quadrotor.hpp"
+#include "airground/sim/runner.hpp"
+#include "airground/sim/survey.hpp"
+#include "airground/visual_odometry/visual_odometry.hpp"
+
+namespace ag::sim {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Sample {
+  double t{0};
+  bool tracking{false};
+  std::uint32_t segment{0};
+  Eigen::Isometry3d vo{Eigen::Isometry3d::Identity()};
+  Eigen::Isometry3d truth{Eigen::Isometry3d::Identity()};
+  double dist{0};  // true distance flown so far [m]
+};
+
+double quantile(std::vector<double> v, double q) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size() - 1) + 0.5))];
+}
+
+double angle_deg(const Eigen::Matrix3d& R) {
+  return Eigen::AngleAxisd(R).angle() * 180.0 / M_PI;
+}
+
+Result<vo::VoParams> vo_params(const EvalVoOptions& o, const PinholeCamera& cam) {
+  vo::VoParams p;
+  p.camera = cam;
+  for (const std::string& kv : o.set) {
+    const auto eq = kv.find('=');
+    if (eq == std::string::npos) return Error::make(ErrorCode::kInvalidArgument, "--set " + kv + ": expected key=value");
+    const std::string k = kv.substr(0, eq);
+    double v = 0;
+    try {
+      v = std::stod(kv.substr(eq + 1));
+    } catch (...) {
+      return Error::make(ErrorCode::kInvalidArgument, "--set " + kv + ": the value is not a number");
+    }
+    if (k == "max_features") p.max_features = static_cast<int>(v);
+    else if (k == "keyframe_parallax_px") p.keyframe_parallax_px = v;
+    else if (k == "window_keyframes") p.window_keyframes = static_cast<int>(v);
+    else if (k == "min_pose_inliers") p.min_pose_inliers = static_cast<int>(v);
+    else if (k == "max_reprojection_px") p.max_reprojection_px = v;
+    else if (k == "gravity_sigma_rad") p.gravity_sigma_rad = v;
+    else return Error::make(ErrorCode::kInvalidArgument, "--set " + kv + ": unknown vo parameter '" + k + "'");
+  }
+  return p;
+}
+
+}  // namespace
+
+Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress) {
+  auto world = resolve_world(o.world);
+  if (!world) return world.error();
+  const World& w = *world.value();
+  CameraModel model = CameraModel{}.scaled(0.5);
+  CameraShading shading;
+  if (!o.camera_config.empty()) {
+    auto m = CameraModel::load_file(o.camera_config);
+    if (!m) return m.error();
+    model = m.value().width == 640 ? m.value() : m.value().scaled(640.0 / m.value().width);
+    auto s = CameraShading::load_file(o.camera_config);
+    if (!s) return s.error();
+    shading = s.value();
+  }
+  PinholeCamera cam;
+  cam.width = model.width;
+  cam.height = model.height;
+  cam.fx = model.fx;
+  cam.fy = model.fy;
+  cam.cx = model.cx;
+  cam.cy = model.cy;
+  cam.k1 = model.k1;
+  cam.k2 = model.k2;
+  cam.p1 = model.p1;
+  cam.p2 = model.p2;
+  cam.k3 = model.k3;
+  auto params = vo_params(o, cam);
+  if (!params) return params.error();
+
+  const GridGeometry& g = w.grid();
+  const double margin = 20.0;
+  const double hfov = 2.0 * std::atan(0.5 * model.width / model.fx);
+  SurveyOptions so;
+  so.speed_mps = o.speed_mps;
+  auto route = survey_lawnmower(g.origin_x + margin, g.origin_y - g.size_y() + margin, g.origin_x + g.size_x() - margin,
+                                g.origin_y - margin, o.altitude_m, o.overlap, hfov, so);
+  if (!route) return route.error();
+  std::vector<Waypoint> wps = std::move(route).value();
+  QuadrotorConfig qc;
+  const Pose3 start{wps.front().x, wps.front().y, wps.front().z, 0, 0, 0};
+  Quadrotor quad(qc, start);
+  const double est = estimate_route_time_s(qc, start, wps);
+  quad.set_waypoints(wps);
+
+  CameraRenderer renderer(w, model, shading);
+  // TODO(attitude model): replaced by the runner's autopilot attitude model.
+  Rng att_rng(o.seed ^ 0x617474ULL);
+  const double att_bias_r = att_rng.gaussian() * 0.15 * M_PI / 180, att_bias_p = att_rng.gaussian() * 0.15 * M_PI / 180;
+  vo::VisualOdometry odo(params.value());
+  CameraFrame frame;
+  std::vector<Sample> samples;
+  std::vector<double> vo_ms;
+  double render_s = 0, dist = 0;
+  const double dt = 0.02, frame_dt = 1.0 / o.camera_hz;
+  double t = 0, next_frame = 0;
+  Pose3 last = quad.pose();
+  const double t_end = std::min(o.max_duration_s, est * 1.05 + 10.0);
+  std::optional<Eigen::Matrix3d> att_R;
+  VoMetrics m;
+  int last_pct = -1;
+  while (t < t_end && !quad.finished()) {
+    quad.step(dt);
+    t += dt;
+    const Pose3& p = quad.pose();
+    dist += std::hypot(std::hypot(p.x - last.x, p.y - last.y), p.z - last.z);
+    last = p;
+    const TimeNs stamp = static_cast<TimeNs>(std::llround(t * 1e9));
+    att_R = rotation_matrix(p.roll + att_bias_r + att_rng.gaussian() * 0.05 * M_PI / 180, p.pitch + att_bias_p + att_rng.gaussian() * 0.05 * M_PI / 180,
+                            p.yaw + 0.01 * att_rng.gaussian());
+    if (t + 1e-9 < next_frame) continue;
+    next_frame += frame_dt;
+    const TimeNs r0 = thread_cpu_now();
+    renderer.render(p, frame, stamp);
+    render_s += to_seconds(thread_cpu_now() - r0);
+    const TimeNs v0 = thread_cpu_now();
+    const vo::VoFrame f = odo.process(stamp, frame.rgb.ptr<std::uint8_t>(0), o.attitude ? att_R : std::nullopt);
+    vo_ms.push_back(to_seconds(thread_cpu_now() - v0) * 1e3);
+    if (std::getenv("AG_VO_DEBUG"))
+      std::fprintf(stderr, "t %.1f trk %d seg %u kf %d tracked %d inl %d pos %.1f %.1f %.1f vo %.2f %.2f %.2f\n", t, f.tracking, f.segment, f.keyframe, f.tracked,
+                   f.inliers, p.x, p.y, p.z, f.body_in_segment.translation().x(), f.body_in_segment.translation().y(), f.body_in_segment.translation().z());
+    Sample s;
+    s.t = t;
+    s.tracking = f.tracking;
+    s.segment = f.segment;
+    s.vo = f.body_in_segment;
+    s.truth = to_isometry(p);
+    s.dist = dist;
+    samples.push_back(s);
+    const int pct = static_cast<int>(100.0 * t / t_end);
+    if (progress && pct != last_pct) {
+      last_pct = pct;
+      progress(t / t_end);
+    }
+  }
+  m.frames = samples.size();
+  m.distance_m = dist;
+  m.duration_s = t;
+  m.segments = odo.stats().segments;
+  m.keyframes = odo.stats().keyframes;
+  for (const Sample& s : samples) m.tracked_frames += s.tracking ? 1U : 0U;
+  m.tracked_fraction = m.frames ? static_cast<double>(m.tracked_frames) / static_cast<double>(m.frames) : 0.0;
+  m.ms_per_frame_p50 = quantile(vo_ms, 0.5);
+  m.ms_per_frame_p99 = quantile(vo_ms, 0.99);
+  m.render_ms_per_frame = m.frames ? render_s * 1e3 / static_cast<double>(m.frames) : 0.0;
+
+  // Relative errors over consecutive pairs about pair_distance_m apart (true distance), same segment.
+  std::vector<double> rot, dir, tilt, pair_t, pair_rot, pair_dir;
+  struct ScalePoint {
+    double d, log_s;
+  };
+  std::vector<std::vector<ScalePoint>> scale_by_segment(m.segments + 1);
+  for (std::size_t i = 0; i < samples.size();) {
+    if (!samples[i].tracking) {
+      ++i;
+      continue;
+    }
+    std::size_t j = i + 1;
+    while (j < samples.size() && samples[j].tracking && samples[j].segment == samples[i].segment &&
+           samples[j].dist - samples[i].dist < o.pair_distance_m)
+      ++j;
+    if (j >= samples.size() || !samples[j].tracking || samples[j].segment != samples[i].segment) {
+      i = j;
+      continue;
+    }
+    const Sample& a = samples[i];
+    const Sample& b = samples[j];
+    const Eigen::Matrix3d dv = a.vo.linear().transpose() * b.vo.linear();
+    const Eigen::Matrix3d dt_ = a.truth.linear().transpose() * b.truth.linear();
+    rot.push_back(angle_deg(dv.transpose() * dt_));
+    const Eigen::Vector3d tv = a.vo.linear().transpose() * (b.vo.translation() - a.vo.translation());
+    const Eigen::Vector3d tt = a.truth.linear().transpose() * (b.truth.translation() - a.truth.translation());
+    if (tv.norm() > 1e-9 && tt.norm() > 1e-9) {
+      dir.push_back(std::acos(std::clamp(tv.normalized().dot(tt.normalized()), -1.0, 1.0)) * 180.0 / M_PI);
+      const std::size_t seg = std::min<std::size_t>(a.segment, scale_by_segment.size() - 1);
+      scale_by_segment[seg].push_back(ScalePoint{a.dist, std::log(tv.norm() / tt.norm())});
+    }
+    pair_t.push_back(a.t);
+    pair_rot.push_back(rot.back());
+    pair_dir.push_back(dir.empty() ? 0.0 : dir.back());
+    i = j;
+  }
+  for (const Sample& s : samples)
+    if (s.tracking)
+      tilt.push_back(std::acos(std::clamp(s.vo.linear().col(2).dot(s.truth.linear().col(2)), -1.0, 1.0)) * 180.0 / M_PI);
+  m.rpe_pairs = rot.size();
+  m.rpe_rotation_deg_p50 = quantile(rot, 0.5);
+  m.rpe_rotation_deg_p95 = quantile(rot, 0.95);
+  m.rpe_translation_direction_deg_p50 = quantile(dir, 0.5);
+  m.rpe_translation_direction_deg_p95 = quantile(dir, 0.95);
+  m.tilt_error_deg_p95 = quantile(tilt, 0.95);
+  // Scale drift: slope of log(scale) against distance per segment, as % per 100 m, length-weighted.
+  double wsum = 0, dsum = 0;
+  for (const auto& pts : scale_by_segment) {
+    if (pts.size() < 10) continue;
+    double sd = 0, sl = 0;
+    for (const auto& q : pts) sd += q.d, sl += q.log_s;
+    const double md = sd / static_cast<double>(pts.size()), ml = sl / static_cast<double>(pts.size());
+    double num = 0, den = 0;
+    for (const auto& q : pts) num += (q.d - md) * (q.log_s - ml), den += (q.d - md) * (q.d - md);
+    if (den <= 0) continue;
+    const double len = pts.back().d - pts.front().d;
+    dsum += len * std::fabs(std::expm1(100.0 * num / den)) * 100.0;
+    wsum += len;
+  }
+  m.scale_drift_percent_per_100m = wsum > 0 ? dsum / wsum : 0.0;
+
+  // Outputs.
+  std::error_code ec;
+  fs::create_directories(o.out_dir, ec);
+  if (ec) return Error::make(ErrorCode::kIo, "cannot create " + o.out_dir + ": " + ec.message());
+  {
+    std::ofstream j(fs::path(o.out_dir) / "metrics.json");
+    j << "{\n  \"world\": \"" << o.world << "\",\n  \"seed\": " << o.seed << ",\n  \"oracles\": [],\n  \"attitude\": "
+      << (o.attitude ? "true" : "false") << ",\n  \"frames\": " << m.frames << ",\n  \"tracked_frames\": " << m.tracked_frames
+      << ",\n  \"tracked_fraction\": " << m.tracked_fraction << ",\n  \"segments\": " << m.segments << ",\n  \"keyframes\": " << m.keyframes
+      << ",\n  \"rpe_pairs\": " << m.rpe_pairs << ",\n  \"rpe_rotation_deg_p50\": " << m.rpe_rotation_deg_p50
+      << ",\n  \"rpe_rotation_deg_p95\": " << m.rpe_rotation_deg_p95 << ",\n  \"rpe_translation_direction_deg_p50\": "
+      << m.rpe_translation_direction_deg_p50 << ",\n  \"rpe_translation_direction_deg_p95\": " << m.rpe_translation_direction_deg_p95
+      << ",\n  \"scale_drift_percent_per_100m\": " << m.scale_drift_percent_per_100m << ",\n  \"tilt_error_deg_p95\": " << m.tilt_error_deg_p95
+      << ",\n  \"ms_per_frame_p50\": " << m.ms_per_frame_p50 << ",\n  \"ms_per_frame_p99\": " << m.ms_per_frame_p99
+      << ",\n  \"render_ms_per_frame\": " << m.render_ms_per_frame << ",\n  \"distance_m\": " << m.distance_m
+      << ",\n  \"duration_s\": " << m.duration_s << "\n}\n";
+    if (!j) return Error::make(ErrorCode::kIo, "cannot write " + (fs::path(o.out_dir) / "metrics.json").string());
+  }
+  {
+    std::ofstream c(fs::path(o.out_dir) / "trajectory.csv");
+    c << "t_s,tracking,segment,vo_x,vo_y,vo_z,true_x,true_y,true_z\n";
+    for (const Sample& s : samples)
+      c << s.t << ',' << (s.tracking ? 1 : 0) << ',' << s.segment << ',' << s.vo.translation().x() << ',' << s.vo.translation().y() << ','
+        << s.vo.translation().z() << ',' << s.truth.translation().x() << ',' << s.truth.translation().y() << ',' << s.truth.translation().z() << '\n';
+  }
+  PlotOptions po;
+  po.title = "relative rotation error per " + std::to_string(o.pair_distance_m).substr(0, 3) + " m pair";
+  po.x_label = "time [s]";
+  po.y_label = "deg";
+  po.h_lines = {0.2};
+  cv::imwrite((fs::path(o.out_dir) / "rpe_rotation.png").string(), line_plot({PlotSeries{"rotation", pair_t, pair_rot, series_colour(0), true}}, po));
+  po.title = "translation direction error per pair";
+  po.h_lines = {2.0};
+  cv::imwrite((fs::path(o.out_dir) / "rpe_direction.png").string(), line_plot({PlotSeries{"direction", pair_t, pair_dir, series_colour(1), true}}, po));
+  std::ofstream md(fs::path(o.out_dir) / "report.md");
+  md << "# Visual odometry on the survey (world " << o.world << ", seed " << o.seed << ")\n\nOracles: none. "
+     << (o.attitude ? "Gravity from the autopilot's attitude (simulated PX4 EKF2 errors)." : "Vision only (no attitude).") << "\n\n"
+     << "| metric | value | goal |\n|---|---|---|\n| frames | " << m.frames << " | |\n| tracked fraction | " << m.tracked_fraction
+     << " | >= 0.98 |\n| segments | " << m.segments << " | |\n| RPE rotation p95 [deg] | " << m.rpe_rotation_deg_p95
+     << " | <= 0.2 |\n| RPE translation direction p95 [deg] | " << m.rpe_translation_direction_deg_p95 << " | <= 2 |\n| scale drift [%/100 m] | "
+     << m.scale_drift_percent_per_100m << " | |\n| tilt error p95 [deg] | " << m.tilt_error_deg_p95 << " | |\n| VO ms/frame p50 / p99 (thread CPU) | "
+     << m.ms_per_frame_p50 << " / " << m.ms_per_frame_p99 << " | <= 40 (p50) |\n\n![rotation](rpe_rotation.png)\n\n![direction](rpe_direction.png)\n";
+  return m;
+}
+
+}  // namespace ag::sim
