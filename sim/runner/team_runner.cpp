@@ -38,6 +38,7 @@
 #include "airground/sim/camera.hpp"
 #include "airground/sim/diff_drive.hpp"
 #include "airground/sim/generator.hpp"
+#include "airground/sim/attitude.hpp"
 #include "airground/sim/gps.hpp"
 #include "airground/sim/lidar.hpp"
 #include "airground/sim/model_params.hpp"
@@ -184,7 +185,7 @@ constexpr std::size_t kScanParts = 4;   // a LiDAR scan as this many column rang
 
 // The role stages that talk to devices; in lockstep the simulator writes their channels instead.
 bool is_simulated_driver(std::string_view stage) noexcept {
-  return stage == "base" || stage == "lidar" || stage == "gps" || stage == "camera";
+  return stage == "base" || stage == "lidar" || stage == "gps" || stage == "camera" || stage == "autopilot";
 }
 
 namespace fs = std::filesystem;
@@ -338,6 +339,9 @@ struct Uav {
   cv::Mat rgb_small{}, cls_small{};
   std::uint32_t image_seq{0};
   std::vector<TruthSample> truth{};
+  AttitudeSimulator attitude{};  // the autopilot's ATTITUDE (PX4 EKF2 error model, attitude.yaml)
+  RingWriter<AttitudeMsg, kAttitudeRing> attitude_out{};
+  std::uint64_t attitudes{0};
 };
 
 struct Team {
@@ -918,6 +922,20 @@ void SimWorldStage::step(TimeNs now) noexcept {
       (void)a.gps_out.push(m);  // a full ring is counted by the channel
       if (a.gps_log) std::fprintf(a.gps_log.get(), "%.3f,%d,%.9f,%.9f,%.3f,%.3f,%.3f,%.3f,%.2f\n", to_seconds(now), static_cast<int>(fix.fix_type), fix.lat_deg, fix.lon_deg, fix.height_m, fix.east_m, fix.north_m, fix.up_m, fix.h_accuracy_m);
     }
+    AttitudeSample as;
+    if (a.attitude.sample(now, p, as)) {
+      ++a.attitudes;
+      AttitudeMsg m;
+      m.stamp = as.stamp;
+      m.published = now;
+      m.roll = as.roll;
+      m.pitch = as.pitch;
+      m.yaw = as.yaw;
+      m.roll_rate = as.roll_rate;
+      m.pitch_rate = as.pitch_rate;
+      m.yaw_rate = as.yaw_rate;
+      (void)a.attitude_out.push(m);
+    }
     VoSample vs;
     if (a.vo.sample(now, p, vs)) {
       ++a.vo_samples;
@@ -1233,6 +1251,8 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   auto radio_cfg = model_config<RadioConfig>(opt.config_dir, "radio.yaml", "radio", [](N y, O o) { return load_radio_config(y, o); });
   auto dd_cfg = model_config<DiffDriveConfig>(opt.config_dir, "diff_drive.yaml", "diff_drive", [](N y, O o) { return load_diff_drive_config(y, o); });
   auto quad_cfg = model_config<QuadrotorConfig>(opt.config_dir, "quadrotor.yaml", "quadrotor", [](N y, O o) { return load_quadrotor_config(y, o); });
+  auto att_cfg = model_config<AttitudeConfig>(opt.config_dir, "attitude.yaml", "attitude", [](N y, O o) { return load_attitude_config(y, o); });
+  if (!att_cfg) return att_cfg.error();
   for (const Error* e : {gps_cfg ? nullptr : &gps_cfg.error(), vo_cfg ? nullptr : &vo_cfg.error(), od_cfg ? nullptr : &od_cfg.error(),
                          radio_cfg ? nullptr : &radio_cfg.error(), dd_cfg ? nullptr : &dd_cfg.error(), quad_cfg ? nullptr : &quad_cfg.error()})
     if (e != nullptr) return *e;
@@ -1374,6 +1394,10 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     u->camera_out = cam_w.value();
     u->vo_out = vo_w.value();
     u->gps_out = gps_w.value();
+    auto att_w = u->role->channels().ring_writer<AttitudeMsg, kAttitudeRing>("attitude");
+    if (!att_w) return att_w.error();
+    u->attitude_out = att_w.value();
+    u->attitude = AttitudeSimulator(att_cfg.value(), opt.seed ^ std::uint64_t{0x61747431});
     u->image = std::make_unique<CameraImageMsg>();
     if (opt.ugv_map == UgvMapSource::kOnline) {
       for (auto& slot : u->role->stages())
