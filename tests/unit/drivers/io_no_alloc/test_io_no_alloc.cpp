@@ -15,6 +15,9 @@
 #include "../../../common/counting_new.hpp"
 #include "airground/drivers/can/cannelloni.hpp"
 #include "airground/drivers/gpio/edge_events.hpp"
+#include "airground/drivers/mavlink/frame_parser.hpp"
+#include "airground/drivers/mavlink/frames.hpp"
+#include "airground/drivers/mavlink/link.hpp"
 #include "airground/drivers/ouster/frame.hpp"
 #include "airground/drivers/ouster/packet_source.hpp"
 #include "airground/drivers/ouster/xyz_lut.hpp"
@@ -219,6 +222,45 @@ TEST(DriversIoNoAllocation, V4l2DequeueAndEStopEdges) {
   EXPECT_EQ(frames, 50);
   EXPECT_EQ(cam.value()->counters().dropped, 49u);
   EXPECT_EQ(edges.edges(), 50u);
+}
+
+TEST(DriversIoNoAllocation, MavlinkTlogAndUdpParseDecodeConvert) {
+  auto tlog = mavlink::TlogReplay::open(std::string(AG_TEST_DATA_DIR) + "/mavlink/ardupilot-sitl-quadplane-40s.tlog");
+  ASSERT_TRUE(tlog.ok()) << tlog.error().message;
+  auto udp = mavlink::UdpLink::open("127.0.0.1", 0);
+  ASSERT_TRUE(udp.ok()) << udp.error().message;
+  const int tx = ::socket(AF_INET, SOCK_DGRAM, 0);
+  sockaddr_in to{};
+  to.sin_family = AF_INET;
+  to.sin_port = htons(static_cast<std::uint16_t>(udp.value()->port()));
+  to.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  mavlink::FrameParser parser;
+  std::vector<std::uint8_t> buf(4096);
+  double sum = 0;
+  int attitudes = 0;
+  {
+    AllocationWindow w;
+    for (TimeNs rec = 0;;) {
+      const long n = tlog.value()->read(buf, rec);
+      if (n < 0) break;
+      (void)parser.feed(std::span(buf.data(), static_cast<std::size_t>(n)));
+      parser.end_of_packet();
+      // The live client's path: the same record through a real socket.
+      ASSERT_EQ(::sendto(tx, buf.data(), static_cast<std::size_t>(n), 0, reinterpret_cast<sockaddr*>(&to), sizeof to), n);
+      mavlink::Frame f;
+      while (parser.next(f)) {
+        mavlink::Attitude a;
+        if (f.header.msgid != mavlink::kIdAttitude || !mavlink::decode(f.payload, a)) continue;
+        sum += mavlink::frd_ned_to_flu_enu({a.roll, a.pitch, a.yaw, a.rollspeed, a.pitchspeed, a.yawspeed}).yaw;
+        ++attitudes;
+      }
+      (void)udp.value()->read(buf, rec);
+    }
+    EXPECT_EQ(w.allocations(), 0u);
+  }
+  EXPECT_EQ(attitudes, 213);
+  EXPECT_EQ(sum, sum) << "not NaN";
+  ::close(tx);
 }
 
 }  // namespace
