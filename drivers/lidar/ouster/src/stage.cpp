@@ -37,8 +37,14 @@ Status OusterStage::init(StageContext& ctx) {
   auto info = read_metadata_file(v.text("metadata"));
   // A file that is not there or not JSON is an absent sensor; one that says what the decoder cannot
   // read (an unsupported profile, a bad mode) is a wrong configuration and stops the robot.
-  if (!info && info.error().code == ErrorCode::kConfig)
-    return Error::make(ErrorCode::kConfig, "config error: " + where + "metadata: " + info.error().message);
+  if (!info && info.error().code == ErrorCode::kConfig) {
+    // Also logged here in two lines: one log line holds 224 characters, the path and the list need more.
+    const std::string& m = info.error().message;
+    const auto cut = m.find(" (supported: ");
+    AG_LOG_ERROR("lidar", "%smetadata: %s", where.c_str(), m.substr(0, cut).c_str());
+    if (cut != std::string::npos) AG_LOG_ERROR("lidar", "supported packet profiles: %s", m.substr(cut + 13, m.size() - cut - 14).c_str());
+    return Error::make(ErrorCode::kConfig, "config error: " + where + "metadata: " + m);
+  }
   if (!info) return absent(where + "metadata: " + info.error().message);
   const SensorInfo& s = info.value();
   const auto lidar_port = static_cast<std::uint16_t>(v.integer("lidar_port") != 0 ? v.integer("lidar_port") : s.udp_port_lidar);
