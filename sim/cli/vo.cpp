@@ -52,6 +52,7 @@ constexpr const char* kEvalVoHelp =
     "  --overlap F         side overlap (0.3)              --camera-hz F  frame rate (5, the team runner's)\n"
     "  --max-duration T    stop after T simulated seconds (default: the whole survey)\n"
     "  --camera FILE       camera YAML (intrinsics, shading, sensor realism)\n"
+    "  --attitude FILE     the autopilot attitude error model (YAML, see airground-sim config)\n"
     "  --no-attitude       vision only: no autopilot attitude (gravity) prior\n"
     "  --set KEY=VALUE     a vo stage parameter (repeatable)\n"
     "  --quiet             no progress line\n";
@@ -213,7 +214,7 @@ int eval_vo_cmd(int argc, char** argv) {
       return 0;
     }
   const Options a = parse("eval vo", argc, argv, 3,
-                          {"world", "seed", "out", "altitude", "speed", "overlap", "camera-hz", "max-duration", "camera", "set"},
+                          {"world", "seed", "out", "altitude", "speed", "overlap", "camera-hz", "max-duration", "camera", "attitude", "set"},
                           {"no-attitude", "quiet"});
   ag::sim::EvalVoOptions o;
   o.world = a.get("world", o.world);
@@ -225,6 +226,7 @@ int eval_vo_cmd(int argc, char** argv) {
   o.camera_hz = number("eval vo", a, "camera-hz", o.camera_hz);
   o.max_duration_s = number("eval vo", a, "max-duration", o.max_duration_s);
   o.camera_config = a.get("camera");
+  o.attitude_config = a.get("attitude");
   o.attitude = !a.has("no-attitude");
   o.quiet = a.has("quiet");
   if (a.has("set")) o.set = a.opt.at("set");

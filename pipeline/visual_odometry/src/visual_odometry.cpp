@@ -30,6 +30,7 @@ VisualOdometry::VisualOdometry(const VoParams& p)
   tracks_.reserve(nf);
   prev_px_.resize(nf);
   next_px_.resize(nf);
+  rot_px_.resize(nf);
   new_corners_.reserve(nf);
   ok_.resize(nf);
   keep_.resize(nf);
@@ -171,12 +172,24 @@ VoFrame VisualOdometry::step(TimeNs stamp, const std::optional<Eigen::Matrix3d>&
     restart(g, R_wb ? yaw_removed(*R_wb) : Eigen::Matrix3d::Identity(), stamp);
     return none;
   }
-  // Optical flow from the previous frame, starting from its image motion.
+  // The camera's rotation since the previous frame (autopilot, else constant rate): corners are looked for
+  // where that rotation and the last frame's translational image motion put them (a quadrotor tilts
+  // several degrees in a frame, tens of pixels).
+  const Eigen::Matrix3d R_bc = nadir_body_from_camera();
+  Eigen::Matrix3d R_cc = Eigen::Matrix3d::Identity();
+  if (R_wb && prev_att)
+    R_cc = R_bc.transpose() * ((*prev_att).transpose() * (*R_wb)).transpose() * R_bc;
+  else if (state_ == VoState::kTracking && have_prev_pose_)
+    R_cc = pose_.R * prev_pose_.R.transpose();
   const ImagePyramid& prev = pyr_[cur_ ^ 1];
   const std::size_t n = tracks_.size();
   for (std::size_t i = 0; i < n; ++i) {
     prev_px_[i] = tracks_[i].px;
-    next_px_[i] = Pixel{tracks_[i].px.u + mean_flow_.u, tracks_[i].px.v + mean_flow_.v};
+    const Eigen::Vector2d x = normalised(tracks_[i].px);
+    const Eigen::Vector3d h = R_cc * Eigen::Vector3d(x.x(), x.y(), 1.0);
+    const Eigen::Vector2d q = h.z() > 1e-6 ? p_.camera.distort_to_pixel(h.x() / h.z(), h.y() / h.z()) : Eigen::Vector2d(x.x(), x.y());
+    rot_px_[i] = Pixel{static_cast<float>(q.x()), static_cast<float>(q.y())};
+    next_px_[i] = Pixel{rot_px_[i].u + mean_flow_.u, rot_px_[i].v + mean_flow_.v};
   }
   flow_.track(prev, pyr_[cur_], std::span<const Pixel>(prev_px_.data(), n), std::span<Pixel>(next_px_.data(), n),
               std::span<std::uint8_t>(ok_.data(), n));
@@ -185,16 +198,16 @@ VoFrame VisualOdometry::step(TimeNs stamp, const std::optional<Eigen::Matrix3d>&
     keep_[i] = ok_[i];
     if (!ok_[i]) continue;
     tracks_[i].px = next_px_[i];
-    motion_.push_back(next_px_[i].u - prev_px_[i].u);
+    motion_.push_back(next_px_[i].u - rot_px_[i].u);
   }
-  // Median flow, per axis, as the next frame's guess.
+  // Median image motion beyond the rotation, per axis, as the next frame's guess.
   if (!motion_.empty()) {
     auto mid = motion_.begin() + static_cast<std::ptrdiff_t>(motion_.size() / 2);
     std::nth_element(motion_.begin(), mid, motion_.end());
     mean_flow_.u = *mid;
     motion_.clear();
     for (std::size_t i = 0; i < n; ++i)
-      if (ok_[i]) motion_.push_back(next_px_[i].v - prev_px_[i].v);
+      if (ok_[i]) motion_.push_back(next_px_[i].v - rot_px_[i].v);
     mid = motion_.begin() + static_cast<std::ptrdiff_t>(motion_.size() / 2);
     std::nth_element(motion_.begin(), mid, motion_.end());
     mean_flow_.v = *mid;
@@ -226,7 +239,6 @@ VoFrame VisualOdometry::step(TimeNs stamp, const std::optional<Eigen::Matrix3d>&
   // Predict: rotation from the autopilot's body rotation since the last frame (or constant), position
   // at constant velocity.
   CameraPose pred = pose_;
-  const Eigen::Matrix3d R_bc = nadir_body_from_camera();
   if (R_wb && prev_att) {
     const Eigen::Matrix3d R_wb_prev = pose_.R.transpose() * R_bc.transpose();
     const Eigen::Matrix3d R_wb_pred = R_wb_prev * (prev_att->transpose() * (*R_wb));
@@ -334,7 +346,9 @@ bool VisualOdometry::track_pose(const GravityPrior& g, CameraPose& pose, int& in
   pp.gravity_sigma_rad = p_.gravity_sigma_rad;
   inliers = solve_pose(std::span<const Eigen::Vector3d>(pnp_X_.data(), n), std::span<const Eigen::Vector2d>(pnp_x_.data(), n),
                        g, rp, pp, rng_, pose, std::span<std::uint8_t>(ok_.data(), n));
-  if (inliers < p_.min_pose_inliers) return false;
+  if (inliers < p_.min_pose_inliers) {
+    return false;
+  }
   // Tracks whose map point disagrees have drifted (or the point is wrong): drop both.
   for (std::size_t i = 0; i < tracks_.size(); ++i) keep_[i] = 1;
   for (std::size_t k = 0; k < n; ++k)

@@ -135,7 +135,7 @@ class VisualOdometry {
   std::uint64_t next_kf_serial_{1};
 
   std::vector<Track> tracks_;
-  std::vector<Pixel> prev_px_, next_px_, new_corners_;
+  std::vector<Pixel> prev_px_, next_px_, rot_px_, new_corners_;
   std::vector<std::uint8_t> ok_, keep_;
   std::vector<float> motion_;
   Eigen::Matrix3d kf0_attitude_{Eigen::Matrix3d::Identity()};  // autopilot R_wb at the segment's first keyframe
