@@ -12,6 +12,7 @@
 #include "airground/mission/stages.hpp"
 #include "airground/platform/status_stage.hpp"
 #include "airground/segmentation/stage.hpp"
+#include "airground/visual_odometry/stage.hpp"
 
 namespace ag {
 
@@ -31,6 +32,10 @@ constexpr StageSpec kUavStages[] = {
      "PX4 / ArduPilot attitude over MAVLink (TELEM2 serial, UDP onboard link or a .tlog), on 'attitude' in REP-103"},
     {"gps", &ublox::UbloxStage::make, 20.0, 2'000, 35, -1, ublox::UbloxStage::kParams,
      "u-blox GNSS: UBX NAV-PVT (NMEA GGA fallback) from the serial port or a recording, on 'gps' in the map frame"},
+    // Monocular keyframe VO on every frame with the autopilot's attitude as gravity: ~5 ms a frame
+    // (eval vo, one core here), bundle adjustment on keyframes; its own thread below the drivers.
+    {"vo", &vo::VoStage::make, 10.0, 60'000, 33, -1, vo::VoStage::kParams,
+     "visual odometry: camera frames + autopilot attitude -> 'visual_odometry' (segment frame, unknown scale)"},
     {"pose_graph", &PoseGraphStage::make, 5.0, 150'000, 30, -1, PoseGraphStage::kParams,
      "odometry + GPS pose graph (Ceres), keyframes every 2 m, keyframe poses after each solve"},
     {"segmentation", &seg::SegmentationStage::make, 2.5, 300'000, 24, -1, seg::SegmentationStage::kParams,

@@ -97,6 +97,8 @@ constexpr const char* kRunHelp =
     "  --init-yaw-error D       ... and D degrees (30)\n"
     "  --wait-map-radius M      --ugv-map online: a robot starts driving once the map knows half the cells\n"
     "                           within M metres of it (30; 0 = at once)\n"
+    "  --oracle vo              ablation: the simulator's VO model (visual_odometry.yaml) feeds the pose graph\n"
+    "                           instead of the quadrotor's own vo stage on the rendered frames (the default)\n"
     "  --config-dir DIR         model parameters: gps.yaml, visual_odometry.yaml, wheel_odometry.yaml,\n"
     "                           radio.yaml, diff_drive.yaml, quadrotor.yaml, camera.yaml, lidar_noise.yaml\n"
     "                           (airground-sim config --out DIR writes the defaults)\n"
@@ -117,8 +119,10 @@ constexpr const char* kEvalMappingHelp =
     "Options:\n"
     "  --altitude M            survey altitude above the start (40)   --speed V   survey speed (5 m/s)\n"
     "  --overlap F             side overlap of the survey lines (0.3)\n"
-    "  --vo-scale S            the odometry starts with exactly this scale (VO units per metre; default random 0.3-3)\n"
-    "  --tracking-loss-at T    force one odometry tracking loss T s into the flight\n"
+    "  --oracle vo             ablation: the simulator's VO model (true motion, scaled, noisy) instead of the\n"
+    "                          quadrotor's own vo stage on the rendered frames (the default); the report says so\n"
+    "  --vo-scale S            with --oracle vo: the odometry starts with exactly this scale (VO units per metre)\n"
+    "  --tracking-loss-at T    with --oracle vo: force one odometry tracking loss T s into the flight\n"
     "  --gps-outlier-at T      one GPS fix T s into the flight is off by --gps-outlier-m (50) metres\n"
     "  --no-random-faults      no random tracking losses or GPS dropouts\n"
     "  --max-duration T        stop after T simulated seconds even if the survey is not done (3600)\n"
@@ -223,6 +227,26 @@ Args parse(int argc, char** argv, int first) {
     }
   }
   return a;
+}
+
+// --oracle vo[,...]: ground truth handed to the robots by name, an ablation; unknown names are an error.
+std::vector<std::string> oracles_from(const Args& a) {
+  std::vector<std::string> out;
+  if (!a.has("oracle")) return out;
+  for (const std::string& v : a.opt.at("oracle")) {
+    std::size_t b = 0;
+    while (b <= v.size()) {
+      const std::size_t e = std::min(v.find(',', b), v.size());
+      const std::string name = v.substr(b, e - b);
+      if (name != "vo") {
+        std::fprintf(stderr, "airground-sim: --oracle: unknown oracle '%s' (known: vo) (see --help)\n", name.c_str());
+        std::exit(2);
+      }
+      if (std::find(out.begin(), out.end(), name) == out.end()) out.push_back(name);
+      b = e + 1;
+    }
+  }
+  return out;
 }
 
 double number(const Args& a, const std::string& k, double def) {
@@ -435,6 +459,7 @@ int write_model_configs(const Args& a) {
 
 int run(const Args& a) {
   RunOptions o;
+  o.oracles = oracles_from(a);
   o.world = a.get("world", o.world);
   o.ugvs = static_cast<int>(number(a, "ugvs", o.ugvs));
   o.seed = static_cast<std::uint64_t>(number(a, "seed", static_cast<double>(o.seed)));
@@ -526,6 +551,8 @@ constexpr const char* kMissionHelp =
     "  --kill-base T           power the base station off at T seconds\n"
     "  --set SECTION.KEY=VALUE any parameter of the ground robots' role config (repeatable)\n"
     "  --set-uav SECTION.KEY=VALUE  ... of the quadrotor's\n"
+    "  --oracle vo              ablation: the quadrotor's odometry from the simulator's VO model instead of its\n"
+    "                           own vo stage (field mode, the default); metrics.json and the report list it\n"
     "  --lidar-columns C       512|1024|2048 (1024)\n"
     "  --web-port P            the base station serves its live page on http://localhost:P/ during the run\n"
     "  --pace X                hold the run to X times real time (to watch it on the page)\n"
@@ -547,6 +574,7 @@ void progress_bar(double sim, double total, double rtf, bool tty, double& last_p
 
 int mission_cmd(const Args& a) {
   MissionOptions o;
+  o.oracles = oracles_from(a);
   o.world = a.get("world", o.world);
   o.out_dir = a.get("out", o.out_dir);
   o.mission_file = a.get("mission");
@@ -804,6 +832,7 @@ int study_cmd(const Args& a, const char* self) {
 
 int eval_mapping_cmd(const Args& a) {
   EvalMappingOptions o;
+  o.oracles = oracles_from(a);
   o.world = a.get("world", o.world);
   o.seed = static_cast<std::uint64_t>(number(a, "seed", static_cast<double>(o.seed)));
   o.out_dir = a.get("out", o.out_dir);
@@ -811,6 +840,8 @@ int eval_mapping_cmd(const Args& a) {
   o.speed_mps = number(a, "speed", o.speed_mps);
   o.overlap = number(a, "overlap", o.overlap);
   o.vo_scale = number(a, "vo-scale", 0);
+  if ((a.has("vo-scale") || a.has("tracking-loss-at")) && std::find(o.oracles.begin(), o.oracles.end(), "vo") == o.oracles.end())
+    usage_error("--vo-scale and --tracking-loss-at shape the simulator's VO model: they need --oracle vo");
   o.tracking_loss_at_s = number(a, "tracking-loss-at", -1);
   o.gps_outlier_at_s = number(a, "gps-outlier-at", -1);
   o.gps_outlier_m = number(a, "gps-outlier-m", o.gps_outlier_m);

@@ -150,6 +150,7 @@ Result<MappingMetrics> eval_mapping(const EvalMappingOptions& o, const ProgressF
   r.stop_when_survey_done = true;
   r.progress = !o.quiet;
   r.uav_config = o.set;
+  r.oracles = o.oracles;
 
   MappingMetrics m;
   mapping::MapRaster raster;
@@ -182,10 +183,19 @@ Result<MappingMetrics> eval_mapping(const EvalMappingOptions& o, const ProgressF
     m.gps_rejected = graph.stats().gps_rejected_gate;
     m.vo_segments = in.vo_segments;
     const mapping::NodeId last = graph.last();
-    if (last != mapping::kNoNode && graph.segment_initialised(graph.segment_of(last)))
-      m.scale_error = std::fabs(graph.scale(graph.segment_of(last)) * in.vo_scale - 1.0);
-    else
+    if (last == mapping::kNoNode || !graph.segment_initialised(graph.segment_of(last))) {
       m.scale_error = 1.0;
+    } else if (in.vo_scale > 0) {  // the oracle VO's true scale is known
+      m.scale_error = std::fabs(graph.scale(graph.segment_of(last)) * in.vo_scale - 1.0);
+    } else {  // the robot's own VO: keyframe spacing as the graph has it against the truth's
+      double est_d = 0, true_d = 0;
+      for (std::uint32_t k = 1; k < pg->keyframes(); ++k) {
+        est_d += (pg->keyframe_pose(k).translation() - pg->keyframe_pose(k - 1).translation()).norm();
+        const Pose3 a = truth_at(*in.uav_truth, pg->keyframe_stamp(k - 1)), b = truth_at(*in.uav_truth, pg->keyframe_stamp(k));
+        true_d += std::sqrt((b.x - a.x) * (b.x - a.x) + (b.y - a.y) * (b.y - a.y) + (b.z - a.z) * (b.z - a.z));
+      }
+      m.scale_error = true_d > 0 ? std::fabs(est_d / true_d - 1.0) : 1.0;
+    }
     double se = 0, ze = 0, tilt_e = 0, yaw_e = 0;
     std::uint64_t n = 0;
     for (std::uint32_t k = 0; k < pg->keyframes(); ++k) {
@@ -300,7 +310,9 @@ Result<MappingMetrics> eval_mapping(const EvalMappingOptions& o, const ProgressF
   if (error_w > 0 && !cv::imwrite((fs::path(o.out_dir) / "map_elevation_error.png").string(), error_image(error_map, error_w, error_h)))
     return Error::make(ErrorCode::kIo, "cannot write map_elevation_error.png in " + o.out_dir);
   std::ofstream j(fs::path(o.out_dir) / "metrics.json");
-  j << "{\n  \"map_class_accuracy\": " << m.map_class_accuracy << ",\n  \"map_coverage\": " << m.map_coverage
+  RunOptions oracle_list;
+  oracle_list.oracles = o.oracles;
+  j << "{\n  \"oracles\": " << oracle_list.oracles_json() << ",\n  \"map_class_accuracy\": " << m.map_class_accuracy << ",\n  \"map_coverage\": " << m.map_coverage
     << ",\n  \"elevation_rmse_ground_m\": " << m.elevation_rmse_ground_m << ",\n  \"elevation_rmse_m\": " << m.elevation_rmse_m << ",\n  \"elevation_coverage\": " << m.elevation_coverage
     << ",\n  \"elevation_bias_ground_m\": " << m.elevation_bias_ground_m << ",\n  \"elevation_p50_ground_m\": " << m.elevation_p50_ground_m
     << ",\n  \"elevation_p95_ground_m\": " << m.elevation_p95_ground_m << ",\n  \"elevation_p95_m\": " << m.elevation_p95_m
@@ -314,7 +326,7 @@ Result<MappingMetrics> eval_mapping(const EvalMappingOptions& o, const ProgressF
     << ",\n  \"resident_mb\": " << m.resident_mb << ",\n  \"resident_growth_mb\": " << m.resident_growth_mb
     << ",\n  \"map_memory_mb\": " << m.map_memory_mb << ",\n  \"sim_s\": " << m.sim_s << ",\n  \"wall_s\": " << m.wall_s << "\n}\n";
   std::ofstream md(fs::path(o.out_dir) / "report.md", std::ios::app);
-  md << "\n## Mapping evaluation\n\n| metric | value | goal |\n|---|---|---|\n"
+  md << "\n## Mapping evaluation\n\n" << oracle_list.oracles_line() << "\n\n| metric | value | goal |\n|---|---|---|\n"
      << "| map_class_accuracy | " << m.map_class_accuracy << " | >= 0.95 |\n| map_coverage | " << m.map_coverage << " | >= 0.90 |\n"
      << "| elevation_rmse_ground_m | " << m.elevation_rmse_ground_m << " | <= 0.5 |\n| elevation_rmse_m | " << m.elevation_rmse_m << " | <= 1.5 |\n"
      << "| georeg_error_m | " << m.georeg_error_m << " | <= 0.5 |\n| scale_error | " << m.scale_error << " | <= 0.01 |\n"

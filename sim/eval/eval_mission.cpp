@@ -179,6 +179,7 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
   r.ugv_survey_end = true;
   r.uav_config = {kv("regions.area_x0_m", ax0), kv("regions.area_y0_m", ay0), kv("regions.area_x1_m", ax1), kv("regions.area_y1_m", ay1)};
   r.uav_config.insert(r.uav_config.end(), o.uav_config.begin(), o.uav_config.end());
+  r.oracles = o.oracles;
   r.ugv_config = o.ugv_config;
   r.ugv_config_for = [&mf](int i, const Pose2& start) {
     char b[3][96];
@@ -571,7 +572,9 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
       tc << targets[ti].id << "," << targets[ti].x << "," << targets[ti].y << "," << targets[ti].cars << "," << (target_hit[ti] ? 1 : 0) << "\n";
   }
   std::ofstream j(out / "metrics.json");
-  j << "{\n  \"targets_total\": " << m.targets_total << ",\n  \"targets_visited\": " << m.targets_visited
+  RunOptions oracle_list;
+  oracle_list.oracles = o.oracles;
+  j << "{\n  \"oracles\": " << oracle_list.oracles_json() << ",\n  \"targets_total\": " << m.targets_total << ",\n  \"targets_visited\": " << m.targets_visited
     << ",\n  \"regions_found\": " << m.regions_found << ",\n  \"regions_visited\": " << m.regions_visited
     << ",\n  \"mission_time_s\": " << m.mission_time_s << ",\n  \"completed\": " << (m.completed ? "true" : "false")
     << ",\n  \"time_cap_s\": " << m.time_cap_s << ",\n  \"survey_estimate_s\": " << m.survey_estimate_s
@@ -602,7 +605,7 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
   j << "\n  ]\n}\n";
   std::ofstream md(out / "report.md");
   char line[1536];
-  md << "# airground mission report\n\nWorld `" << o.world << "`, seed " << o.seed << ": 1 quadrotor at " << o.uav_altitude_m << " m, " << n
+  md << "# airground mission report\n\n" << oracle_list.oracles_line() << "\n\nWorld `" << o.world << "`, seed " << o.seed << ": 1 quadrotor at " << o.uav_altitude_m << " m, " << n
      << " ground robots (initial guesses up to " << o.init_error_m << " m off), radio range "
      << (o.comm_range_m > 0 ? std::to_string(static_cast<int>(o.comm_range_m)) + " m" : std::string("default")) << ". "
      << (m.completed ? "Every robot finished and returned to its start." : "The mission hit the time cap before every robot finished.")

@@ -398,6 +398,9 @@ Result<HilResult> run_hil(const HilOptions& opt) {
              {"gps.source", "serial"}, {"gps.device", pty_path}, {"gps.datum_lat_deg", num(w.header.datum.lat_deg)},
              {"gps.datum_lon_deg", num(w.header.datum.lon_deg)}, {"gps.datum_height_m", num(w.header.datum.height_m)},
              {"camera.source", "replay"}, {"camera.replay", fifo.string()}, {"camera.stamps", "record"},
+             // HIL still hands the pose graph the simulator's odometry (an oracle, in the frame stream); the
+             // robot's own VO runs beside it on the same frames, on a channel nobody reads.
+             {"camera.vo_channel", "visual_odometry"}, {"vo.output_channel", "visual_odometry_own"},
              {"segmentation.labels", "gt"}, {"comms.send_map_tiles", "true"},
              {"regions.area_x0_m", num(ax0)}, {"regions.area_y0_m", num(ay0)}, {"regions.area_x1_m", num(ax1)}, {"regions.area_y1_m", num(ay1)},
              {"regions.merge_distance_m", num(mf.params.merge_distance_m)}, {"regions.min_region_cells", std::to_string(mf.params.min_region_cells)}})

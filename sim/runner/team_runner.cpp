@@ -333,7 +333,8 @@ struct Uav {
   std::unique_ptr<RoleInstance> role;
   // The quadrotor's drivers in simulation: what the camera, the VO and the GPS publish to its stages.
   RingWriter<CameraImageMsg, kCameraRing> camera_out{};
-  RingWriter<VoMsg, kVoRing> vo_out{};
+  RingWriter<VoMsg, kVoRing> vo_out{};  // the oracle VO (RunOptions::oracles "vo")
+  bool vo_oracle{false};
   RingWriter<GpsMsg, kGpsRing> gps_out{};
   std::unique_ptr<CameraImageMsg> image{};
   cv::Mat rgb_small{}, cls_small{};
@@ -573,8 +574,44 @@ double route_covered(const mapping::OrthoMap& m, const std::vector<Eigen::Vector
   return total == 0 ? 1.0 : static_cast<double>(known) / static_cast<double>(total);
 }
 
+// The simulator's reader on the quadrotor's own odometry (its vo stage's output, as the pose graph gets it),
+// appended to its table in field mode: counts segments and writes vo_uav.csv.
+class SimVoTapStage final : public Stage {
+ public:
+  static constexpr ParamSpec kParams[] = {ParamSpec::boolean("log", true, "count and log 'visual_odometry'")};
+  static std::unique_ptr<Stage> make() { return std::make_unique<SimVoTapStage>(); }
+  Status init(StageContext& ctx) override {
+    auto r = ctx.channels.ring_reader<VoMsg, kVoRing>("visual_odometry");
+    if (!r) return r.error();
+    in_ = r.value();
+    return ok_status();
+  }
+  void step(TimeNs) noexcept override;
+  Uav* uav{nullptr};
+
+ private:
+  RingReader<VoMsg, kVoRing> in_{};
+};
+
 // The simulator's reader on a ground robot's channels, appended to its table: the newest "localization"
 // for the sampling callback and, for tests, what arrives on the robot's input channels.
+void SimVoTapStage::step(TimeNs) noexcept {
+  while (const VoMsg* m = in_.front()) {
+    if (uav != nullptr) {
+      Uav& a = *uav;
+      ++a.vo_samples;
+      if (m->segment != a.last_segment || a.vo_samples == 1) {
+        a.last_segment = m->segment;
+        ++a.segments;
+      }
+      if (a.vo_log)
+        std::fprintf(a.vo_log.get(), "%.3f,%u,%d,%.4f,%.4f,%.4f,%.5f,%.5f,%.5f\n", to_seconds(m->stamp), m->segment, m->tracking ? 1 : 0, m->pose.x,
+                     m->pose.y, m->pose.z, m->pose.roll, m->pose.pitch, m->pose.yaw);
+    }
+    in_.pop();
+  }
+}
+
 class SimProbeStage final : public Stage {
  public:
   static constexpr ParamSpec kParams[] = {
@@ -936,21 +973,23 @@ void SimWorldStage::step(TimeNs now) noexcept {
       m.yaw_rate = as.yaw_rate;
       (void)a.attitude_out.push(m);
     }
-    VoSample vs;
-    if (a.vo.sample(now, p, vs)) {
-      ++a.vo_samples;
-      VoMsg m;
-      m.stamp = vs.stamp;
-      m.published = now;
-      m.segment = vs.segment;
-      m.tracking = vs.tracking;
-      m.pose = vs.pose;
-      (void)a.vo_out.push(m);
-      if (vs.segment != a.last_segment || a.vo_samples == 1) {
-        a.last_segment = vs.segment;
-        ++a.segments;
+    if (a.vo_oracle) {
+      VoSample vs;
+      if (a.vo.sample(now, p, vs)) {
+        ++a.vo_samples;
+        VoMsg m;
+        m.stamp = vs.stamp;
+        m.published = now;
+        m.segment = vs.segment;
+        m.tracking = vs.tracking;
+        m.pose = vs.pose;
+        (void)a.vo_out.push(m);
+        if (vs.segment != a.last_segment || a.vo_samples == 1) {
+          a.last_segment = vs.segment;
+          ++a.segments;
+        }
+        if (a.vo_log) std::fprintf(a.vo_log.get(), "%.3f,%u,%d,%.4f,%.4f,%.4f,%.5f,%.5f,%.5f\n", to_seconds(now), vs.segment, vs.tracking ? 1 : 0, vs.pose.x, vs.pose.y, vs.pose.z, vs.pose.roll, vs.pose.pitch, vs.pose.yaw);
       }
-      if (a.vo_log) std::fprintf(a.vo_log.get(), "%.3f,%u,%d,%.4f,%.4f,%.4f,%.5f,%.5f,%.5f\n", to_seconds(now), vs.segment, vs.tracking ? 1 : 0, vs.pose.x, vs.pose.y, vs.pose.z, vs.pose.roll, vs.pose.pitch, vs.pose.yaw);
     }
     if (log_now) {
       if (a.truth_log) std::fprintf(a.truth_log.get(), "%.3f,%.3f,%.3f,%.3f,%.4f,%.4f,%.4f\n", to_seconds(now), p.x, p.y, p.z, p.roll, p.pitch, p.yaw);
@@ -1379,20 +1418,29 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     uav_extra.insert(uav_extra.end(), opt.uav_config.begin(), opt.uav_config.end());
     // The simulator is the quadrotor's camera (and its VO) and its GNSS receiver: it writes their channels.
     RoleDescription uav_desc = uav_role();
+    u->vo_oracle = opt.oracle("vo");
     for (const StageSpec& st : uav_desc.stages)
-      if (!is_simulated_driver(st.name)) t.uav_stages.push_back(st);
+      if (!is_simulated_driver(st.name) && !(u->vo_oracle && st.name == "vo")) t.uav_stages.push_back(st);
+    if (!u->vo_oracle)
+      t.uav_stages.push_back(StageSpec{"sim_vo_tap", &SimVoTapStage::make, 10.0, 90'000, 1, -1, SimVoTapStage::kParams,
+                                       "simulator: counts and logs the quadrotor's own odometry"});
     uav_desc.stages = t.uav_stages;
     auto role = make_role(uav_desc, 0, "uav", cfgs, uav_extra, "quadrotor config override");
     if (!role) return role.error();
     u->role = std::move(role).value();
     auto cam_w = u->role->channels().ring_writer<CameraImageMsg, kCameraRing>("camera");
-    auto vo_w = u->role->channels().ring_writer<VoMsg, kVoRing>("visual_odometry");
     auto gps_w = u->role->channels().ring_writer<GpsMsg, kGpsRing>("gps");
     if (!cam_w) return cam_w.error();
-    if (!vo_w) return vo_w.error();
     if (!gps_w) return gps_w.error();
     u->camera_out = cam_w.value();
-    u->vo_out = vo_w.value();
+    if (u->vo_oracle) {
+      auto vo_w = u->role->channels().ring_writer<VoMsg, kVoRing>("visual_odometry");
+      if (!vo_w) return vo_w.error();
+      u->vo_out = vo_w.value();
+    } else {
+      for (auto& slot : u->role->stages())
+        if (auto* tap = dynamic_cast<SimVoTapStage*>(slot.stage.get())) tap->uav = u.get();
+    }
     u->gps_out = gps_w.value();
     auto att_w = u->role->channels().ring_writer<AttitudeMsg, kAttitudeRing>("attitude");
     if (!att_w) return att_w.error();
@@ -1735,9 +1783,9 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     RunInspection in{w};
     in.uav = t.uav ? t.uav->role.get() : nullptr;
     in.uav_truth = t.uav ? &t.uav->truth : nullptr;
-    in.vo_scale = t.uav ? t.uav->vo.scale() : 0.0;
+    in.vo_scale = t.uav && t.uav->vo_oracle ? t.uav->vo.scale() : 0.0;  // unknown for the robot's own VO
     in.vo_segments = s.vo_segments;
-    in.vo_tracking_losses = t.uav ? t.uav->vo.tracking_losses() : 0;
+    in.vo_tracking_losses = t.uav && t.uav->vo_oracle ? t.uav->vo.tracking_losses() : (t.uav && t.uav->segments > 0 ? t.uav->segments - 1 : 0);
     in.survey_x0 = g.origin_x + opt.survey_margin_m;
     in.survey_y0 = g.origin_y - g.size_y() + opt.survey_margin_m;
     in.survey_x1 = g.origin_x + g.size_x() - opt.survey_margin_m;

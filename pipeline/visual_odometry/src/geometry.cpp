@@ -227,12 +227,19 @@ int solve_pose(std::span<const Eigen::Vector3d> X, std::span<const Eigen::Vector
   if (best_count < 6) return 0;
   pose = best;
   for (std::size_t k = 0; k < n; ++k) inlier[k] = reprojection_error2(pose, X[k], x[k]) < thr2 ? 1 : 0;
-  refine_pose(X, x, inlier, g, pp, pose);
-  int count = 0;
-  for (std::size_t k = 0; k < n; ++k) {
-    inlier[k] = reprojection_error2(pose, X[k], x[k]) < thr2 ? 1 : 0;
-    count += inlier[k];
-  }
+  auto refine_and_recount = [&] {
+    refine_pose(X, x, inlier, g, pp, pose);
+    int c = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+      inlier[k] = reprojection_error2(pose, X[k], x[k]) < thr2 ? 1 : 0;
+      c += inlier[k];
+    }
+    return c;
+  };
+  // Under a held rotation that is off, the RANSAC's inliers are the points where the error is nearly a
+  // shift (the image centre); once the rotation is corrected the rest agree: refine again over all of them.
+  int count = refine_and_recount();
+  if (count > best_count) count = refine_and_recount();
   return count;
 }
 

@@ -30,7 +30,7 @@ Status VoStage::init(StageContext& ctx) {
   auto att = ctx.channels.ring_reader<AttitudeMsg, kAttitudeRing>("attitude");
   if (!att) return att.error();
   attitude_ = att.value();
-  auto out = ctx.channels.ring_writer<VoMsg, kVoRing>("visual_odometry");
+  auto out = ctx.channels.ring_writer<VoMsg, kVoRing>(v.text("output_channel"));
   if (!out) return out.error();
   out_ = out.value();
   return ok_status();

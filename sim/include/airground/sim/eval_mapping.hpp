@@ -27,6 +27,7 @@ struct EvalMappingOptions {
   bool random_faults{true};       // the models' own random tracking losses and GPS dropouts
   bool quiet{false};
   std::vector<std::string> set{};  // "section.key=value" on the quadrotor's role config (e.g. segmentation.labels=erfnet)
+  std::vector<std::string> oracles{};  // ground truth for the quadrotor by name (RunOptions::oracles): "vo"
 };
 
 struct MappingMetrics {

@@ -39,6 +39,7 @@ struct MissionOptions {
   RecordLevel record{RecordLevel::kLight};
   std::vector<RunOptions::Kill> kills{};   // ugv -1 = the base station
   std::vector<std::string> ugv_config{}, uav_config{};
+  std::vector<std::string> oracles{};  // ground truth for the robots by name (RunOptions::oracles), an ablation
   int web_port{0};                 // > 0: the base station serves its page on this port during the run
   double web_pace{0};              // > 0: hold the simulation to this many times real time (to watch it)
   std::function<void(double t_s)> during{};  // called at 5 Hz of simulated time while the mission runs (tests)

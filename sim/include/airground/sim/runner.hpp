@@ -8,6 +8,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "airground/core/geometry.hpp"
@@ -137,6 +138,27 @@ struct RunOptions {
   double init_yaw_error_deg{0};   // [deg] ... and turned by this much (random sign); sigmas given = these (at least 0.5 m / 2 deg)
   std::vector<std::string> ugv_config{};  // "section.key=value" set on every ground robot's role config
   std::vector<std::string> uav_config{};  // "section.key=value" set on the quadrotor's role config
+  // Ground truth handed to the robots, by name, for an ablation the user asks for; none by default.
+  // "vo": the quadrotor's odometry from the simulator's VO model (true motion, scaled, with noise and losses)
+  // instead of its own vo stage on the rendered frames.
+  std::vector<std::string> oracles{};
+  // The oracle list as JSON ("[]" or ["vo", ...]) and as the report's first line.
+  [[nodiscard]] std::string oracles_json() const {
+    std::string s = "[";
+    for (std::size_t i = 0; i < oracles.size(); ++i) s += (i ? ", \"" : "\"") + oracles[i] + "\"";
+    return s + "]";
+  }
+  [[nodiscard]] std::string oracles_line() const {
+    if (oracles.empty()) return "Field mode: no ground truth reached a robot (oracles: none).";
+    std::string s = "ABLATION: ground truth handed to the robots by name (oracles:";
+    for (const std::string& o : oracles) s += " " + o;
+    return s + "); these figures are not field-mode figures.";
+  }
+  [[nodiscard]] bool oracle(std::string_view name) const noexcept {
+    for (const std::string& o : oracles)
+      if (o == name) return true;
+    return false;
+  }
   // Per ground robot (0-based) with its true start pose: more "section.key=value" (its priority, its start).
   std::function<std::vector<std::string>(int ugv, const Pose2& start)> ugv_config_for{};
   std::vector<std::string> base_config{};  // "section.key=value" set on the base station's role config

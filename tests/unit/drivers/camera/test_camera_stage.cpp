@@ -180,6 +180,7 @@ struct Rig {
     rig->clock.set(start);
     static const std::vector<ParamSection> schema = role_schema(kRole);
     Config cfg = Config::defaults(schema);
+    EXPECT_TRUE(cfg.set("camera.vo_channel=visual_odometry").ok());  // the sink reads the recording's odometry there
     for (const std::string& s : sets) EXPECT_TRUE(cfg.set(s).ok()) << s;
     auto r = RoleInstance::create(kRole, cfg, rig->clock, "uav");
     if (!r.ok()) {

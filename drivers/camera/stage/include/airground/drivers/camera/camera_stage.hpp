@@ -33,7 +33,7 @@ inline constexpr ParamSpec kCameraStageParams[] = {
                     "replay: keep the recorded stamps (a HIL simulator on this machine's clock) or shift them to the arrival of the first record (a recording from another boot)"),
     ParamSpec::boolean("pace", false, "replay of a file: hand records out at their recorded intervals from the first, not as fast as the rings take them"),
     ParamSpec::text("camera_channel", "camera", "", "ring channel the images are published on"),
-    ParamSpec::text("vo_channel", "visual_odometry", "", "ring channel the replayed visual odometry is published on"),
+    ParamSpec::text("vo_channel", "visual_odometry_recorded", "", "ring channel a frame-stream recording's own odometry is published on (the robot's vo stage writes visual_odometry)"),
 };
 
 struct CameraStageCounters {
