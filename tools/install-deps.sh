@@ -33,6 +33,8 @@ fi
 
 # The browser test's npm package (playwright-core, pinned; it drives Debian's chromium).
 "$here/install-browser-test.sh" || echo "install-deps: the browser test's npm package is missing (the browser test will skip)" >&2
+# The official MCAP readers the recording tests read their files back with (@mcap/core, @mcap/support; pinned).
+"$here/install-mcap-reader.sh" || echo "install-deps: the MCAP readers are missing (the recording tests will fail: run tools/install-mcap-reader.sh)" >&2
 
 # The cross build: arm64 architecture for apt, then the arm64 -dev packages unpacked into a sysroot
 # folder (several -dev packages are not co-installable with their amd64 twins, so they are not installed).
