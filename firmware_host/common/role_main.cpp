@@ -15,6 +15,7 @@
 #include "airground/platform/role_instance.hpp"
 #include "airground/platform/service.hpp"
 #include "airground_version.hpp"
+#include "sensor_labels_check.hpp"
 
 namespace ag {
 
@@ -121,6 +122,11 @@ int run_role(const RoleDescription& role, int argc, char** argv) {
                 config_path.empty() ? " (built-in defaults)" : " from ", config_path.c_str());
     std::fputs(cfg.to_yaml().c_str(), stdout);
     return 0;
+  }
+  // Classes the robot's sensors cannot give (a V4L2 camera's, an Ouster's) stop it here, with the keys.
+  if (Status st = check_sensor_labels(cfg, config_path.empty() ? "built-in defaults" : config_path); !st) {
+    std::fprintf(stderr, "airground-%s: %s\n", rname.c_str(), st.error().message.c_str());
+    return 2;
   }
   if (check_config) {
     std::printf("%s: valid\n", config_path.empty() ? "built-in defaults" : config_path.c_str());

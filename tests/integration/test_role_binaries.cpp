@@ -87,6 +87,28 @@ INSTANTIATE_TEST_SUITE_P(
                       BadConfig{"list_value", "status:\n  log_every: [3, 4]\n", {"status.log_every", "single value"}}),
     [](const auto& test_case) { return std::string(test_case.param.name); });
 
+// Classes the robot's sensors cannot give stop it at start, naming the file and the keys (issue 27).
+TEST(RoleBinaryErrors, LabelsTheSensorsCannotGiveExit2NamingTheKeys) {
+  const auto uav = run({role_bin("uav"), "--config", source_dir() + "/firmware_host/uav/uav.yaml", "--set", "segmentation.labels=gt"});
+  EXPECT_EQ(uav.exit_code, 2) << uav.err;
+  EXPECT_NE(uav.err.find("uav.yaml"), std::string::npos) << uav.err;
+  EXPECT_NE(uav.err.find("segmentation.labels: gt"), std::string::npos) << uav.err;
+  EXPECT_NE(uav.err.find("camera.source: v4l2"), std::string::npos) << uav.err;
+  const auto mapper = run({role_bin("uav"), "--config", source_dir() + "/firmware_host/uav/uav.yaml", "--set", "ortho_map.keyframes_channel=keyframes",
+                           "--check-config"});
+  EXPECT_EQ(mapper.exit_code, 2) << mapper.err;
+  EXPECT_NE(mapper.err.find("ortho_map.keyframes_channel: keyframes"), std::string::npos) << mapper.err;
+  const auto ugv = run({role_bin("ugv"), "--config", source_dir() + "/firmware_host/ugv/ugv.yaml", "--set", "localization.labels=gt", "--check-config"});
+  EXPECT_EQ(ugv.exit_code, 2) << ugv.err;
+  EXPECT_NE(ugv.err.find("ugv.yaml"), std::string::npos) << ugv.err;
+  EXPECT_NE(ugv.err.find("localization.labels: gt"), std::string::npos) << ugv.err;
+  EXPECT_NE(ugv.err.find("lidar.classes: none"), std::string::npos) << ugv.err;
+  // The simulator's HIL mode: point classes in the reflectivity byte, so gt labels can work.
+  const auto hil = run({role_bin("ugv"), "--config", source_dir() + "/firmware_host/ugv/ugv.yaml", "--set", "localization.labels=gt", "--set",
+                        "lidar.classes=reflectivity", "--check-config"});
+  EXPECT_EQ(hil.exit_code, 0) << hil.err;
+}
+
 TEST(RoleBinaryErrors, MissingConfigFileAndBadOptionsExit2) {
   const auto missing = run({role_bin("uav"), "--config", "/nonexistent/uav.yaml"});
   EXPECT_EQ(missing.exit_code, 2);
@@ -143,7 +165,8 @@ int count_with(const std::vector<std::string>& msgs, const std::string& needle) 
 
 TEST(RoleBinaryService, NotifiesReadyFeedsWatchdogAndStopsOnSigterm) {
   NotifySocket sock;
-  Process p({role_bin("ugv"), "--set", "scheduler.realtime=false", "--set", "scheduler.lock_memory=false"},
+  // Built-in defaults label scans "gt", which an Ouster cannot give (refused at start): the field's labeller.
+  Process p({role_bin("ugv"), "--set", "scheduler.realtime=false", "--set", "scheduler.lock_memory=false", "--set", "localization.labels=geometric"},
             {"NOTIFY_SOCKET=" + sock.path(), "WATCHDOG_USEC=200000"});
   auto msgs = sock.collect(10.0, "READY=1");
   ASSERT_EQ(count_with(msgs, "READY=1"), 1) << "READY=1 once the stages run";
@@ -164,7 +187,9 @@ TEST(RoleBinaryService, SigintAlsoStopsCleanlyAndRunForEnds) {
   p.send_signal(SIGINT);
   const auto r = p.wait(5.0);
   EXPECT_EQ(r.exit_code, 0) << r.err;
-  const auto timed = run({role_bin("uav"), "--run-for", "1.2", "--set", "scheduler.realtime=false"}, 10.0);
+  const auto timed = run({role_bin("uav"), "--run-for", "1.2", "--set", "scheduler.realtime=false", "--set", "segmentation.labels=erfnet", "--set",
+                          "segmentation.weights=" + source_dir() + "/config/erfnet/erfnet_c7.agw", "--set", "ortho_map.keyframes_channel=keyframes_labelled"},
+                         10.0);
   EXPECT_EQ(timed.exit_code, 0) << timed.err;
   EXPECT_NE(timed.err.find("final stage=status runs=2"), std::string::npos) << "released at 0 s and 1 s: " << timed.err;
 }
