@@ -1,4 +1,5 @@
 // The lockstep team runner: robots' role tables and the simulated world on one SimClock.
+#include "team_recording.hpp"
 #include "airground/sim/runner.hpp"
 
 #include <yaml-cpp/yaml.h>
@@ -312,6 +313,8 @@ Pose2 Ugv::truth_at(TimeNs t) const noexcept {
   for (std::size_t k = 1; k < n; ++k) {
     const auto& a = at(k);
     if (a.first > t) continue;
+  Pose2 loc_pose{};  // its newest tracking estimate (for recording.mcap)
+  bool loc_has_pose{false};
     const auto& b = at(k - 1);
     const double w = static_cast<double>(t - a.first) / static_cast<double>(std::max<TimeNs>(1, b.first - a.first));
     return Pose2{a.second.x + w * (b.second.x - a.second.x), a.second.y + w * (b.second.y - a.second.y),
@@ -401,6 +404,7 @@ Pose3 lidar_pose(const Ugv& u, double mount) {
 void new_leg(Team& t, Ugv& u, TimeNs now) {
   std::vector<Eigen::Vector2d> path;
   u.on_route = false;
+  std::unique_ptr<TeamRecording> mcap;  // recording.mcap (unless --record none)
   for (int attempt = 0; attempt < 20; ++attempt) {
     const std::uint64_t key = t.opt.seed * std::uint64_t{1000003} + static_cast<std::uint64_t>(u.node) * std::uint64_t{10007} + u.leg++;
     const Eigen::Vector2d goal = t.router->pick_drivable(key);
@@ -706,6 +710,8 @@ class SimProbeStage final : public Stage {
       s.now = now;
       s.ugv = i;
       s.truth = ugv->vehicle.pose();
+          ugv->loc_pose = loc.pose;
+          ugv->loc_has_pose = true;
       s.odometry = ugv->odom_last;
       s.odometry_in_map = ugv->odometry_in_map(ugv->odom_last);
       s.initial_guess = ugv->init_pose.pose;
@@ -943,6 +949,7 @@ void SimWorldStage::step(TimeNs now) noexcept {
       t.uav_yaw_rate = wrap_angle(a.vehicle.pose().yaw - yaw0) / dt;
     }
     const Pose3& p = a.vehicle.pose();
+      if (t.mcap) t.mcap->ugv_pose(now, u.index, p, u.odometry_in_map(od.pose), u.loc_has_pose ? &u.loc_pose : nullptr);
     if (t.opt.keep_uav_truth) a.truth.push_back(TruthSample{now, p});
     GpsFix fix;
     if (a.gps.sample(now, p, fix)) {
@@ -970,6 +977,7 @@ void SimWorldStage::step(TimeNs now) noexcept {
       m.yaw = as.yaw;
       m.roll_rate = as.roll_rate;
       m.pitch_rate = as.pitch_rate;
+      if (t.mcap) t.mcap->uav_gps(now, fix.lat_deg, fix.lon_deg, fix.height_m, fix.h_accuracy_m);
       m.yaw_rate = as.yaw_rate;
       (void)a.attitude_out.push(m);
     }
@@ -1007,6 +1015,7 @@ void SimWorldStage::step(TimeNs now) noexcept {
     constexpr std::size_t kParts = kScanParts;
     const std::size_t jobs = static_cast<std::size_t>(bands) + (lidar_due ? kParts * t.ugvs.size() : 0);
     const Pose3 uav_pose = t.uav ? t.uav->vehicle.pose() : Pose3{};
+      if (t.mcap) t.mcap->uav_pose(now, p);
     const CameraShot shot = camera_due ? camera_shot(t, t.uav->vehicle, t.uav_yaw_rate, t.uav->frames) : CameraShot{};
     bool ahead = false;  // this frame was started ahead for exactly this pose, instant and shot
     if (camera_due && t.prefetch && t.prefetch->active()) {
@@ -1062,6 +1071,7 @@ void SimWorldStage::step(TimeNs now) noexcept {
         ++t.frame_pngs;
       }
       if (t.prefetch) {  // the next exposure: step a copy of the vehicle as this stage will step it
+      if (t.mcap) t.mcap->camera_frame(now, a.frames, a.frame.rgb);
         if (!t.uav_ahead) t.uav_ahead.emplace(a.vehicle);
         else *t.uav_ahead = a.vehicle;  // reuses the route's storage
         TimeNs due = now;
@@ -1118,6 +1128,7 @@ void SimWorldStage::step(TimeNs now) noexcept {
   // Radio: with gossip, what the comms stages sent reaches the receivers' inboxes; without, every robot
   // broadcasts a small status datagram and the runner counts what arrives where.
   if (t.net) t.net->pump(now);
+        if (t.mcap) t.mcap->ugv_scan(now, u.index, u.scans, u.scan_parts.data(), u.scan_parts.size());
   if (t.radio) {
     if (now >= t.next_heartbeat) {
       t.next_heartbeat += t.heartbeat_period;
@@ -1145,6 +1156,10 @@ cv::Mat trajectories_image(const Team& t) {
     return cv::Point(static_cast<int>(g.col_f(p.x()) * scale), static_cast<int>(g.row_f(p.y()) * scale));
   };
   const cv::Scalar colours[] = {{0, 200, 255}, {255, 0, 255}, {255, 255, 0}, {0, 128, 255}, {255, 128, 0}, {128, 255, 128}};
+  if (t.mcap) {
+    const LinkStats radio = t.air ? t.air->total() : LinkStats{};
+    t.mcap->tick(now, t.air ? &radio : nullptr);
+  }
   auto draw = [&](const std::vector<Eigen::Vector2d>& trail, const cv::Scalar& c, int thick) {
     for (std::size_t i = 1; i < trail.size(); ++i) cv::line(bgr, px(trail[i - 1]), px(trail[i]), c, thick, cv::LINE_AA);
     if (!trail.empty()) cv::circle(bgr, px(trail.back()), 4, c, cv::FILLED, cv::LINE_AA);
@@ -1703,6 +1718,20 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   s.sim_s = to_seconds(ended);
   s.uav_route_estimate_s = survey_time_s;
   s.duration_cap_s = duration_s;
+  if (opt.record != RecordLevel::kNone && opt.record_mcap) {
+    TeamRecordingOptions ro;
+    ro.scheduler_period_s = opt.record_scheduler_period_s;
+    ro.lidar_mount_height_m = opt.lidar_mount_height_m;
+    auto recording = TeamRecording::open((t.out / "recording.mcap").string(), *t.world, t.uav != nullptr, static_cast<int>(t.ugvs.size()), opt.seed, ro);
+    if (!recording) return recording.error();
+    t.mcap = std::move(recording).value();
+    std::vector<std::pair<std::string, RoleInstance*>> roles;
+    if (t.uav) roles.emplace_back("uav", t.uav->role.get());
+    for (auto& u : t.ugvs) roles.emplace_back(u->name, u->role.get());
+    roles.emplace_back("base", t.base.get());
+    const auto* om = t.uav ? find_stage<mapping::OrthoMapStage>(t.uav->role.get()) : nullptr;
+    t.mcap->watch(std::move(roles), om != nullptr ? &om->map() : nullptr);
+  }
   s.wall_s = wall_s;
   s.real_time_factor = wall_s > 0 ? s.sim_s / wall_s : 0;
   s.process_cpu_s = process_cpu_seconds() - process_cpu0;
@@ -1797,3 +1826,8 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
 }
 
 }  // namespace ag::sim
+  if (t.mcap) {
+    if (auto st = t.mcap->close(s.sim_s); !st) return st.error();
+    s.recording_messages = t.mcap->stats().messages;
+    s.recording_bytes = t.mcap->stats().bytes;
+  }

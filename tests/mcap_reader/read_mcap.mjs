@@ -110,5 +110,6 @@ async function main() {
   return out;
 }
 
-main().then((out) => { console.log(JSON.stringify(out)); process.exit(0); })
-  .catch((e) => { console.log(JSON.stringify({ ok: false, error: String(e && e.message ? e.message : e) })); process.exit(1); });
+// process.exit() right after a large write to a pipe would cut it short: exit once it is flushed.
+const emit = (obj, code) => process.stdout.write(JSON.stringify(obj) + '\n', () => process.exit(code));
+main().then((out) => emit(out, 0)).catch((e) => emit({ ok: false, error: String(e && e.message ? e.message : e) }, 1));

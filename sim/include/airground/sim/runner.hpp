@@ -123,6 +123,11 @@ struct RunOptions {
   // After the survey the quadrotor flies back over its launch point at survey height and hovers there (as
   // PX4 and ArduPilot return to launch at the end of a mission): a team with a short radio range hears
   // the last regions there. The run's "survey done" includes the return.
+  // recording.mcap (Foxglove's schemas, docs/simulator.md "Recordings") unless record is kNone; its
+  // /scheduler channel every this many simulated seconds (0 = none: stage times are CPU times, the one
+  // channel two runs of a seed do not repeat).
+  bool record_mcap{true};
+  double record_scheduler_period_s{10};
   bool uav_return_home{false};
   // Tell the ground robots when the survey (with the return) should end, as mission.survey_end_s (the
   // route's flying time, estimate_route_time_s): until then one with nothing to do waits for regions.
@@ -287,6 +292,7 @@ Result<RunSummary> run_team(const RunOptions& options, const ProgressFn& progres
 // Loads a world directory, or generates the built-in default for "default".
 Result<std::shared_ptr<const World>> resolve_world(const std::string& world_arg);
 
+  std::uint64_t recording_messages{0}, recording_bytes{0};  // recording.mcap (0 without one)
 // A team key as an operator makes one (64 hex digits, owner-only), drawn from `seed` so a run repeats;
 // the lockstep runner and the HIL mode write one per run. The error names the file.
 Status write_team_key(const std::string& path, std::uint64_t seed);
