@@ -97,8 +97,10 @@ constexpr const char* kRunHelp =
     "  --init-yaw-error D       ... and D degrees (30)\n"
     "  --wait-map-radius M      --ugv-map online: a robot starts driving once the map knows half the cells\n"
     "                           within M metres of it (30; 0 = at once)\n"
-    "  --oracle vo              ablation: the simulator's VO model (visual_odometry.yaml) feeds the pose graph\n"
-    "                           instead of the quadrotor's own vo stage on the rendered frames (the default)\n"
+    "  --oracle labels,vo       ablation (field mode without it): labels = the camera frames and LiDAR points carry\n"
+    "                           the true classes and the robots use them instead of ErfNet and the geometric\n"
+    "                           labeller; vo = the simulator's VO model (visual_odometry.yaml) feeds the pose\n"
+    "                           graph instead of the quadrotor's own vo stage; the report lists them\n"
     "  --config-dir DIR         model parameters: gps.yaml, visual_odometry.yaml, wheel_odometry.yaml,\n"
     "                           radio.yaml, diff_drive.yaml, quadrotor.yaml, camera.yaml, lidar_noise.yaml\n"
     "                           (airground-sim config --out DIR writes the defaults)\n"
@@ -119,16 +121,16 @@ constexpr const char* kEvalMappingHelp =
     "Options:\n"
     "  --altitude M            survey altitude above the start (40)   --speed V   survey speed (5 m/s)\n"
     "  --overlap F             side overlap of the survey lines (0.3)\n"
-    "  --oracle vo             ablation: the simulator's VO model (true motion, scaled, noisy) instead of the\n"
-    "                          quadrotor's own vo stage on the rendered frames (the default); the report says so\n"
+    "  --oracle labels,vo      ablation: labels = the camera's true classes instead of ErfNet's (segmentation.labels\n"
+    "                          gt); vo = the simulator's VO model (true motion, scaled, noisy) instead of the\n"
+    "                          quadrotor's own vo stage on the rendered frames; the report says so\n"
     "  --vo-scale S            with --oracle vo: the odometry starts with exactly this scale (VO units per metre)\n"
     "  --tracking-loss-at T    with --oracle vo: force one odometry tracking loss T s into the flight\n"
     "  --gps-outlier-at T      one GPS fix T s into the flight is off by --gps-outlier-m (50) metres\n"
     "  --no-random-faults      no random tracking losses or GPS dropouts\n"
     "  --max-duration T        stop after T simulated seconds even if the survey is not done (3600)\n"
     "  --config-dir DIR        simulator model overrides (as for run)\n"
-    "  --erfnet WEIGHTS.agw    map with ErfNet's classes (the segmentation stage on keyframes) instead of the\n"
-    "                          camera's ground truth\n"
+    "  --erfnet WEIGHTS.agw    ErfNet with these weights instead of the shipped ones (config/erfnet/erfnet_c7.agw)\n"
     "  --set SECTION.KEY=VALUE quadrotor role parameter (repeatable), e.g. segmentation.threads=2\n"
     "  --quiet                 no progress line\n";
 
@@ -154,6 +156,8 @@ constexpr const char* kEvalPlanningHelp =
     "  --pose truth|localizer   drive with the true pose (truth), or with the robot's own stages in the\n"
     "                           lockstep runner: its localizer's pose, planner, tracker, drive (localizer)\n"
     "  --set SECTION.KEY=VALUE  a planner.* or drive.* parameter (repeatable)\n"
+    "  --oracle labels          with --pose localizer: ablation, the LiDAR points carry the true classes and the\n"
+    "                           localizer uses them (metrics.json lists it)\n"
     "  --quiet                  no progress line\n";
 
 constexpr const char* kEvalLocalizationHelp =
@@ -161,7 +165,7 @@ constexpr const char* kEvalLocalizationHelp =
     "One ground robot drives a loop of about --route-km over the roads (planned from ground truth through\n"
     "far-apart drivable points, from the staging pad; deterministic by seed) with its initial pose guess off\n"
     "by exactly --init-error metres (direction by seed) and --init-yaw-error degrees (sign by seed). Its real\n"
-    "role table gets the simulated LiDAR (ground-truth labels), wheel odometry, that guess and the aerial map\n"
+    "role table (its shipped configuration) gets the simulated LiDAR (no classes), wheel odometry, that guess and the aerial map\n"
     "tiles: --map gt the world's class map at 0.5 m, --map online the quadrotor's ortho-map as its mapping\n"
     "stages build it (it flies its survey; the robot waits at its start until the map knows\n"
     "--wait-map-fraction of the cells within --wait-map-radius and --wait-map-route of those along its\n"
@@ -179,7 +183,10 @@ constexpr const char* kEvalLocalizationHelp =
     "Options:\n"
     "  --init-yaw-error D       initial yaw error [deg] (30)\n"
     "  --route-km K             route length (2)                  --speed V   driving speed (1.2 m/s)\n"
-    "  --labels gt|geometric    the robot's scan labelling (its localization.labels parameter, when it has one)\n"
+    "  --labels gt|geometric    the robot's scan labelling (localization.labels; shipped: geometric); gt needs\n"
+    "                           --oracle labels\n"
+    "  --oracle labels          ablation: the LiDAR points carry the world's classes and the robot labels its scans\n"
+    "                           with them (gt); metrics.json and the report list it\n"
     "  --set SECTION.KEY=VALUE  any parameter of the ground robot's role config (repeatable)\n"
     "  --stand-still-s S        the robot stands still S seconds ...\n"
     "  --stand-still-at T       ... from simulated time T (120; with --map online the wait counts)\n"
@@ -229,7 +236,7 @@ Args parse(int argc, char** argv, int first) {
   return a;
 }
 
-// --oracle vo[,...]: ground truth handed to the robots by name, an ablation; unknown names are an error.
+// --oracle labels,vo: ground truth handed to the robots by name, an ablation; unknown names are an error.
 std::vector<std::string> oracles_from(const Args& a) {
   std::vector<std::string> out;
   if (!a.has("oracle")) return out;
@@ -238,8 +245,8 @@ std::vector<std::string> oracles_from(const Args& a) {
     while (b <= v.size()) {
       const std::size_t e = std::min(v.find(',', b), v.size());
       const std::string name = v.substr(b, e - b);
-      if (name != "vo") {
-        std::fprintf(stderr, "airground-sim: --oracle: unknown oracle '%s' (known: vo) (see --help)\n", name.c_str());
+      if (name != "vo" && name != "labels") {
+        std::fprintf(stderr, "airground-sim: --oracle: unknown oracle '%s' (known: labels, vo) (see --help)\n", name.c_str());
         std::exit(2);
       }
       if (std::find(out.begin(), out.end(), name) == out.end()) out.push_back(name);
@@ -551,8 +558,10 @@ constexpr const char* kMissionHelp =
     "  --kill-base T           power the base station off at T seconds\n"
     "  --set SECTION.KEY=VALUE any parameter of the ground robots' role config (repeatable)\n"
     "  --set-uav SECTION.KEY=VALUE  ... of the quadrotor's\n"
-    "  --oracle vo              ablation: the quadrotor's odometry from the simulator's VO model instead of its\n"
-    "                           own vo stage (field mode, the default); metrics.json and the report list it\n"
+    "  --oracle labels,vo       ablation (field mode without it): labels = true classes in the camera frames and\n"
+    "                           LiDAR points, used instead of ErfNet and the geometric labeller; vo = the\n"
+    "                           simulator's VO model instead of the quadrotor's own vo stage; metrics.json and the\n"
+    "                           report list them\n"
     "  --lidar-columns C       512|1024|2048 (1024)\n"
     "  --web-port P            the base station serves its live page on http://localhost:P/ during the run\n"
     "  --pace X                hold the run to X times real time (to watch it on the page)\n"
@@ -654,13 +663,15 @@ constexpr const char* kStudyHelp =
     "  --altitude A           quadrotor altitude (40 m; the paper flew 60 m)\n"
     "  --lidar-columns C      (1024)\n"
     "  --set SECTION.KEY=VALUE  passed to every mission (repeatable)\n"
+    "  --set-uav SECTION.KEY=VALUE  passed to every mission (repeatable)\n"
+    "  --oracle labels,vo     ablation passed to every mission; study.csv and study.md list each mission's oracles\n"
     "  --report-only          run nothing: write the table and plots from the missions already done\n"
     "                         (also while another study process is still running into DIR)\n";
 
 constexpr const char* kHilHelp =
     "airground-sim hil — hardware in the loop: the simulated world served to the real role binaries over\n"
     "the devices' wire protocols, in real time. Each ground robot's airground-ugv gets Ouster OS-1 packets on\n"
-    "its lidar UDP port (the ground-truth class in the reflectivity byte) and its two ODrive controllers over\n"
+    "its lidar UDP port (the surface's albedo in the reflectivity byte) and its two ODrive controllers over\n"
     "the cannelloni CAN-over-UDP bridge; airground-uav gets UBX NAV-PVT on a pseudo-terminal (its serial\n"
     "port) and camera frames with visual odometry through the camera stage's frame-stream replay (a FIFO);\n"
     "airground-base serves the live page. The processes are configured only by the YAML files written to\n"
@@ -681,6 +692,7 @@ constexpr const char* kHilHelp =
     "  --lidar-profile P      Ouster packet profile: LEGACY, RNG19_RFL8_SIG16_NIR16 (default),\n"
     "                         RNG19_RFL8_SIG16_NIR16_DUAL or RNG15_RFL8_NIR8\n"
     "  --seed S               sensor noise (1)\n"
+    "  --oracle labels        ablation: the true class in the frames and the reflectivity byte, used by the robots\n"
     "  --quiet                no progress lines\n";
 
 int hil_cmd(const Args& a) {
@@ -694,6 +706,7 @@ int hil_cmd(const Args& a) {
   o.lidar_profile = a.get("lidar-profile", o.lidar_profile);
   o.seed = static_cast<std::uint64_t>(number(a, "seed", static_cast<double>(o.seed)));
   o.progress = !a.has("quiet");
+  o.oracles = oracles_from(a);
   if (o.mission_file.empty()) usage_error("hil needs --mission FILE.yaml");
   if (!(o.max_duration_s > 0)) usage_error("--max-duration must be positive");
   auto r = run_hil(o);
@@ -736,6 +749,7 @@ std::vector<double> number_list(const Args& a, const std::string& k, const std::
 }
 
 int study_cmd(const Args& a, const char* self) {
+  (void)oracles_from(a);  // an unknown oracle stops the study here, not in every mission
   const auto ugvs = number_list(a, "ugvs", "1,2,3");
   const auto ranges = number_list(a, "comm-range", "150");
   const int seeds = static_cast<int>(number(a, "seeds", 1));
@@ -780,11 +794,12 @@ int study_cmd(const Args& a, const char* self) {
       args.emplace_back("--max-duration");
       args.push_back(a.get("max-duration"));
     }
-    if (a.has("set"))
-      for (const auto& s : a.opt.at("set")) {
-        args.emplace_back("--set");
-        args.push_back(s);
-      }
+    for (const char* key : {"set", "set-uav", "oracle"})
+      if (a.has(key))
+        for (const auto& s : a.opt.at(key)) {
+          args.push_back(std::string("--") + key);
+          args.push_back(s);
+        }
     std::filesystem::create_directories(j.dir);
     const pid_t pid = fork();
     if (pid == 0) {
@@ -893,6 +908,7 @@ int eval_mapping_cmd(const Args& a) {
 
 int eval_localization_cmd(const Args& a) {
   EvalLocalizationOptions o;
+  o.oracles = oracles_from(a);
   o.world = a.get("world", o.world);
   o.seed = static_cast<std::uint64_t>(number(a, "seed", static_cast<double>(o.seed)));
   o.out_dir = a.get("out", o.out_dir);
@@ -907,6 +923,8 @@ int eval_localization_cmd(const Args& a) {
   o.speed_mps = number(a, "speed", o.speed_mps);
   o.labels = a.get("labels");
   if (a.has("labels") && o.labels != "gt" && o.labels != "geometric") usage_error("--labels must be gt or geometric");
+  if (o.labels == "gt" && std::find(o.oracles.begin(), o.oracles.end(), "labels") == o.oracles.end())
+    usage_error("--labels gt needs the scans' true classes, which a LiDAR does not give: name the ablation --oracle labels");
   if (a.has("set")) {
     const auto& kv = a.opt.at("set");
     if (kv.empty()) usage_error("--set needs SECTION.KEY=VALUE");
@@ -971,6 +989,7 @@ int eval_localization_cmd(const Args& a) {
 
 int eval_planning_cmd(const Args& a) {
   EvalPlanningOptions o;
+  o.oracles = oracles_from(a);
   o.world = a.get("world", o.world);
   o.seed = static_cast<std::uint64_t>(number(a, "seed", static_cast<double>(o.seed)));
   o.pairs = static_cast<int>(number(a, "pairs", o.pairs));

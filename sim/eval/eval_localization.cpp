@@ -272,16 +272,15 @@ Result<LocalizationMetrics> eval_localization(const EvalLocalizationOptions& o, 
                                       : 1.5 * m.route_length_m / o.speed_mps + 60.0 + std::max(0.0, o.stand_still_s) +
                                             (o.map == UgvMapSource::kOnline ? 3600.0 : 0.0);
   r.ugv_config = o.set;
-  m.labels = "default";
+  r.oracles = o.oracles;
+  // The shipped labeller (geometric), or the true classes in the labels ablation.
+  m.labels = r.oracle("labels") ? "gt" : "geometric";
   if (!o.labels.empty()) {
     if (o.labels != "gt" && o.labels != "geometric") return Error::make(ErrorCode::kInvalidArgument, "--labels must be gt or geometric");
-    if (Config::defaults(role_schema(ugv_role())).has("localization.labels")) {
-      r.ugv_config.push_back("localization.labels=" + o.labels);
-      m.labels = o.labels;
-    } else {
-      AG_LOG_WARN("eval", "the ground robot has no localization.labels parameter yet; --labels %s ignored", o.labels.c_str());
-      m.labels = "n/a";
-    }
+    if (o.labels == "gt" && !r.oracle("labels"))
+      return Error::make(ErrorCode::kInvalidArgument, "--labels gt needs the scans' true classes, which a LiDAR does not give: name the ablation --oracle labels");
+    r.ugv_config.push_back("localization.labels=" + o.labels);
+    m.labels = o.labels;
   }
 
   std::vector<Sample> samples;
@@ -445,14 +444,14 @@ Result<LocalizationMetrics> eval_localization(const EvalLocalizationOptions& o, 
     << ",\n  \"route_length_m\": " << num(m.route_length_m) << ",\n  \"distance_m\": " << num(m.distance_m)
     << ",\n  \"released_s\": " << num(m.released_s) << ",\n  \"tiles_published\": " << m.tiles_published
     << ",\n  \"scans_published\": " << m.scans_published << ",\n  \"sim_s\": " << num(m.sim_s) << ",\n  \"wall_s\": " << num(m.wall_s)
-    << ",\n  \"config\": {\"world\": \"" << o.world << "\", \"seed\": " << o.seed << ", \"map\": \"" << map_name
+    << ",\n  \"oracles\": " << r.oracles_json() << ",\n  \"config\": {\"world\": \"" << o.world << "\", \"seed\": " << o.seed << ", \"map\": \"" << map_name
     << "\", \"init_error_m\": " << num(o.init_error_m) << ", \"init_yaw_error_deg\": " << num(o.init_yaw_error_deg)
     << ", \"route_km\": " << num(o.route_km) << ", \"labels\": \"" << m.labels << "\", \"convergence_radius_m\": " << num(radius)
     << ", \"stand_still_s\": " << num(o.stand_still_s) << ", \"stand_still_at_s\": " << num(o.stand_still_at_s)
     << ", \"yaw_drift_at_rest_rad_per_s\": " << num(o.yaw_drift_at_rest_set ? o.yaw_drift_at_rest : 0.0) << "}\n}\n";
   // report.md: the runner wrote its own; the evaluation's replaces it.
   std::ofstream md(out / "report.md");
-  md << "# Localization evaluation\n\nWorld `" << o.world << "`, seed " << o.seed << ", map `" << map_name << "`, labels `" << m.labels
+  md << "# Localization evaluation\n\n" << r.oracles_line() << "\n\nWorld `" << o.world << "`, seed " << o.seed << ", map `" << map_name << "`, labels `" << m.labels
      << "`, initial guess off by " << o.init_error_m << " m and " << o.init_yaw_error_deg << " deg. Route " << num(m.route_length_m)
      << " m over the roads (driven " << num(m.distance_m) << " m); " << num(m.sim_s) << " s simulated in " << num(m.wall_s) << " s.\n\n";
   if (!m.localization_published)

@@ -196,6 +196,7 @@ Result<PlanningMetrics> eval_planning(const EvalPlanningOptions& o, const std::f
       r.ugv_starts = {st};
       r.ugv_goals = {Eigen::Vector2d(b.x, b.y)};
       r.ugv_config = o.set;
+      r.oracles = o.oracles;
       r.duration_s = 60.0 + 3.0 * path->length_m / std::max(0.1, dp.max_speed_mps);
       r.sample_hz = 5;
       double closest = 1e18, err_sum = 0;
@@ -270,7 +271,9 @@ Result<PlanningMetrics> eval_planning(const EvalPlanningOptions& o, const std::f
                 out.min_clearance_ratio_mean, out.min_clearance_ratio_min, out.reached, static_cast<unsigned long long>(out.collisions),
                 out.failures, out.through_blocked, out.too_close, rp.min_clearance_m, out.build_ms, out.query_ms_mean, out.query_ms_max, out.nodes,
                 out.edges, o.drive ? "true" : "false", o.localizer_pose ? "localizer" : "ground truth");
-  js << buf << "  \"pair_results\": [\n";
+  RunOptions oracle_list;
+  oracle_list.oracles = o.oracles;
+  js << buf << "  \"oracles\": " << oracle_list.oracles_json() << ",\n  \"pair_results\": [\n";
   for (std::size_t k = 0; k < out.results.size(); ++k) {
     const auto& r = out.results[k];
     std::snprintf(buf, sizeof buf,

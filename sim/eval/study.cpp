@@ -30,6 +30,7 @@ struct Row {
   double repeat_visits{-1};                // visits of a region someone had visited already; -1: unknown
   double first_visit_s{-1}, last_visit_s{-1};  // from visits.csv; -1: none or no file
   bool completed{false};
+  std::string oracles{"?"};  // the ground truth the robots got, "+"-joined; "none" in field mode; "?" not recorded
 };
 
 // The first and last visit times of a run's visits.csv (t_s in the first column). A line that does not
@@ -101,6 +102,12 @@ Result<std::string> summarise_study(const std::string& dir) {
         if (robot.is_object() && robot.contains("visited") && robot["visited"].is_number()) visits += robot["visited"].get<double>();
       r.repeat_visits = std::max(0.0, visits - j["regions_visited"].get<double>());
     }
+    if (j.contains("oracles") && j["oracles"].is_array()) {
+      r.oracles.clear();
+      for (const auto& o : j["oracles"])
+        if (o.is_string()) r.oracles += (r.oracles.empty() ? "" : "+") + o.get<std::string>();
+      if (r.oracles.empty()) r.oracles = "none";
+    }
     read_visit_times(e.path() / "visits.csv", r);
     rows.push_back(r);
   }
@@ -110,11 +117,11 @@ Result<std::string> summarise_study(const std::string& dir) {
   });
   const fs::path out(dir);
   std::ofstream csv(out / "study.csv");
-  csv << "run,ugvs,comm_range_m,seed,targets_total,targets_visited,completed,mission_time_s,loc_error_mean_m,loc_error_p95_m,"
+  csv << "run,ugvs,comm_range_m,seed,oracles,targets_total,targets_visited,completed,mission_time_s,loc_error_mean_m,loc_error_p95_m,"
          "odom_only_error_mean_m,false_visits,failed_goals,collisions,bytes_on_air,realtime_factor,repeat_visits,first_visit_s,"
          "last_visit_s\n";
   for (const Row& r : rows)
-    csv << r.name << "," << r.ugvs << "," << r.range << "," << r.seed << "," << r.targets_total << "," << r.targets_visited << ","
+    csv << r.name << "," << r.ugvs << "," << r.range << "," << r.seed << "," << r.oracles << "," << r.targets_total << "," << r.targets_visited << ","
         << (r.completed ? 1 : 0) << "," << r.mission_time_s << "," << r.loc_mean << "," << r.loc_p95 << "," << r.odom_mean << ","
         << r.false_visits << "," << r.failed_goals << "," << r.collisions << "," << r.bytes << "," << r.rtf << "," << r.repeat_visits
         << "," << r.first_visit_s << "," << r.last_visit_s << "\n";
@@ -177,7 +184,23 @@ Result<std::string> summarise_study(const std::string& dir) {
 
   std::ostringstream md;
   char line[512];
-  md << "# airground study\n\n" << rows.size() << " missions. All targets reached in " << all_reached << " of " << rows.size()
+  // The first lines say whether any ground truth reached the robots (field mode) and in which runs.
+  std::map<std::string, std::vector<std::string>> by_oracles;
+  for (const Row& r : rows) by_oracles[r.oracles].push_back(r.name);
+  md << "# airground study\n\n";
+  if (by_oracles.empty() || (by_oracles.size() == 1 && by_oracles.begin()->first == "none")) {
+    md << "Field mode: no ground truth reached a robot in any mission (oracles: none).\n\n";
+  } else {
+    md << "ABLATION in some or all missions: ground truth handed to the robots by name; those figures are not field-mode figures.\n\n";
+    for (const auto& [names, runs] : by_oracles) {
+      md << "- oracles " << (names == "?" ? "not recorded (a metrics.json from before field mode)" : names) << ": " << runs.size() << " mission"
+         << (runs.size() == 1 ? "" : "s") << " (";
+      for (std::size_t i = 0; i < runs.size(); ++i) md << (i ? ", " : "") << runs[i];
+      md << ")\n";
+    }
+    md << "\n";
+  }
+  md << rows.size() << " missions. All targets reached in " << all_reached << " of " << rows.size()
      << "; no false visit in " << zero_false << " of " << rows.size() << ".";
   if (loc_n > 0) {
     std::snprintf(line, sizeof line, " Localization error after convergence: mean %.2f m over the missions (worst mission %.2f m); wheel odometry alone %.1f m.",

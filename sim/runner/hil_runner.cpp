@@ -41,7 +41,9 @@
 #include "airground/drivers/ouster/packet_format.hpp"
 #include "airground/drivers/ublox/ubx.hpp"
 #include "airground/mission/mission_file.hpp"
+#include "airground/platform/config.hpp"
 #include "airground/platform/log.hpp"
+#include "airground/platform/role_instance.hpp"
 #include "airground/platform/time.hpp"
 #include "airground/sim/camera.hpp"
 #include "airground/sim/diff_drive.hpp"
@@ -54,6 +56,7 @@
 #include "airground/sim/visual_odometry.hpp"
 #include "airground/sim/world_png.hpp"
 #include "roles.hpp"
+#include "sensor_labels_check.hpp"
 #include "worker_pool.hpp"
 
 namespace ag::sim {
@@ -78,38 +81,40 @@ Result<std::uint16_t> free_port(int type) {
   return static_cast<std::uint16_t>(ntohs(a.sin_port));
 }
 
-// One role's YAML: "section.key=value" pairs grouped by section; numbers and booleans bare, text quoted.
-Status write_role_yaml(const fs::path& path, const std::string& title, const std::vector<std::pair<std::string, std::string>>& kv) {
-  std::map<std::string, std::vector<std::pair<std::string, std::string>>> sections;
-  std::vector<std::string> order;
-  for (const auto& [k, v] : kv) {
-    const auto dot = k.find('.');
-    const std::string sec = k.substr(0, dot), key = k.substr(dot + 1);
-    if (!sections.count(sec)) order.push_back(sec);
-    sections[sec].emplace_back(key, v);
-  }
+// The Ouster reflectivity byte of a surface (calibrated reflectivity, 0-100 for diffuse targets): the
+// world's albedo under the point, grey, scaled to 0-100; 0 outside the world.
+std::uint8_t albedo_reflectivity(const World& w, double x, double y) noexcept {
+  const GridGeometry& g = w.header.grid;
+  const auto c = g.col(x), r = g.row(y);
+  if (!g.contains(c, r) || w.albedo.empty()) return 0;
+  const cv::Vec3b a = w.albedo.at<cv::Vec3b>(r, c);
+  return static_cast<std::uint8_t>((static_cast<int>(a[0]) + static_cast<int>(a[1]) + static_cast<int>(a[2])) * 100 / (3 * 255));
+}
+
+// The shipped ErfNet weights where the package installs them, else the source tree's copy.
+std::string hil_erfnet_weights() {
+  const std::string installed = "/usr/share/airground/erfnet_c7.agw";
+  std::error_code ec;
+  return fs::exists(installed, ec) ? installed : std::string(AG_SOURCE_DIR) + "/config/erfnet/erfnet_c7.agw";
+}
+
+// One role's YAML: its shipped configuration (built in from firmware_host/<role>/<role>.yaml) with the
+// "section.key=value" pairs the simulator must set, every key written out.
+Status write_role_yaml(const fs::path& path, const std::string& title, const RoleDescription& role,
+                       const std::vector<std::pair<std::string, std::string>>& kv) {
+  const std::string origin = "firmware_host/" + std::string(role.name) + "/" + std::string(role.name) + ".yaml (built into airground-sim)";
+  auto c = Config::load_string(role_schema(role), shipped_config_yaml(role.name), origin);
+  if (!c) return c.error();
+  for (const auto& [k, v] : kv)
+    if (auto st = c.value().set(k + "=" + v, "airground-sim hil"); !st) return st.error();
+  if (auto st = check_sensor_labels(c.value(), origin + " with airground-sim hil's settings"); !st) return st.error();
   std::ofstream f(path);
-  f << "# " << title << " — written by airground-sim hil; every key: airground-<role> --print-config\n";
-  for (const std::string& sec : order) {
-    f << sec << ":\n";
-    for (const auto& [key, v] : sections[sec]) {
-      char* end = nullptr;
-      (void)std::strtod(v.c_str(), &end);
-      const bool bare = (!v.empty() && end != nullptr && *end == '\0') || v == "true" || v == "false";
-      f << "  " << key << ": ";
-      if (bare) {
-        f << v;
-      } else {
-        f << '"';
-        for (const char c : v) f << (c == '"' || c == '\\' ? "\\" : "") << c;
-        f << '"';
-      }
-      f << "\n";
-    }
-  }
+  f << "# " << title << " — written by airground-sim hil: the shipped " << role.name << ".yaml and the keys the simulator sets\n"
+    << c.value().to_yaml();
   if (!f) return Error::make(ErrorCode::kIo, "cannot write " + path.string());
   return ok_status();
 }
+
 
 std::string num(double v) {
   char b[64];
@@ -308,8 +313,10 @@ Result<HilResult> run_hil(const HilOptions& opt) {
   std::vector<Child> children;
   std::vector<std::unique_ptr<HilUgv>> ugvs;
   HilResult res;
+  const bool labels_oracle = std::find(opt.oracles.begin(), opt.oracles.end(), "labels") != opt.oracles.end();
   std::vector<std::pair<std::string, std::string>> ugv_kv_common = {
-      {"localization.labels", "gt"},
+      // The Ouster gives no class: the shipped geometric labeller, or the truth in the reflectivity byte.
+      {"localization.labels", labels_oracle ? "gt" : "geometric"},
       {"localization.area_x0_m", num(ax0)}, {"localization.area_y0_m", num(ay0)}, {"localization.area_x1_m", num(ax1)}, {"localization.area_y1_m", num(ay1)},
       {"planner.area_x0_m", num(ax0)}, {"planner.area_y0_m", num(ay0)}, {"planner.area_x1_m", num(ax1)}, {"planner.area_y1_m", num(ay1)},
       {"drive.track_m", num(dd.track_width_m)},
@@ -356,7 +363,7 @@ Result<HilResult> run_hil(const HilOptions& opt) {
     kv.insert(kv.end(), ugv_kv_common.begin(), ugv_kv_common.end());
     for (const auto& p : std::vector<std::pair<std::string, std::string>>{
              {"lidar.source", "udp"}, {"lidar.metadata", meta_path.string()}, {"lidar.bind_address", "127.0.0.1"},
-             {"lidar.mount_z_m", num(opt.lidar_mount_height_m)}, {"lidar.classes", "reflectivity"},
+             {"lidar.mount_z_m", num(opt.lidar_mount_height_m)}, {"lidar.classes", labels_oracle ? "reflectivity" : "none"},
              {"localization.set_initial_pose", "true"}, {"localization.initial_x_m", num(tm.guess_x)}, {"localization.initial_y_m", num(tm.guess_y)},
              {"localization.initial_yaw_rad", num(tm.guess_yaw)}, {"localization.initial_sigma_m", num(std::max(0.5, tm.guess_sigma_m))},
              {"base.can_bridge_port", std::to_string(can_robot)}, {"base.can_bridge_remote", "127.0.0.1:" + std::to_string(can_sim)},
@@ -370,7 +377,7 @@ Result<HilResult> run_hil(const HilOptions& opt) {
       kv.emplace_back("mission.waypoints", wp);
     }
     const fs::path cfg = out / "config" / (u->name + ".yaml");
-    if (auto st = write_role_yaml(cfg, u->name + " (ground robot " + std::to_string(tm.id) + ")", kv); !st) return st.error();
+    if (auto st = write_role_yaml(cfg, u->name + " (ground robot " + std::to_string(tm.id) + ")", ugv_role(), kv); !st) return st.error();
     children.push_back(Child{u->name, "ugv", -1, out / "logs" / (u->name + ".log")});
     ugvs.push_back(std::move(u));
   }
@@ -401,11 +408,13 @@ Result<HilResult> run_hil(const HilOptions& opt) {
              // HIL still hands the pose graph the simulator's odometry (an oracle, in the frame stream); the
              // robot's own VO runs beside it on the same frames, on a channel nobody reads.
              {"camera.vo_channel", "visual_odometry"}, {"vo.output_channel", "visual_odometry_own"},
-             {"segmentation.labels", "gt"}, {"comms.send_map_tiles", "true"},
+             // ErfNet with the shipped weights (the source tree's copy when not installed), or the frames' true classes.
+             {"segmentation.labels", labels_oracle ? "gt" : "erfnet"}, {"segmentation.weights", hil_erfnet_weights()},
+             {"comms.send_map_tiles", "true"},
              {"regions.area_x0_m", num(ax0)}, {"regions.area_y0_m", num(ay0)}, {"regions.area_x1_m", num(ax1)}, {"regions.area_y1_m", num(ay1)},
              {"regions.merge_distance_m", num(mf.params.merge_distance_m)}, {"regions.min_region_cells", std::to_string(mf.params.min_region_cells)}})
       kv.push_back(p);
-    if (auto st = write_role_yaml(out / "config" / "uav.yaml", "uav (quadrotor)", kv); !st) return st.error();
+    if (auto st = write_role_yaml(out / "config" / "uav.yaml", "uav (quadrotor)", uav_role(), kv); !st) return st.error();
     children.insert(children.begin(), Child{"uav", "uav", -1, out / "logs" / "uav.log"});
   }
   {
@@ -414,7 +423,7 @@ Result<HilResult> run_hil(const HilOptions& opt) {
     kv.emplace_back("web.port", std::to_string(web_port));
     kv.emplace_back("web.bind", "127.0.0.1");
     kv.emplace_back("web.log_path", (out / "mission.jsonl").string());
-    if (auto st = write_role_yaml(out / "config" / "base.yaml", "base station", kv); !st) return st.error();
+    if (auto st = write_role_yaml(out / "config" / "base.yaml", "base station", base_role(), kv); !st) return st.error();
     children.push_back(Child{"base", "base", -1, out / "logs" / "base.log"});
   }
   fs::remove(out / "mission.jsonl", ec);
@@ -558,10 +567,11 @@ Result<HilResult> run_hil(const HilOptions& opt) {
       m.stamp = now;
       m.published = now;
       m.seq = image_seq++;
-      m.labels = LabelSource::kGroundTruth;
+      m.labels = labels_oracle ? LabelSource::kGroundTruth : LabelSource::kNone;  // a camera gives no classes
+      if (!labels_oracle) m.cls.fill(255);
       for (int r = 0; r < kImageHeight; ++r) {
         std::memcpy(m.rgb.data() + static_cast<std::size_t>(r) * kImageWidth * 3, cf.rgb.ptr<std::uint8_t>(r), kImageWidth * 3);
-        std::memcpy(m.cls.data() + static_cast<std::size_t>(r) * kImageWidth, cf.cls.ptr<std::uint8_t>(r), kImageWidth);
+        if (labels_oracle) std::memcpy(m.cls.data() + static_cast<std::size_t>(r) * kImageWidth, cf.cls.ptr<std::uint8_t>(r), kImageWidth);
       }
       if (frames->write_image(m)) cam_written.fetch_add(1, std::memory_order_relaxed);
       else cam_dropped.fetch_add(1, std::memory_order_relaxed);
@@ -665,11 +675,15 @@ Result<HilResult> run_hil(const HilOptions& opt) {
             f.column_valid[static_cast<std::size_t>(c)] = 1;
           }
           f.columns_received = f.width;
+          const Pose3& sp = lidar_poses[static_cast<std::size_t>(&up - ugvs.data())];
+          const double cy = std::cos(sp.yaw), sy = std::sin(sp.yaw);
           for (const LidarPoint& q : u.scan) {
             if (q.ring >= f.height || q.col >= f.width) continue;
             const std::size_t k = f.index(q.ring, q.col);
             f.range_mm[k] = static_cast<std::uint32_t>(std::lround(q.range * 1000.0f));
-            f.reflectivity[k] = q.cls;
+            // An Ouster measures reflectivity, not class: the surface's albedo (the true class only with --oracle labels).
+            f.reflectivity[k] = labels_oracle ? q.cls : albedo_reflectivity(w, sp.x + cy * static_cast<double>(q.x) - sy * static_cast<double>(q.y),
+                                                                             sp.y + sy * static_cast<double>(q.x) + cy * static_cast<double>(q.y));
             f.signal[k] = 200;
           }
           const int cpp = u.fmt->columns_per_packet();
@@ -829,7 +843,12 @@ Result<HilResult> run_hil(const HilOptions& opt) {
   // The report: JSON, Markdown and the trajectories over the world's class map.
   {
     json j;
+    // HIL always hands the pose graph the simulator's odometry in the frame stream: the vo oracle.
+    RunOptions oracle_list;
+    oracle_list.oracles = opt.oracles;
+    if (!oracle_list.oracle("vo")) oracle_list.oracles.emplace_back("vo");
     j["mission"] = opt.mission_file;
+    j["oracles"] = oracle_list.oracles;
     j["world"] = opt.world;
     j["mission_done"] = res.mission_done;
     j["duration_s"] = res.duration_s;
@@ -847,7 +866,7 @@ Result<HilResult> run_hil(const HilOptions& opt) {
                                    {"max_us", t.max_us}, {"budget_us", t.budget_us}, {"overruns", t.overruns}});
     std::ofstream(out / "hil.json") << j.dump(2) << "\n";
     std::ofstream md(out / "hil_report.md");
-    md << "# HIL run: " << opt.mission_file << "\n\n"
+    md << "# HIL run: " << opt.mission_file << "\n\n" << oracle_list.oracles_line() << "\n\n"
        << (res.mission_done ? "Mission **done**" : "Mission **not finished**") << " after " << fixed(res.duration_s, 1) << " s"
        << (failure.empty() ? "" : " — " + failure) << ".\n\nLocalization error: the pose the base station last heard against the truth of that time (every poll while tracking: mean, max).\n\n| robot | exit | state | driven [m] | final error [m] | mean / max error [m] | collisions |\n|---|---|---|---|---|---|---|\n";
     for (const HilRobot& r : res.robots)

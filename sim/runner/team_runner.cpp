@@ -53,7 +53,9 @@
 #include "airground/sim/visual_odometry.hpp"
 #include "airground/sim/wheel_odometry.hpp"
 #include "airground/sim/world_png.hpp"
+#include "airground/sim/shipped_configs.hpp"
 #include "roles.hpp"
+#include "sensor_labels_check.hpp"
 #include "worker_pool.hpp"
 
 namespace ag::sim {
@@ -191,6 +193,14 @@ bool is_simulated_driver(std::string_view stage) noexcept {
 
 namespace fs = std::filesystem;
 
+// The shipped ErfNet weights: where the package installs them (segmentation.weights' shipped value), else
+// the source tree's copy for a simulator run from the build tree.
+std::string erfnet_weights_path(const std::string& shipped) {
+  std::error_code ec;
+  if (fs::exists(shipped, ec)) return shipped;
+  return std::string(AG_SOURCE_DIR) + "/config/erfnet/erfnet_c7.agw";
+}
+
 // Optional model overrides from --config-dir: <dir>/<name> when it exists. The file holds the model's
 // mapping either at the top level or under its section name (as `airground-sim config` writes it).
 template <typename T, typename Loader>
@@ -303,6 +313,8 @@ struct Ugv {
   std::vector<Eigen::Vector2d> est_trail{};  // tracking estimates, for the picture
   TimeNs loc_first_tracking{-1};
   LocalizationStatus loc_last{LocalizationStatus::kNoMap};
+  Pose2 loc_pose{};  // its newest tracking estimate (for recording.mcap)
+  bool loc_has_pose{false};
 };
 
 Pose2 Ugv::truth_at(TimeNs t) const noexcept {
@@ -313,8 +325,6 @@ Pose2 Ugv::truth_at(TimeNs t) const noexcept {
   for (std::size_t k = 1; k < n; ++k) {
     const auto& a = at(k);
     if (a.first > t) continue;
-  Pose2 loc_pose{};  // its newest tracking estimate (for recording.mcap)
-  bool loc_has_pose{false};
     const auto& b = at(k - 1);
     const double w = static_cast<double>(t - a.first) / static_cast<double>(std::max<TimeNs>(1, b.first - a.first));
     return Pose2{a.second.x + w * (b.second.x - a.second.x), a.second.y + w * (b.second.y - a.second.y),
@@ -338,6 +348,7 @@ struct Uav {
   RingWriter<CameraImageMsg, kCameraRing> camera_out{};
   RingWriter<VoMsg, kVoRing> vo_out{};  // the oracle VO (RunOptions::oracles "vo")
   bool vo_oracle{false};
+  bool labels_oracle{false};  // the frames carry the renderer's classes (RunOptions::oracles "labels")
   RingWriter<GpsMsg, kGpsRing> gps_out{};
   std::unique_ptr<CameraImageMsg> image{};
   cv::Mat rgb_small{}, cls_small{};
@@ -393,6 +404,7 @@ struct Team {
   std::vector<std::uint64_t> changed;          // scratch
   TimeNs sample_period{0};
   int lidar_rings{64};
+  std::unique_ptr<TeamRecording> mcap;  // recording.mcap (unless --record none)
 };
 
 Pose3 lidar_pose(const Ugv& u, double mount) {
@@ -404,7 +416,6 @@ Pose3 lidar_pose(const Ugv& u, double mount) {
 void new_leg(Team& t, Ugv& u, TimeNs now) {
   std::vector<Eigen::Vector2d> path;
   u.on_route = false;
-  std::unique_ptr<TeamRecording> mcap;  // recording.mcap (unless --record none)
   for (int attempt = 0; attempt < 20; ++attempt) {
     const std::uint64_t key = t.opt.seed * std::uint64_t{1000003} + static_cast<std::uint64_t>(u.node) * std::uint64_t{10007} + u.leg++;
     const Eigen::Vector2d goal = t.router->pick_drivable(key);
@@ -699,6 +710,8 @@ class SimProbeStage final : public Stage {
           ++ugv->loc_tracking;
           ugv->loc_errors.push_back(static_cast<float>(std::hypot(loc.pose.x - tr.x, loc.pose.y - tr.y)));
           if (ugv->loc_first_tracking < 0) ugv->loc_first_tracking = now;
+          ugv->loc_pose = loc.pose;
+          ugv->loc_has_pose = true;
           if (ugv->est_trail.empty() || (ugv->est_trail.back() - Eigen::Vector2d(loc.pose.x, loc.pose.y)).norm() > 1.0)
             ugv->est_trail.emplace_back(loc.pose.x, loc.pose.y);
         }
@@ -710,8 +723,6 @@ class SimProbeStage final : public Stage {
       s.now = now;
       s.ugv = i;
       s.truth = ugv->vehicle.pose();
-          ugv->loc_pose = loc.pose;
-          ugv->loc_has_pose = true;
       s.odometry = ugv->odom_last;
       s.odometry_in_map = ugv->odometry_in_map(ugv->odom_last);
       s.initial_guess = ugv->init_pose.pose;
@@ -791,10 +802,12 @@ void publish_image(Uav& a, TimeNs now) {
   m.stamp = now;
   m.published = now;
   m.seq = a.image_seq++;
-  m.labels = LabelSource::kGroundTruth;
+  // A camera measures light, not classes: the truth only in the ablation the user names.
+  m.labels = a.labels_oracle ? LabelSource::kGroundTruth : LabelSource::kNone;
+  if (!a.labels_oracle) m.cls.fill(255);
   for (int r = 0; r < kImageHeight; ++r) {
     std::memcpy(m.rgb.data() + static_cast<std::size_t>(r) * kImageWidth * 3, rgb->ptr<std::uint8_t>(r), kImageWidth * 3);
-    std::memcpy(m.cls.data() + static_cast<std::size_t>(r) * kImageWidth, cls->ptr<std::uint8_t>(r), kImageWidth);
+    if (a.labels_oracle) std::memcpy(m.cls.data() + static_cast<std::size_t>(r) * kImageWidth, cls->ptr<std::uint8_t>(r), kImageWidth);
   }
   (void)a.camera_out.push(m);
 }
@@ -936,6 +949,7 @@ void SimWorldStage::step(TimeNs now) noexcept {
       if (u.truth_log) std::fprintf(u.truth_log.get(), "%.3f,%.3f,%.3f,%.3f,%.4f,%.4f,%.4f\n", to_seconds(now), p.x, p.y, p.z, p.roll, p.pitch, p.yaw);
       if (u.odom_log) std::fprintf(u.odom_log.get(), "%.3f,%.3f,%.3f,%.4f,%.4f,%.4f\n", to_seconds(now), od.pose.x, od.pose.y, od.pose.yaw, od.wheel_left_rad_s, od.wheel_right_rad_s);
       u.trail.emplace_back(p.x, p.y);
+      if (t.mcap) t.mcap->ugv_pose(now, u.index, p, u.odometry_in_map(od.pose), u.loc_has_pose ? &u.loc_pose : nullptr);
     }
     if (t.air) t.air->set_position(u.node, u.killed ? kFarAway : u.vehicle.pose().x, u.killed ? kFarAway : u.vehicle.pose().y);
   }
@@ -949,7 +963,6 @@ void SimWorldStage::step(TimeNs now) noexcept {
       t.uav_yaw_rate = wrap_angle(a.vehicle.pose().yaw - yaw0) / dt;
     }
     const Pose3& p = a.vehicle.pose();
-      if (t.mcap) t.mcap->ugv_pose(now, u.index, p, u.odometry_in_map(od.pose), u.loc_has_pose ? &u.loc_pose : nullptr);
     if (t.opt.keep_uav_truth) a.truth.push_back(TruthSample{now, p});
     GpsFix fix;
     if (a.gps.sample(now, p, fix)) {
@@ -964,6 +977,7 @@ void SimWorldStage::step(TimeNs now) noexcept {
       m.h_accuracy_m = fix.h_accuracy_m;
       m.v_accuracy_m = fix.v_accuracy_m;
       (void)a.gps_out.push(m);  // a full ring is counted by the channel
+      if (t.mcap) t.mcap->uav_gps(now, fix.lat_deg, fix.lon_deg, fix.height_m, fix.h_accuracy_m);
       if (a.gps_log) std::fprintf(a.gps_log.get(), "%.3f,%d,%.9f,%.9f,%.3f,%.3f,%.3f,%.3f,%.2f\n", to_seconds(now), static_cast<int>(fix.fix_type), fix.lat_deg, fix.lon_deg, fix.height_m, fix.east_m, fix.north_m, fix.up_m, fix.h_accuracy_m);
     }
     AttitudeSample as;
@@ -977,7 +991,6 @@ void SimWorldStage::step(TimeNs now) noexcept {
       m.yaw = as.yaw;
       m.roll_rate = as.roll_rate;
       m.pitch_rate = as.pitch_rate;
-      if (t.mcap) t.mcap->uav_gps(now, fix.lat_deg, fix.lon_deg, fix.height_m, fix.h_accuracy_m);
       m.yaw_rate = as.yaw_rate;
       (void)a.attitude_out.push(m);
     }
@@ -1002,6 +1015,7 @@ void SimWorldStage::step(TimeNs now) noexcept {
     if (log_now) {
       if (a.truth_log) std::fprintf(a.truth_log.get(), "%.3f,%.3f,%.3f,%.3f,%.4f,%.4f,%.4f\n", to_seconds(now), p.x, p.y, p.z, p.roll, p.pitch, p.yaw);
       a.trail.emplace_back(p.x, p.y);
+      if (t.mcap) t.mcap->uav_pose(now, p);
     }
     if (t.air) t.air->set_position(0, p.x, p.y);
   }
@@ -1015,7 +1029,6 @@ void SimWorldStage::step(TimeNs now) noexcept {
     constexpr std::size_t kParts = kScanParts;
     const std::size_t jobs = static_cast<std::size_t>(bands) + (lidar_due ? kParts * t.ugvs.size() : 0);
     const Pose3 uav_pose = t.uav ? t.uav->vehicle.pose() : Pose3{};
-      if (t.mcap) t.mcap->uav_pose(now, p);
     const CameraShot shot = camera_due ? camera_shot(t, t.uav->vehicle, t.uav_yaw_rate, t.uav->frames) : CameraShot{};
     bool ahead = false;  // this frame was started ahead for exactly this pose, instant and shot
     if (camera_due && t.prefetch && t.prefetch->active()) {
@@ -1058,6 +1071,7 @@ void SimWorldStage::step(TimeNs now) noexcept {
       ++a.frames;
       t.camera_ae.observe(a.frame);
       publish_image(a, now);
+      if (t.mcap) t.mcap->camera_frame(now, a.frames, a.frame.rgb);
       if (a.frame_log) std::fprintf(a.frame_log.get(), "%.3f,%llu,%.3f,%.3f,%.3f,%.4f\n", to_seconds(now), static_cast<unsigned long long>(a.frames), uav_pose.x, uav_pose.y, uav_pose.z, uav_pose.yaw);
       const bool keep = t.opt.record == RecordLevel::kFull || (t.opt.record == RecordLevel::kLight && (a.frames - 1) % 20 == 0);
       if (keep) {
@@ -1071,7 +1085,6 @@ void SimWorldStage::step(TimeNs now) noexcept {
         ++t.frame_pngs;
       }
       if (t.prefetch) {  // the next exposure: step a copy of the vehicle as this stage will step it
-      if (t.mcap) t.mcap->camera_frame(now, a.frames, a.frame.rgb);
         if (!t.uav_ahead) t.uav_ahead.emplace(a.vehicle);
         else *t.uav_ahead = a.vehicle;  // reuses the route's storage
         TimeNs due = now;
@@ -1095,25 +1108,27 @@ void SimWorldStage::step(TimeNs now) noexcept {
         std::size_t total = 0;
         for (const auto& part : u.scan_parts) total += part.size();
         ++u.scans;
-        {  // the Ouster driver's revolution, labelled with the simulator's ground truth
+        {  // the Ouster driver's revolution: range, XYZ, no class (the world's classes only with --oracle labels)
+          const bool truth = t.opt.oracle("labels");
           LidarScanMsg& m = *u.scan_msg;
           m.stamp = now;
           m.published = now;
           m.seq = u.scan_seq++;
           m.rings = static_cast<std::uint16_t>(t.lidar_rings);
           m.columns = static_cast<std::uint16_t>(t.opt.lidar_columns);
-          m.labels = LabelSource::kGroundTruth;
+          m.labels = truth ? LabelSource::kGroundTruth : LabelSource::kNone;
           m.sensor_in_body = Pose3{0, 0, t.opt.lidar_mount_height_m, 0, 0, 0};
           std::size_t n = 0;
           for (const auto& part : u.scan_parts)
             for (const LidarPoint& q : part) {
               if (n == kMaxScanPoints) break;
-              m.points[n++] = ScanReturn{q.x, q.y, q.z, q.range, q.cls, q.ring, q.col};
+              m.points[n++] = ScanReturn{q.x, q.y, q.z, q.range, truth ? q.cls : std::uint8_t{255}, q.ring, q.col};
             }
           m.count = static_cast<std::uint32_t>(n);
           if (u.scan_out.push(m) > 0) ++u.channel_drops;
           ++u.scans_published;
         }
+        if (t.mcap) t.mcap->ugv_scan(now, u.index, u.scans, u.scan_parts.data(), u.scan_parts.size());
         if (u.scan_log) std::fprintf(u.scan_log.get(), "%.3f,%llu,%zu\n", to_seconds(now), static_cast<unsigned long long>(u.scans), total);
         if (u.scan_bin != nullptr) {  // per scan: int64 stamp, uint32 count, then packed points
           const std::uint32_t n = static_cast<std::uint32_t>(total);
@@ -1128,7 +1143,6 @@ void SimWorldStage::step(TimeNs now) noexcept {
   // Radio: with gossip, what the comms stages sent reaches the receivers' inboxes; without, every robot
   // broadcasts a small status datagram and the runner counts what arrives where.
   if (t.net) t.net->pump(now);
-        if (t.mcap) t.mcap->ugv_scan(now, u.index, u.scans, u.scan_parts.data(), u.scan_parts.size());
   if (t.radio) {
     if (now >= t.next_heartbeat) {
       t.next_heartbeat += t.heartbeat_period;
@@ -1141,6 +1155,10 @@ void SimWorldStage::step(TimeNs now) noexcept {
     }
     t.deliveries.clear();
     t.radio->deliver(now, t.deliveries);
+  }
+  if (t.mcap) {
+    const LinkStats radio = t.air ? t.air->total() : LinkStats{};
+    t.mcap->tick(now, t.air ? &radio : nullptr);
   }
 }
 
@@ -1156,10 +1174,6 @@ cv::Mat trajectories_image(const Team& t) {
     return cv::Point(static_cast<int>(g.col_f(p.x()) * scale), static_cast<int>(g.row_f(p.y()) * scale));
   };
   const cv::Scalar colours[] = {{0, 200, 255}, {255, 0, 255}, {255, 255, 0}, {0, 128, 255}, {255, 128, 0}, {128, 255, 128}};
-  if (t.mcap) {
-    const LinkStats radio = t.air ? t.air->total() : LinkStats{};
-    t.mcap->tick(now, t.air ? &radio : nullptr);
-  }
   auto draw = [&](const std::vector<Eigen::Vector2d>& trail, const cv::Scalar& c, int thick) {
     for (std::size_t i = 1; i < trail.size(); ++i) cv::line(bgr, px(trail[i - 1]), px(trail[i]), c, thick, cv::LINE_AA);
     if (!trail.empty()) cv::circle(bgr, px(trail.back()), 4, c, cv::FILLED, cv::LINE_AA);
@@ -1389,14 +1403,42 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   const bool rec = opt.record != RecordLevel::kNone;
   SimClock clock(0);
   // Robot role instances: the real stage tables, quiet status stages (the runner reports instead).
-  auto make_role = [&](const RoleDescription& role, int id, const std::string& name, std::vector<Config>& cfgs,
-                       const std::vector<std::string>& extra = {}, const char* what = "") -> Result<std::unique_ptr<RoleInstance>> {
-    Config c = Config::defaults(role_schema(role));
-    if (auto st = c.set("robot.id=" + std::to_string(id)); !st) return st.error();
-    if (auto st = c.set("robot.name=" + name); !st) return st.error();
-    if (auto st = c.set("status.log_counters=false"); !st) return st.error();
+  // Each robot starts from its role's shipped configuration (built in from firmware_host/<role>/<role>.yaml),
+  // read over its full table's schema plus the simulator's own stages, so the sections of the device
+  // stages the simulator replaces stay and the start-up check sees what the simulated devices give. The
+  // simulator then sets only what it must: robot id and name, device backends, comms transport, mission
+  // area and start keys (tests/unit/sim/test_runner_shipped_config.cpp holds it to that).
+  const bool labels_oracle = opt.oracle("labels");
+  auto make_role = [&](const RoleDescription& role, const RoleDescription& shipped_role, int id, const std::string& name,
+                       std::vector<Config>& cfgs, const std::vector<std::string>& extra = {},
+                       const char* what = "") -> Result<std::unique_ptr<RoleInstance>> {
+    std::vector<StageSpec> all(shipped_role.stages.begin(), shipped_role.stages.end());
+    for (const StageSpec& st : role.stages)
+      if (std::none_of(all.begin(), all.end(), [&](const StageSpec& a) { return std::string_view(a.name) == st.name; })) all.push_back(st);
+    RoleDescription schema_role = shipped_role;
+    schema_role.stages = all;
+    const std::string origin = "firmware_host/" + std::string(shipped_role.name) + "/" + std::string(shipped_role.name) + ".yaml (built into airground-sim)";
+    auto loaded = Config::load_string(role_schema(schema_role), shipped_config_yaml(shipped_role.name), origin);
+    if (!loaded) return loaded.error();
+    Config c = std::move(loaded).value();
+    std::vector<std::string> sim = {"robot.id=" + std::to_string(id), "robot.name=" + name,
+                                    "status.log_counters=false"};  // the runner reports the counters
+    if (c.has("comms.journal")) {
+      sim.emplace_back("comms.journal=");  // a file on the robot; the simulation keeps its store in memory
+      if (!opt.gossip) sim.emplace_back("comms.transport=none");
+    }
+    if (c.has("segmentation.weights")) sim.push_back("segmentation.weights=" + erfnet_weights_path(c.get_text("segmentation.weights")));
+    if (labels_oracle) {  // the ablation: the drivers hand over the truth and the robots use it
+      if (c.has("segmentation.labels")) sim.emplace_back("segmentation.labels=gt");
+      if (c.has("camera.source")) sim.emplace_back("camera.source=replay");  // frames with classes, as HIL's frame stream
+      if (c.has("localization.labels")) sim.emplace_back("localization.labels=gt");
+      if (c.has("lidar.classes")) sim.emplace_back("lidar.classes=reflectivity");  // points with classes, as HIL's packets
+    }
+    for (const auto& kv : sim)
+      if (auto st = c.set(kv, "the simulator"); !st) return st.error();
     for (const auto& kv : extra)
       if (auto st = c.set(kv, what); !st) return st.error();
+    if (auto st = check_sensor_labels(c, origin + " with the simulator's settings and the " + what); !st) return st.error();
     cfgs.push_back(std::move(c));
     return RoleInstance::create(role, cfgs.back(), clock, name);
   };
@@ -1434,13 +1476,14 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     // The simulator is the quadrotor's camera (and its VO) and its GNSS receiver: it writes their channels.
     RoleDescription uav_desc = uav_role();
     u->vo_oracle = opt.oracle("vo");
+    u->labels_oracle = labels_oracle;
     for (const StageSpec& st : uav_desc.stages)
       if (!is_simulated_driver(st.name) && !(u->vo_oracle && st.name == "vo")) t.uav_stages.push_back(st);
     if (!u->vo_oracle)
       t.uav_stages.push_back(StageSpec{"sim_vo_tap", &SimVoTapStage::make, 10.0, 90'000, 1, -1, SimVoTapStage::kParams,
                                        "simulator: counts and logs the quadrotor's own odometry"});
     uav_desc.stages = t.uav_stages;
-    auto role = make_role(uav_desc, 0, "uav", cfgs, uav_extra, "quadrotor config override");
+    auto role = make_role(uav_desc, uav_role(), 0, "uav", cfgs, uav_extra, "quadrotor config override");
     if (!role) return role.error();
     u->role = std::move(role).value();
     auto cam_w = u->role->channels().ring_writer<CameraImageMsg, kCameraRing>("camera");
@@ -1493,6 +1536,8 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     ugv_extra.emplace_back("comms.send_pose=true");
     if (opt.ugv_map == UgvMapSource::kNone) ugv_extra.emplace_back("comms.deliver_map_tiles=true");
   }
+  // The runner is then the robots' map link and writes their map_tiles itself.
+  if (!opt.gossip || opt.ugv_map != UgvMapSource::kNone) ugv_extra.emplace_back("comms.deliver_map_tiles=false");
   if (opt.drive_by_stages || opt.gossip) {  // the planner's roadmap covers the world
     const GridGeometry& g = w.grid();
     char buf[160];
@@ -1559,7 +1604,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
       const auto more = opt.ugv_config_for(i, start);
       extra_i.insert(extra_i.end(), more.begin(), more.end());
     }
-    auto role = make_role(ugv_desc, i + 1, name, cfgs, extra_i, "ground robot config override");
+    auto role = make_role(ugv_desc, ugv_role(), i + 1, name, cfgs, extra_i, "ground robot config override");
     if (!role) return role.error();
     u->role = std::move(role).value();
     u->index = i;
@@ -1626,7 +1671,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     if (opt.gossip) base_extra.emplace_back("comms.deliver_map_tiles=true");
     base_extra.emplace_back("web.log_path=" + (t.out / "mission_log.jsonl").string());
     base_extra.insert(base_extra.end(), opt.base_config.begin(), opt.base_config.end());
-    auto role = make_role(base_role(), 250, "base", cfgs, base_extra, "base station config");
+    auto role = make_role(base_role(), base_role(), 250, "base", cfgs, base_extra, "base station config");
     if (!role) return role.error();
     t.base = std::move(role).value();
   }
@@ -1673,6 +1718,20 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
         },
         &t);
   }
+  if (opt.record != RecordLevel::kNone && opt.record_mcap) {
+    TeamRecordingOptions ro;
+    ro.scheduler_period_s = opt.record_scheduler_period_s;
+    ro.lidar_mount_height_m = opt.lidar_mount_height_m;
+    auto recording = TeamRecording::open((t.out / "recording.mcap").string(), *t.world, t.uav != nullptr, static_cast<int>(t.ugvs.size()), opt.seed, ro);
+    if (!recording) return recording.error();
+    t.mcap = std::move(recording).value();
+    std::vector<std::pair<std::string, RoleInstance*>> roles;
+    if (t.uav) roles.emplace_back("uav", t.uav->role.get());
+    for (auto& u : t.ugvs) roles.emplace_back(u->name, u->role.get());
+    roles.emplace_back("base", t.base.get());
+    const auto* om = t.uav ? find_stage<mapping::OrthoMapStage>(t.uav->role.get()) : nullptr;
+    t.mcap->watch(std::move(roles), om != nullptr ? &om->map() : nullptr);
+  }
   exec.start(0);
 
   const double duration_s = opt.duration_survey_factor > 0 && opt.uav ? std::max(opt.duration_s, opt.duration_survey_factor * survey_time_s)
@@ -1718,20 +1777,6 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   s.sim_s = to_seconds(ended);
   s.uav_route_estimate_s = survey_time_s;
   s.duration_cap_s = duration_s;
-  if (opt.record != RecordLevel::kNone && opt.record_mcap) {
-    TeamRecordingOptions ro;
-    ro.scheduler_period_s = opt.record_scheduler_period_s;
-    ro.lidar_mount_height_m = opt.lidar_mount_height_m;
-    auto recording = TeamRecording::open((t.out / "recording.mcap").string(), *t.world, t.uav != nullptr, static_cast<int>(t.ugvs.size()), opt.seed, ro);
-    if (!recording) return recording.error();
-    t.mcap = std::move(recording).value();
-    std::vector<std::pair<std::string, RoleInstance*>> roles;
-    if (t.uav) roles.emplace_back("uav", t.uav->role.get());
-    for (auto& u : t.ugvs) roles.emplace_back(u->name, u->role.get());
-    roles.emplace_back("base", t.base.get());
-    const auto* om = t.uav ? find_stage<mapping::OrthoMapStage>(t.uav->role.get()) : nullptr;
-    t.mcap->watch(std::move(roles), om != nullptr ? &om->map() : nullptr);
-  }
   s.wall_s = wall_s;
   s.real_time_factor = wall_s > 0 ? s.sim_s / wall_s : 0;
   s.process_cpu_s = process_cpu_seconds() - process_cpu0;
@@ -1819,15 +1864,23 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     in.survey_y0 = g.origin_y - g.size_y() + opt.survey_margin_m;
     in.survey_x1 = g.origin_x + g.size_x() - opt.survey_margin_m;
     in.survey_y1 = g.origin_y - opt.survey_margin_m;
+    in.role_configs = &cfgs;
     if (auto st = opt.inspect(in); !st) return st.error();
   }
-  if (auto st = write_reports(t, s); !st) return st.error();
-  return s;
-}
-
-}  // namespace ag::sim
   if (t.mcap) {
     if (auto st = t.mcap->close(s.sim_s); !st) return st.error();
     s.recording_messages = t.mcap->stats().messages;
     s.recording_bytes = t.mcap->stats().bytes;
   }
+  if (auto st = write_reports(t, s); !st) return st.error();
+  return s;
+}
+
+std::string_view shipped_config_yaml(std::string_view role) noexcept {
+  if (role == "uav") return shipped::k_uav_yaml;
+  if (role == "ugv") return shipped::k_ugv_yaml;
+  if (role == "base") return shipped::k_base_yaml;
+  return {};
+}
+
+}  // namespace ag::sim

@@ -62,7 +62,7 @@ TEST(Study, TablesCarryRepeatVisitsAndFirstAndLastVisitTimes) {
 
   const std::string csv = read(dir / "study.csv");
   EXPECT_NE(csv.find(",repeat_visits,first_visit_s,last_visit_s\n"), std::string::npos) << csv;
-  EXPECT_NE(csv.find("u2_r50_s1,2,50,1,"), std::string::npos) << csv;
+  EXPECT_NE(csv.find("u2_r50_s1,2,50,1,?,"), std::string::npos) << csv;  // oracles not recorded
   EXPECT_NE(csv.find(",2,1100,1500.5\n"), std::string::npos) << csv;  // the bad line is skipped
   EXPECT_NE(csv.find(",0,1000,1000\n"), std::string::npos) << csv;
   EXPECT_NE(csv.find(",-1,-1,-1\n"), std::string::npos) << csv;
@@ -83,6 +83,26 @@ TEST(Study, TablesCarryRepeatVisitsAndFirstAndLastVisitTimes) {
   EXPECT_NE(md.find("| 1 | – | – |", first), std::string::npos) << md;
   EXPECT_NE(md.find("| 2 | 1.0 | – |", repeat), std::string::npos) << md;
   EXPECT_TRUE(fs::exists(dir / "mission_time.png"));
+}
+
+// Every table says which ground truth reached the robots: none (field mode) or the oracles named.
+TEST(Study, TablesListTheOraclesOfEveryMission) {
+  const fs::path dir = fs::path(::testing::TempDir()) / "study-oracles";
+  fs::remove_all(dir);
+  auto with = [](std::string m, const std::string& oracles) { return m.insert(1, "\"oracles\": " + oracles + ", "); };
+  write(dir / "runs/u1_r150_s1/metrics.json", with(metrics(1, 150, 1, 1000, 3, {3}), "[]"));
+  write(dir / "runs/u1_r150_s2/metrics.json", with(metrics(1, 150, 2, 1000, 3, {3}), "[]"));
+  ASSERT_TRUE(summarise_study(dir.string()).ok());
+  EXPECT_NE(read(dir / "study.csv").find("u1_r150_s1,1,150,1,none,"), std::string::npos) << read(dir / "study.csv");
+  EXPECT_EQ(read(dir / "study.md").find("# airground study\n\nField mode: no ground truth reached a robot"), 0u) << read(dir / "study.md");
+
+  write(dir / "runs/u1_r150_s2/metrics.json", with(metrics(1, 150, 2, 1000, 3, {3}), "[\"labels\", \"vo\"]"));
+  ASSERT_TRUE(summarise_study(dir.string()).ok());
+  const std::string csv = read(dir / "study.csv"), md = read(dir / "study.md");
+  EXPECT_NE(csv.find("u1_r150_s2,1,150,2,labels+vo,"), std::string::npos) << csv;
+  EXPECT_EQ(md.find("# airground study\n\nABLATION"), 0u) << md;
+  EXPECT_NE(md.find("- oracles labels+vo: 1 mission (u1_r150_s2)"), std::string::npos) << md;
+  EXPECT_NE(md.find("- oracles none: 1 mission (u1_r150_s1)"), std::string::npos) << md;
 }
 
 }  // namespace

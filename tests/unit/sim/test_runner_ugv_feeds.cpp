@@ -115,6 +115,9 @@ class UgvFeeds : public ::testing::Test {
 
 TEST_F(UgvFeeds, ScansOdometryInitialPoseAndGroundTruthTilesArrive) {
   RunOptions o = options("feeds");
+  // The simulator's true point classes are the ablation --oracle labels (field mode's scans carry none:
+  // test_runner_shipped_config.cpp); this checks that the truth it hands over is right.
+  o.oracles = {"labels"};
   o.ugv_map = UgvMapSource::kGroundTruth;
   o.init_error_m = 16;
   o.init_yaw_error_deg = 30;
@@ -180,7 +183,7 @@ TEST_F(UgvFeeds, ScansOdometryInitialPoseAndGroundTruthTilesArrive) {
   ASSERT_TRUE(r.ok()) << r.error().message;
   const RobotSummary& s = r.value().ugvs.at(0);
 
-  // LiDAR: every revolution at 10 Hz from t = 0, labelled with the world's classes.
+  // LiDAR: every revolution at 10 Hz from t = 0, labelled with the world's classes (--oracle labels).
   EXPECT_EQ(scan_stamps.size(), 31u);
   EXPECT_EQ(s.scans_published, 31u);
   EXPECT_EQ(s.channel_drops, 0u);

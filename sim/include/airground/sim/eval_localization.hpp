@@ -27,7 +27,9 @@ struct EvalLocalizationOptions {
   double init_yaw_error_deg{30};    // [deg] ... and turned by exactly this much (sign by seed)
   double route_km{2};               // length of the road loop to drive
   double speed_mps{1.2};            // scripted driving speed
-  std::string labels{};             // "gt" or "geometric": the ground robot's localization.labels, if it has that key
+  std::string labels{};             // "gt" or "geometric": the ground robot's localization.labels (empty: the shipped
+                                    // geometric, or gt with the labels oracle); gt needs the labels oracle
+  std::vector<std::string> oracles{};  // ground truth for the robot by name (RunOptions::oracles), an ablation
   std::vector<std::string> set{};   // "section.key=value" on the ground robot's role config
   double stand_still_s{0};          // > 0: the robot stands this long ...
   double stand_still_at_s{120};     // [s] ... from this simulated time

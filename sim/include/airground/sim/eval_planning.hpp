@@ -26,6 +26,7 @@ struct EvalPlanningOptions {
   bool localizer_pose{false};
   double speed_mps{1.2};
   std::vector<std::string> set{};   // "planner.key=value" / "drive.key=value" overrides of the ugv role config
+  std::vector<std::string> oracles{};  // with localizer_pose: ground truth for the robot by name (RunOptions::oracles)
   bool quiet{false};
 };
 

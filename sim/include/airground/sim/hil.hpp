@@ -30,6 +30,10 @@ struct HilOptions {
   double lidar_mount_height_m{0.6};
   double camera_hz{5};
   bool progress{true};
+  // Ground truth for the robots by name (RunOptions::oracles), an ablation: "labels" puts the true class
+  // in the frames and in the Ouster reflectivity byte, and the robots use it (segmentation.labels and
+  // localization.labels gt). Without it the reflectivity byte is the surface's albedo.
+  std::vector<std::string> oracles{};
 };
 
 struct HilStageTiming {

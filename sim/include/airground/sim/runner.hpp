@@ -17,6 +17,7 @@
 #include "airground/sim/world.hpp"
 
 namespace ag {
+class Config;
 class RoleInstance;
 struct LidarScanMsg;
 struct WheelOdometryMsg;
@@ -42,7 +43,15 @@ struct RunInspection {
   std::uint64_t vo_segments{0};
   std::uint64_t vo_tracking_losses{0};
   double survey_x0{0}, survey_y0{0}, survey_x1{0}, survey_y1{0};  // [m] the area the survey covers
+  // Every robot's role configuration as the simulator gave it: the quadrotor (with one), the ground
+  // robots in order, the base station (RunOptions::base). The shipped file's sections of the device
+  // stages the simulator replaces are kept.
+  const std::vector<Config>* role_configs{nullptr};
 };
+
+// The robots' shipped configuration built into the simulator at build time (firmware_host/<role>/<role>.yaml
+// for "uav", "ugv", "base"; empty for another name): what every simulated robot starts from.
+[[nodiscard]] std::string_view shipped_config_yaml(std::string_view role) noexcept;
 
 enum class RecordLevel { kNone, kLight, kFull };
 
@@ -114,6 +123,11 @@ struct RunOptions {
   double heartbeat_hz{1};         // radio: each robot's status datagram
   std::string config_dir{};       // optional YAML overrides: gps.yaml, visual_odometry.yaml, wheel_odometry.yaml, radio.yaml, diff_drive.yaml, quadrotor.yaml, camera.yaml, lidar_noise.yaml
   RecordLevel record{RecordLevel::kLight};
+  // recording.mcap (Foxglove's schemas, docs/simulator.md "Recordings") unless record is kNone; its
+  // /scheduler channel every this many simulated seconds (0 = none: stage times are CPU times, the one
+  // channel two runs of a seed do not repeat).
+  bool record_mcap{true};
+  double record_scheduler_period_s{10};
   int threads{0};                 // sensor worker threads, 0 = all cores
   bool parallel_robots{true};     // with threads > 1, the robots' stages of one release time run side by side (same results)
   bool progress{true};
@@ -123,11 +137,6 @@ struct RunOptions {
   // After the survey the quadrotor flies back over its launch point at survey height and hovers there (as
   // PX4 and ArduPilot return to launch at the end of a mission): a team with a short radio range hears
   // the last regions there. The run's "survey done" includes the return.
-  // recording.mcap (Foxglove's schemas, docs/simulator.md "Recordings") unless record is kNone; its
-  // /scheduler channel every this many simulated seconds (0 = none: stage times are CPU times, the one
-  // channel two runs of a seed do not repeat).
-  bool record_mcap{true};
-  double record_scheduler_period_s{10};
   bool uav_return_home{false};
   // Tell the ground robots when the survey (with the return) should end, as mission.survey_end_s (the
   // route's flying time, estimate_route_time_s): until then one with nothing to do waits for regions.
@@ -146,6 +155,9 @@ struct RunOptions {
   // Ground truth handed to the robots, by name, for an ablation the user asks for; none by default.
   // "vo": the quadrotor's odometry from the simulator's VO model (true motion, scaled, with noise and losses)
   // instead of its own vo stage on the rendered frames.
+  // "labels": the camera frames carry the renderer's true classes and the LiDAR points the world's, and the
+  // robots use them (segmentation.labels gt, localization.labels gt) instead of ErfNet and the geometric
+  // labeller.
   std::vector<std::string> oracles{};
   // The oracle list as JSON ("[]" or ["vo", ...]) and as the report's first line.
   [[nodiscard]] std::string oracles_json() const {
@@ -280,6 +292,7 @@ struct RunSummary {
   std::uint64_t radio_sent{0}, radio_delivered{0}, radio_dropped_range{0}, radio_dropped_loss{0}, radio_dropped_queue{0};
   std::uint64_t radio_bytes_sent{0}, radio_bytes_delivered{0};  // payload bytes put on the air / received
   std::uint64_t stage_overruns{0};
+  std::uint64_t recording_messages{0}, recording_bytes{0};  // recording.mcap (0 without one)
   std::vector<RobotSummary> ugvs;
 };
 
@@ -292,7 +305,6 @@ Result<RunSummary> run_team(const RunOptions& options, const ProgressFn& progres
 // Loads a world directory, or generates the built-in default for "default".
 Result<std::shared_ptr<const World>> resolve_world(const std::string& world_arg);
 
-  std::uint64_t recording_messages{0}, recording_bytes{0};  // recording.mcap (0 without one)
 // A team key as an operator makes one (64 hex digits, owner-only), drawn from `seed` so a run repeats;
 // the lockstep runner and the HIL mode write one per run. The error names the file.
 Status write_team_key(const std::string& path, std::uint64_t seed);
