@@ -1190,6 +1190,7 @@ Status write_reports(const Team& t, const RunSummary& s) {
   cv::imwrite((t.out / "trajectories.png").string(), trajectories_image(t));
   std::ofstream y(t.out / "summary.yaml");
   y << "# airground-sim run summary\n"
+    << "oracles: " << t.opt.oracles_json() << "\n"
     << "world: " << t.opt.world << "\nseed: " << t.opt.seed << "\nugvs: " << t.opt.ugvs << "\nuav: " << (t.opt.uav ? "true" : "false")
     << "\nsim_s: " << s.sim_s << "\nwall_s: " << s.wall_s << "\nreal_time_factor: " << s.real_time_factor
     << "\nsensor_cpu_s: " << s.sensor_cpu_s << "\ncamera_cpu_s: " << s.camera_cpu_s << "\nlidar_cpu_s: " << s.lidar_cpu_s
@@ -1213,7 +1214,7 @@ Status write_reports(const Team& t, const RunSummary& s) {
       << ", localization: {status: \"" << r.loc_status << "\", tracking_fraction: " << r.loc_tracking_fraction << ", first_tracking_s: " << r.loc_first_tracking_s
       << ", error_mean_m: " << r.loc_error_mean_m << ", error_p95_m: " << r.loc_error_p95_m << ", error_max_m: " << r.loc_error_max_m << "}}\n";
   std::ofstream j(t.out / "summary.json");
-  j << "{\"sim_s\": " << s.sim_s << ", \"wall_s\": " << s.wall_s << ", \"real_time_factor\": " << s.real_time_factor
+  j << "{\"oracles\": " << t.opt.oracles_json() << ", \"sim_s\": " << s.sim_s << ", \"wall_s\": " << s.wall_s << ", \"real_time_factor\": " << s.real_time_factor
     << ", \"cpu_s\": {\"process\": " << s.process_cpu_s << ", \"camera\": " << s.camera_cpu_s << ", \"lidar\": " << s.lidar_cpu_s;
   for (const auto& [name, cpu] : s.robot_cpu_s) j << ", \"" << name << "\": " << cpu;
   j << "}"
@@ -1234,7 +1235,7 @@ Status write_reports(const Team& t, const RunSummary& s) {
   }
   j << "]}\n";
   std::ofstream m(t.out / "report.md");
-  m << "# airground-sim run\n\n"
+  m << "# airground-sim run\n\n" << t.opt.oracles_line() << "\n\n"
     << "World `" << t.opt.world << "`, seed " << t.opt.seed << ", " << (t.opt.uav ? "1 quadrotor + " : "") << t.opt.ugvs
     << " ground robots, " << s.sim_s << " s simulated in " << s.wall_s << " s (real-time factor " << s.real_time_factor << "x).\n\n"
     << "CPU over the run, in core-seconds per simulated second (the machine's cores divided by the total bound the "
