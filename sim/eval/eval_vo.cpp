@@ -211,6 +211,8 @@ Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress
 
   // Relative errors over consecutive pairs about pair_distance_m apart (true distance), same segment.
   std::vector<double> rot, dir, tilt, pair_t, pair_rot, pair_dir;
+  Eigen::Vector3d signed_err_sum = Eigen::Vector3d::Zero();
+  std::size_t signed_n = 0;
   struct ScalePoint {
     double d, log_s;
   };
@@ -233,6 +235,12 @@ Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress
     const Eigen::Matrix3d dv = a.vo.linear().transpose() * b.vo.linear();
     const Eigen::Matrix3d dt_ = a.truth.linear().transpose() * b.truth.linear();
     rot.push_back(angle_deg(dv.transpose() * dt_));
+    {
+      const Eigen::AngleAxisd e(dt_.transpose() * dv);  // error rotation in body frame a
+      const Eigen::Vector3d ev = e.angle() * e.axis() * 180.0 / M_PI;
+      signed_err_sum += ev;
+      ++signed_n;
+    }
     const Eigen::Vector3d tv = a.vo.linear().transpose() * (b.vo.translation() - a.vo.translation());
     const Eigen::Vector3d tt = a.truth.linear().transpose() * (b.truth.translation() - a.truth.translation());
     if (tv.norm() > 1e-9 && tt.norm() > 1e-9) {
@@ -249,6 +257,7 @@ Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress
     if (s.tracking)
       tilt.push_back(std::acos(std::clamp(s.vo.linear().col(2).dot(s.truth.linear().col(2)), -1.0, 1.0)) * 180.0 / M_PI);
   m.rpe_pairs = rot.size();
+  if (signed_n > 0) m.rpe_rotation_mean_deg = signed_err_sum / static_cast<double>(signed_n);
   m.rpe_rotation_deg_p50 = quantile(rot, 0.5);
   m.rpe_rotation_deg_p95 = quantile(rot, 0.95);
   m.rpe_translation_direction_deg_p50 = quantile(dir, 0.5);
@@ -280,7 +289,8 @@ Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress
       << (o.attitude ? "true" : "false") << ",\n  \"frames\": " << m.frames << ",\n  \"tracked_frames\": " << m.tracked_frames
       << ",\n  \"tracked_fraction\": " << m.tracked_fraction << ",\n  \"segments\": " << m.segments << ",\n  \"keyframes\": " << m.keyframes
       << ",\n  \"rpe_pairs\": " << m.rpe_pairs << ",\n  \"rpe_rotation_deg_p50\": " << m.rpe_rotation_deg_p50
-      << ",\n  \"rpe_rotation_deg_p95\": " << m.rpe_rotation_deg_p95 << ",\n  \"rpe_translation_direction_deg_p50\": "
+      << ",\n  \"rpe_rotation_deg_p95\": " << m.rpe_rotation_deg_p95 << ",\n  \"rpe_rotation_mean_body_xyz_deg\": ["
+      << m.rpe_rotation_mean_deg.x() << ", " << m.rpe_rotation_mean_deg.y() << ", " << m.rpe_rotation_mean_deg.z() << "]" << ",\n  \"rpe_translation_direction_deg_p50\": "
       << m.rpe_translation_direction_deg_p50 << ",\n  \"rpe_translation_direction_deg_p95\": " << m.rpe_translation_direction_deg_p95
       << ",\n  \"scale_drift_percent_per_100m\": " << m.scale_drift_percent_per_100m << ",\n  \"tilt_error_deg_p95\": " << m.tilt_error_deg_p95
       << ",\n  \"ms_per_frame_p50\": " << m.ms_per_frame_p50 << ",\n  \"ms_per_frame_p99\": " << m.ms_per_frame_p99

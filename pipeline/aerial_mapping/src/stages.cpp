@@ -64,6 +64,8 @@ Status PoseGraphStage::init(StageContext& ctx) {
   p.gps_gate_floor_m = v.real("gps_gate_floor_m");
   p.min_gps_fixes = static_cast<int>(v.integer("min_gps_fixes"));
   p.min_gps_baseline_m = v.real("min_gps_baseline_m");
+  p.scale_knot_s = v.real("scale_knot_s");
+  p.scale_drift_per_sqrt_s = v.real("scale_drift_per_sqrt_s");
   keyframe_distance_m_ = v.real("keyframe_distance_m");
   segment_settle_m_ = v.real("segment_settle_m");
   max_image_wait_s_ = v.real("max_image_wait_s");

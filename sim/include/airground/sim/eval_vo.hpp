@@ -2,6 +2,7 @@
 // scored against the true trajectory (relative pose errors, scale drift, tracking, cost per frame).
 #pragma once
 
+#include <Eigen/Core>
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -34,6 +35,7 @@ struct VoMetrics {
   double rpe_rotation_deg_p50{0}, rpe_rotation_deg_p95{0};
   double rpe_translation_direction_deg_p50{0}, rpe_translation_direction_deg_p95{0};
   std::uint64_t rpe_pairs{0};
+  Eigen::Vector3d rpe_rotation_mean_deg{0, 0, 0};  // signed mean of the pair errors about body x, y, z (a bias the stereo feels)
   double scale_drift_percent_per_100m{0};  // |drift| per 100 m flown, mean over segments weighted by length
   double tilt_error_deg_p95{0};            // the published roll/pitch against the true gravity
   double ms_per_frame_p50{0}, ms_per_frame_p99{0};  // thread CPU of the VO per frame

@@ -66,6 +66,8 @@ class PoseGraphStage final : public Stage {
       ParamSpec::real("gps_gate_floor_m", 5.0, 0.0, 1000.0, "m", "... but never fixes closer than this"),
       ParamSpec::integer("min_gps_fixes", 3, 2, 1000, "fixes", "GPS fixes a segment needs before it is georeferenced"),
       ParamSpec::real("min_gps_baseline_m", 4.0, 0.0, 1000.0, "m", "spread those fixes need (scale and yaw need motion)"),
+      ParamSpec::real("scale_knot_s", 2.0, 0.0, 600.0, "s", "a log-scale knot of the odometry every this many seconds; 0 = one scale per segment (ASOOM)"),
+      ParamSpec::real("scale_drift_per_sqrt_s", 0.002, 0.0, 1.0, "1/sqrt(s)", "random walk allowed to the odometry's log-scale between knots"),
   };
   static std::unique_ptr<Stage> make() { return std::make_unique<PoseGraphStage>(); }
 
