@@ -17,6 +17,7 @@
 #include "airground/sim/generator.hpp"
 #include "airground/sim/runner.hpp"
 #include "airground/sim/world.hpp"
+#include "airground/visual_odometry/stage.hpp"
 
 namespace ag::sim {
 namespace {
@@ -53,12 +54,18 @@ void check_uav_budgets(const std::string& name, double duration_s, const std::ve
   o.progress = false;
   std::vector<Measured> measured;
   std::uint64_t keyframes = 0, pairs = 0, segmented = 0;
+  vo::VoStageCounters vo_counters;
+  bool vo_seen = false;
   o.inspect = [&](const RunInspection& in) -> Status {
     for (auto& slot : in.uav->stages()) {
       measured.push_back(Measured{std::string(slot.spec->name), snapshot(*slot.perf)});
       if (auto* pg = dynamic_cast<const mapping::PoseGraphStage*>(slot.stage.get())) keyframes = pg->keyframes();
       if (auto* om = dynamic_cast<const mapping::OrthoMapStage*>(slot.stage.get())) pairs = om->counters().pairs_matched;
       if (auto* sg = dynamic_cast<const seg::SegmentationStage*>(slot.stage.get())) segmented = sg->counters().segmented;
+      if (auto* v = dynamic_cast<const vo::VoStage*>(slot.stage.get())) {
+        vo_counters = v->counters();
+        vo_seen = true;
+      }
     }
     return ok_status();
   };
@@ -70,6 +77,15 @@ void check_uav_budgets(const std::string& name, double duration_s, const std::ve
   EXPECT_GT(keyframes, min_keyframes);
   EXPECT_GT(pairs, min_pairs);
   EXPECT_GE(segmented, min_segmented);
+  // The vo stage ran on the camera's frames (5 Hz) with the autopilot's attitude, not on empty rings.
+  EXPECT_TRUE(vo_seen) << "no vo stage in the uav table";
+  EXPECT_GT(static_cast<double>(vo_counters.frames), 2.0 * duration_s) << "vo frames";
+  EXPECT_GT(vo_counters.frames_with_attitude, vo_counters.frames / 2) << "vo frames with the autopilot's attitude";
+  EXPECT_GT(vo_counters.tracked, vo_counters.frames / 2) << "vo frames tracked";
+  std::printf("vo stage: %llu frames (%llu with attitude), %llu tracked, %llu keyframes, %llu segments, %llu dropped\n",
+              static_cast<unsigned long long>(vo_counters.frames), static_cast<unsigned long long>(vo_counters.frames_with_attitude),
+              static_cast<unsigned long long>(vo_counters.tracked), static_cast<unsigned long long>(vo_counters.keyframes),
+              static_cast<unsigned long long>(vo_counters.segments), static_cast<unsigned long long>(vo_counters.frames_dropped_busy));
   std::printf("uav stages in the runner (%s): %llu keyframes, %llu segmented; calibration median %.2f ms, scale %.2f\n", name.c_str(), static_cast<unsigned long long>(keyframes),
               static_cast<unsigned long long>(segmented), to_seconds(cal.median_ns) * 1e3, cal.scale);
   std::printf("  %-12s %6s %10s %10s %10s %10s\n", "stage", "runs", "p50_ms", "p99_ms", "max_ms", "scaled_ms");
