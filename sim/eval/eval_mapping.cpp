@@ -132,6 +132,10 @@ Result<std::string> model_dir(const EvalMappingOptions& o) {
 }  // namespace
 
 Result<MappingMetrics> eval_mapping(const EvalMappingOptions& o, const ProgressFn& progress) {
+  const bool oracle_vo = std::find(o.oracles.begin(), o.oracles.end(), "vo") != o.oracles.end();
+  if (!oracle_vo && (o.vo_scale > 0 || o.tracking_loss_at_s >= 0))
+    return Error::make(ErrorCode::kInvalidArgument,
+                       "eval mapping: vo_scale and tracking_loss_at_s shape the simulator's VO model; they need the oracle \"vo\"");
   auto models = model_dir(o);
   if (!models) return models.error();
   RunOptions r;
