@@ -107,18 +107,7 @@ Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress
     if (!a) return a.error();
     att_cfg = a.value();
   }
-  PinholeCamera cam;
-  cam.width = model.width;
-  cam.height = model.height;
-  cam.fx = model.fx;
-  cam.fy = model.fy;
-  cam.cx = model.cx;
-  cam.cy = model.cy;
-  cam.k1 = model.k1;
-  cam.k2 = model.k2;
-  cam.p1 = model.p1;
-  cam.p2 = model.p2;
-  cam.k3 = model.k3;
+  const PinholeCamera cam = model.pinhole();
   auto params = vo_params(o, cam);
   if (!params) return params.error();
 
@@ -181,9 +170,6 @@ Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress
     const TimeNs v0 = thread_cpu_now();
     const vo::VoFrame f = odo.process(stamp, frame.rgb.ptr<std::uint8_t>(0), o.attitude ? att_R : std::nullopt);
     vo_ms.push_back(to_seconds(thread_cpu_now() - v0) * 1e3);
-    if (std::getenv("AG_VO_DEBUG"))
-      std::fprintf(stderr, "t %.1f trk %d seg %u kf %d tracked %d inl %d pos %.1f %.1f %.1f vo %.2f %.2f %.2f\n", t, f.tracking, f.segment, f.keyframe, f.tracked,
-                   f.inliers, p.x, p.y, p.z, f.body_in_segment.translation().x(), f.body_in_segment.translation().y(), f.body_in_segment.translation().z());
     Sample s;
     s.t = t;
     s.tracking = f.tracking;

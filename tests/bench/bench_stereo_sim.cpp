@@ -134,18 +134,7 @@ int main() {
   const ag::sim::World& world = ag::sim::default_world();
   const ag::sim::CameraModel model = ag::sim::CameraModel{}.scaled(0.5);
   const ag::sim::CameraRenderer renderer(world, model);
-  ag::PinholeCamera cam;
-  cam.width = model.width;
-  cam.height = model.height;
-  cam.fx = model.fx;
-  cam.fy = model.fy;
-  cam.cx = model.cx;
-  cam.cy = model.cy;
-  cam.k1 = model.k1;
-  cam.k2 = model.k2;
-  cam.p1 = model.p1;
-  cam.p2 = model.p2;
-  cam.k3 = model.k3;
+  const ag::PinholeCamera cam = model.pinhole();
 
   // The 10 m grid point with the most building cells within 15 m (as the unit test picks it).
   double bx = 0, by = 0;

@@ -78,22 +78,6 @@ double quantile(std::vector<double> v, double q) {
   return v[std::min(v.size() - 1, static_cast<std::size_t>(q * static_cast<double>(v.size() - 1) + 0.5))];
 }
 
-ag::PinholeCamera pinhole(const sim::CameraModel& m) {
-  ag::PinholeCamera c;
-  c.width = m.width;
-  c.height = m.height;
-  c.fx = m.fx;
-  c.fy = m.fy;
-  c.cx = m.cx;
-  c.cy = m.cy;
-  c.k1 = m.k1;
-  c.k2 = m.k2;
-  c.p1 = m.p1;
-  c.p2 = m.p2;
-  c.k3 = m.k3;
-  return c;
-}
-
 vo::CameraPose camera_pose(const Eigen::Matrix3d& R_wb, const Eigen::Vector3d& centre) {
   const Eigen::Matrix3d R_wc = R_wb * ag::nadir_body_from_camera();
   vo::CameraPose p;
@@ -213,7 +197,7 @@ int main() {
   const bool pinned = !cpus.empty() && ag::bench::pin_this_thread(cpus.back());
   cv::setNumThreads(1);
   const sim::CameraModel model = sim::CameraModel{}.scaled(0.5);
-  const ag::PinholeCamera cam = pinhole(model);
+  const ag::PinholeCamera cam = model.pinhole();
   const cv::Matx33d K(cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1);
 
   double render_ms = 0;

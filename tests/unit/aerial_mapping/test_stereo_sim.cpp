@@ -51,22 +51,6 @@ using ag::mapping::RectifiedGeometry;
 using ag::mapping::StereoImage;
 using ag::mapping::StereoParams;
 
-ag::PinholeCamera pinhole(const ag::sim::CameraModel& m) {
-  ag::PinholeCamera c;
-  c.width = m.width;
-  c.height = m.height;
-  c.fx = m.fx;
-  c.fy = m.fy;
-  c.cx = m.cx;
-  c.cy = m.cy;
-  c.k1 = m.k1;
-  c.k2 = m.k2;
-  c.p1 = m.p1;
-  c.p2 = m.p2;
-  c.k3 = m.k3;
-  return c;
-}
-
 Eigen::Isometry3d camera_pose(const Pose3& body) {
   Eigen::Isometry3d t = ag::to_isometry(body);
   t.linear() = t.linear() * ag::nadir_body_from_camera();
@@ -89,7 +73,7 @@ struct Frame {
 struct Scene {
   const ag::sim::World& world = ag::sim::default_world();
   ag::sim::CameraModel model = ag::sim::CameraModel{}.scaled(0.5);
-  ag::PinholeCamera camera = pinhole(model);
+  ag::PinholeCamera camera = model.pinhole();
   ag::sim::CameraRenderer renderer{world, model};
   Pose3 cur_body;   // 40 m over the most built-up spot of the world, flying north-east-ish
   Pose3 prev_body;  // 2 m behind it along body x

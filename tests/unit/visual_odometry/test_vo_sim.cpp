@@ -30,22 +30,6 @@ struct Shot {
   double dist{0};
 };
 
-PinholeCamera pinhole(const CameraModel& m) {
-  PinholeCamera c;
-  c.width = m.width;
-  c.height = m.height;
-  c.fx = m.fx;
-  c.fy = m.fy;
-  c.cx = m.cx;
-  c.cy = m.cy;
-  c.k1 = m.k1;
-  c.k2 = m.k2;
-  c.p1 = m.p1;
-  c.p2 = m.p2;
-  c.k3 = m.k3;
-  return c;
-}
-
 const CameraModel& model() {
   static const CameraModel m = CameraModel{}.scaled(0.5);
   return m;
@@ -131,7 +115,7 @@ double quantile(std::vector<double> v, double q) {
 // Runs the VO over the shots and scores it as eval vo does (pairs ~2 m apart, same segment).
 Scores run(const std::vector<Shot>& shots, bool with_attitude, std::size_t count) {
   vo::VoParams p;
-  p.camera = pinhole(model());
+  p.camera = model().pinhole();
   vo::VisualOdometry odo(p);
   Scores s;
   count = std::min(count, shots.size());

@@ -10,6 +10,7 @@
 #include <string_view>
 #include <vector>
 
+#include "airground/core/camera.hpp"
 #include "airground/core/geometry.hpp"
 #include "airground/platform/result.hpp"
 #include "airground/sim/raycast.hpp"
@@ -31,6 +32,22 @@ struct CameraModel {
   [[nodiscard]] Status check() const;
   // Rotation taking camera-frame vectors to the body frame (columns: camera x, y, z in body axes).
   [[nodiscard]] static Eigen::Matrix3d body_from_camera() noexcept;
+  // The same intrinsics as the robot's camera model (pipeline/core), for the stages and their tests.
+  [[nodiscard]] PinholeCamera pinhole() const noexcept {
+    PinholeCamera c;
+    c.width = width;
+    c.height = height;
+    c.fx = fx;
+    c.fy = fy;
+    c.cx = cx;
+    c.cy = cy;
+    c.k1 = k1;
+    c.k2 = k2;
+    c.p1 = p1;
+    c.p2 = p2;
+    c.k3 = k3;
+    return c;
+  }
 
   // YAML section `camera:` with the keys above; any unknown key, wrong type or out-of-range value is an
   // ErrorCode::kConfig error naming the file and the key. Missing keys keep their defaults.
