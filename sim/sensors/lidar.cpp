@@ -13,6 +13,8 @@
 #include <stdexcept>
 
 #include "airground/platform/config.hpp"
+#include "airground/core/geometry.hpp"
+#include "airground/platform/rng.hpp"
 
 namespace ag::sim {
 
@@ -66,13 +68,8 @@ Result<std::vector<double>> number_list(const json& node, const char* key, doubl
   return v;
 }
 
-// Counter-based randomness: splitmix64 of (seed, ray) so that every ray's noise is independent of the others.
-inline std::uint64_t splitmix64(std::uint64_t& state) noexcept {
-  std::uint64_t z = (state += 0x9E3779B97F4A7C15ULL);
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-  return z ^ (z >> 31);
-}
+// Counter-based randomness: splitmix64 (platform/rng.hpp) of (seed, ray) so that every ray's noise is
+// independent of the others.
 inline double unit_open(std::uint64_t bits) noexcept {  // (0, 1]
   return (static_cast<double>(bits >> 11) + 1.0) * 0x1.0p-53;
 }

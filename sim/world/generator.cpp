@@ -11,7 +11,8 @@
 #include <utility>
 #include <vector>
 
-#include "airground/sim/rng.hpp"
+#include "airground/core/geometry.hpp"
+#include "airground/platform/rng.hpp"
 #include "airground/sim/world_texture.hpp"
 
 namespace ag::sim {

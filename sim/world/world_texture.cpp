@@ -9,7 +9,8 @@
 #include <vector>
 
 #include "airground/core/classes.hpp"
-#include "airground/sim/rng.hpp"
+#include "airground/core/geometry.hpp"
+#include "airground/platform/rng.hpp"
 
 namespace ag::sim {
 

@@ -12,15 +12,6 @@ namespace ag::loc {
 
 namespace {
 
-std::uint64_t splitmix64(std::uint64_t& s) noexcept {
-  std::uint64_t z = (s += 0x9E3779B97F4A7C15ULL);
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-  return z ^ (z >> 31);
-}
-
-std::uint64_t rotl(std::uint64_t x, int k) noexcept { return (x << k) | (x >> (64 - k)); }
-
 // Map cells (row-major index, or `outside`) of kCellBlock consecutive range-bin centres r0, r0 + 1, ...
 // along the direction (ux, uy) [cells per range bin] from (fx0, fy0) [cells], in GCC vector types
 // (AVX2 on the robots' x86, NEON on the Xavier's ARM).
@@ -104,36 +95,6 @@ ParticleFilterParams load_particle_filter_params(const SectionView& s) {
   return p;
 }
 
-// ------------------------------------------------------------------------------------------------ Rng
-
-std::uint64_t ParticleFilter::Rng::next() noexcept {  // xoshiro256**
-  const std::uint64_t result = rotl(s[1] * 5, 7) * 9;
-  const std::uint64_t t = s[1] << 17;
-  s[2] ^= s[0];
-  s[3] ^= s[1];
-  s[1] ^= s[2];
-  s[0] ^= s[3];
-  s[2] ^= t;
-  s[3] = rotl(s[3], 45);
-  return result;
-}
-
-double ParticleFilter::Rng::uniform() noexcept { return static_cast<double>(next() >> 11) * 0x1.0p-53; }
-
-double ParticleFilter::Rng::normal() noexcept {  // Box-Muller, both values used
-  if (has_spare) {
-    has_spare = false;
-    return spare;
-  }
-  double u = uniform();
-  while (u <= 0.0) u = uniform();
-  const double v = uniform();
-  const double r = std::sqrt(-2.0 * std::log(u));
-  spare = r * std::sin(2.0 * kPi * v);
-  has_spare = true;
-  return r * std::cos(2.0 * kPi * v);
-}
-
 // ------------------------------------------------------------------------------------------- set-up
 
 ParticleFilter::ParticleFilter(const ParticleFilterParams& params, const PolarRenderParams& render, std::uint64_t seed)
@@ -146,8 +107,7 @@ ParticleFilter::ParticleFilter(const ParticleFilterParams& params, const PolarRe
   if (max_angle_bins_ < 1 || max_range_bins_ < 1) throw std::invalid_argument("ParticleFilter: render bins must be positive");
   if (p_.range_bin_min_m <= 0.0 || p_.range_bin_max_m < p_.range_bin_min_m)
     throw std::invalid_argument("ParticleFilter: need 0 < range_bin_min_m <= range_bin_max_m");
-  std::uint64_t sm = seed;
-  for (auto& w : rng_.s) w = splitmix64(sm);
+  rng_ = Rng(seed);
   const auto n = static_cast<std::size_t>(p_.max_particles);
   for (auto* v : {&x_, &y_, &yaw_, &w_, &score_, &nx_, &ny_, &nyaw_}) v->assign(n, 0.0);
   const std::size_t table = next_pow2(2 * n);
@@ -179,9 +139,9 @@ void ParticleFilter::respread(const Pose2& centre, double sigma_xy, double sigma
   n_ = static_cast<std::size_t>(p_.max_particles);
   const double w = 1.0 / static_cast<double>(n_);
   for (std::size_t i = 0; i < n_; ++i) {
-    x_[i] = centre.x + sigma_xy * rng_.normal();
-    y_[i] = centre.y + sigma_xy * rng_.normal();
-    yaw_[i] = wrap_angle(centre.yaw + sigma_yaw * rng_.normal());
+    x_[i] = centre.x + sigma_xy * rng_.gaussian();
+    y_[i] = centre.y + sigma_xy * rng_.gaussian();
+    yaw_[i] = wrap_angle(centre.yaw + sigma_yaw * rng_.gaussian());
     w_[i] = w;
     score_[i] = 0.0;
   }
@@ -250,9 +210,9 @@ void ParticleFilter::apply_motion() noexcept {
     y_[i] += s * pending_.x + c * pending_.y;
     yaw_[i] += pending_.yaw;
     if (moved) {
-      x_[i] += sxy * rng_.normal();
-      y_[i] += sxy * rng_.normal();
-      yaw_[i] += syaw * rng_.normal();
+      x_[i] += sxy * rng_.gaussian();
+      y_[i] += sxy * rng_.gaussian();
+      yaw_[i] += syaw * rng_.gaussian();
     }
     yaw_[i] = wrap_angle(yaw_[i]);
   }

@@ -8,7 +8,8 @@
 #include <vector>
 
 #include "airground/sim/gps.hpp"
-#include "airground/sim/rng.hpp"
+#include "airground/core/geometry.hpp"
+#include "airground/platform/rng.hpp"
 
 namespace ag::sim {
 namespace {

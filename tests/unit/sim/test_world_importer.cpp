@@ -18,7 +18,8 @@
 #include <unistd.h>
 
 #include "airground/sim/importer.hpp"
-#include "airground/sim/rng.hpp"
+#include "airground/core/geometry.hpp"
+#include "airground/platform/rng.hpp"
 
 namespace ag::sim {
 namespace {

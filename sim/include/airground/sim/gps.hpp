@@ -10,7 +10,7 @@
 #include "airground/platform/config.hpp"
 #include "airground/platform/result.hpp"
 #include "airground/platform/time.hpp"
-#include "airground/sim/rng.hpp"
+#include "airground/platform/rng.hpp"
 #include "airground/sim/world.hpp"
 
 namespace YAML {

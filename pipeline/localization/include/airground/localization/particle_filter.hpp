@@ -30,6 +30,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "airground/platform/rng.hpp"
 #include "airground/core/geometry.hpp"
 #include "airground/localization/class_distance_fields.hpp"
 #include "airground/localization/polar_render.hpp"
@@ -194,14 +195,6 @@ class ParticleFilter {
                                  double* known_fraction = nullptr) noexcept;
 
  private:
-  struct Rng {
-    std::uint64_t s[4];
-    std::uint64_t next() noexcept;
-    double uniform() noexcept;   // [0, 1)
-    double normal() noexcept;    // N(0, 1)
-    bool has_spare{false};
-    double spare{0};
-  };
   // Best log-weight (score) over yaw shifts of -window..window bins for a particle at (x, y, yaw), with
   // the known share and known-cell cost at that shift; returns the yaw correction [rad] (the best
   // shift, refined by a parabola).
@@ -219,7 +212,7 @@ class ParticleFilter {
   ParticleFilterParams p_;
   int max_angle_bins_{0}, max_range_bins_{0};
   int prepared_angle_bins_{0};
-  Rng rng_{};
+  Rng rng_{0};  // seeded in the constructor
   std::size_t n_{0};
   std::vector<double> x_, y_, yaw_, w_, score_;  // score: log weight of the last update
   std::vector<double> nx_, ny_, nyaw_;  // resampling target

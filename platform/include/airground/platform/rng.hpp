@@ -1,14 +1,14 @@
-// Deterministic random numbers for the simulator models: the same seed gives the same stream everywhere.
+// Deterministic random numbers, one implementation for the whole tree (the simulator's models, the
+// localizer's particle filter): the same seed gives the same stream on every platform and library.
 #pragma once
 
 #include <cmath>
 #include <cstdint>
 #include <limits>
 
-#include "airground/core/geometry.hpp"
 #include "airground/platform/time.hpp"
 
-namespace ag::sim {
+namespace ag {
 
 // splitmix64 (Steele, Lea, Flood 2014): expands one 64-bit seed into well-mixed state words.
 [[nodiscard]] constexpr std::uint64_t splitmix64(std::uint64_t& state) noexcept {
@@ -70,7 +70,7 @@ class Rng {
     while (u1 <= 0.0) u1 = uniform();
     const double u2 = uniform();
     const double r = std::sqrt(-2.0 * std::log(u1));
-    const double a = 2.0 * kPi * u2;
+    const double a = 2.0 * 3.14159265358979323846 * u2;
     spare_ = r * std::sin(a);
     has_spare_ = true;
     return r * std::cos(a);
@@ -99,4 +99,4 @@ class Rng {
   return t + static_cast<TimeNs>(ns);
 }
 
-}  // namespace ag::sim
+}  // namespace ag
