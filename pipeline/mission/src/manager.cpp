@@ -328,7 +328,7 @@ void MissionManager::tick(TimeNs now) noexcept {
       release(ClaimState::kIdle, now);
     } else if (r == nullptr || !r->valid || other_visited) {
       release(ClaimState::kIdle, now);  // the region merged away, lost its goal, or someone else marked it
-    } else if (tracking && d <= p_.visit_radius_m && sigma_ <= p_.max_sigma_m) {
+    } else if (tracking && d <= mark_radius() && sigma_ <= p_.max_sigma_m) {
       if (visited_.count < kMaxVisited) {
         visited_.entries[visited_.count++] = VisitedEntry{region_, static_cast<float>(loc_.pose.x), static_cast<float>(loc_.pose.y)};
         visited_dirty_ = true;
@@ -337,7 +337,7 @@ void MissionManager::tick(TimeNs now) noexcept {
       }
       release(ClaimState::kIdle, now);
     } else {
-      if (tracking && d <= p_.visit_radius_m) ++refused_visits_;
+      if (tracking && d <= mark_radius()) ++refused_visits_;
       if (tracking && d < best_dist_ - p_.progress_min_m) {
         best_dist_ = d;
         progress_at_ = now;

@@ -149,6 +149,7 @@ Status MissionStage::init(StageContext& ctx) {
   p.start_y = v.real("start_y_m");
   p.visit_radius_m = v.real("visit_radius_m");
   p.max_sigma_m = v.real("max_sigma_m");
+  p.visit_margin_m = v.real("visit_margin_m");
   p.max_no_route = static_cast<int>(v.integer("max_no_route"));
   p.no_progress_timeout_s = v.real("no_progress_timeout_s");
   p.progress_min_m = v.real("progress_min_m");

@@ -3,6 +3,8 @@
 // another robot, waiting for new regions and returning to the start.
 #include <gtest/gtest.h>
 
+#include <tuple>
+
 #include <cmath>
 #include <map>
 #include <utility>
@@ -118,6 +120,25 @@ TEST(Manager, ASilentRobotsRegionIsTakenOverAfterTheClaimTimeout) {
   for (int i = 0; i < 400; ++i) t.step();
   EXPECT_TRUE(t.bots[1].m->visited_by_anyone(1));
   EXPECT_EQ(t.bots[1].m->own_visited().count, 2);
+}
+
+// A visit is marked only visit_margin_m inside visit_radius_m (never inside half of it): driving at the
+// goal from 10 m away, the mark lands where the robot stood when it was that close.
+TEST(Manager, AVisitIsMarkedTheMarginInsideTheVisitRadius) {
+  for (const auto& [margin, near_m, far_m] : {std::tuple{1.5, 1.1, 1.5}, std::tuple{0.0, 2.6, 3.0}, std::tuple{10.0, 1.1, 1.5}}) {
+    Team t;
+    ManagerParams p = quick();
+    p.visit_radius_m = 3.0;
+    p.visit_margin_m = margin;
+    t.add(1, 1, 0, 0, p);
+    t.region(3, 10, 0);
+    t.publish_regions();
+    for (int i = 0; i < 100 && t.bots[0].m->own_visited().count == 0; ++i) t.step();
+    ASSERT_EQ(t.bots[0].m->own_visited().count, 1) << "margin " << margin;
+    const double d = 10.0 - static_cast<double>(t.bots[0].m->own_visited().entries[0].x);
+    EXPECT_GT(d, near_m - 1e-6) << "margin " << margin << ": marked only once that close (0.4 m a step)";
+    EXPECT_LE(d, far_m + 1e-6) << "margin " << margin;
+  }
 }
 
 TEST(Manager, ABadlyLocalizedRobotNearTheGoalDoesNotMarkItVisited) {

@@ -10,6 +10,7 @@
 // after idle_return_s without new regions, not before the survey's expected end (or at mission_end_s).
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <span>
@@ -29,6 +30,9 @@ struct ManagerParams {
   std::uint8_t priority{1};            // lower number wins a clash
   double start_x{0}, start_y{0};       // [m] where it returns at the end
   double visit_radius_m{3.0};
+  // [m] a visit is marked only within visit_radius_m - visit_margin_m (at least half the radius) of the
+  // goal: the pose's own error must not carry a mark made at the circle's edge outside it.
+  double visit_margin_m{1.5};
   double max_sigma_m{1.5};             // [m] a pose less certain than this marks nothing visited
   int max_no_route{5};                 // failed plans in a row for the current goal: failure
   double no_progress_timeout_s{90.0};  // no progress_min_m closer in this long: failure
@@ -112,6 +116,8 @@ class MissionManager {
   [[nodiscard]] std::size_t waypoints_skipped() const noexcept { return wp_skipped_; }
 
  private:
+  // Where a visit is marked: visit_radius_m - visit_margin_m, never below half the radius.
+  [[nodiscard]] double mark_radius() const noexcept { return std::max(p_.visit_radius_m - p_.visit_margin_m, 0.5 * p_.visit_radius_m); }
   struct KnownRegion {
     std::uint32_t id{0};
     double x{0}, y{0};

@@ -79,6 +79,7 @@ inline constexpr ParamSpec kMissionParams[] = {
     ParamSpec::real("start_y_m", 0.0, -1e6, 1e6, "m", "start pose: north"),
     ParamSpec::real("visit_radius_m", 3.0, 0.5, 20.0, "m", "a region is visited when the robot is this close to its goal ..."),
     ParamSpec::real("max_sigma_m", 1.5, 0.1, 50.0, "m", "... while tracking with a pose sigma (largest xy axis) below this"),
+    ParamSpec::real("visit_margin_m", 1.5, 0.0, 20.0, "m", "... and is marked only this much inside visit_radius_m (at least half of it): a pose error must not carry the mark outside"),
     ParamSpec::integer("max_no_route", 5, 1, 1000, "plans", "failed plans in a row for the current goal: the goal failed"),
     ParamSpec::real("no_progress_timeout_s", 90.0, 5.0, 3600.0, "s", "no progress_min_m closer for this long: the goal failed"),
     ParamSpec::real("progress_min_m", 2.0, 0.1, 50.0, "m", "what counts as progress"),
