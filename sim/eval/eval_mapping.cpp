@@ -149,7 +149,7 @@ Result<MappingMetrics> eval_mapping(const EvalMappingOptions& o, const ProgressF
   r.uav_speed_mps = o.speed_mps;
   r.survey_overlap = o.overlap;
   r.config_dir = models.value();
-  r.record = RecordLevel::kNone;
+  r.record = o.record ? RecordLevel::kMcap : RecordLevel::kNone;  // recording.mcap, no CSV streams
   r.keep_uav_truth = true;
   r.stop_when_survey_done = true;
   r.progress = !o.quiet;
@@ -202,9 +202,23 @@ Result<MappingMetrics> eval_mapping(const EvalMappingOptions& o, const ProgressF
     }
     double se = 0, ze = 0, tilt_e = 0, yaw_e = 0;
     std::uint64_t n = 0;
+    // Every keyframe's pose as the graph has it and the truth, for a person to plot (roll, pitch, yaw: ZYX).
+    std::ofstream kf_csv(fs::path(o.out_dir) / "keyframes.csv");
+    kf_csv << "keyframe,t_s,x,y,z,roll_deg,pitch_deg,yaw_deg,true_x,true_y,true_z,true_roll_deg,true_pitch_deg,true_yaw_deg\n";
+    const auto write_rpy_deg = [&kf_csv](const Eigen::Matrix3d& R) {
+      const double d = 180.0 / M_PI;
+      kf_csv << ',' << std::atan2(R(2, 1), R(2, 2)) * d << ',' << -std::asin(std::clamp(R(2, 0), -1.0, 1.0)) * d << ','
+             << std::atan2(R(1, 0), R(0, 0)) * d;
+    };
     for (std::uint32_t k = 0; k < pg->keyframes(); ++k) {
       const Eigen::Isometry3d est = pg->keyframe_pose(k);
       const Pose3 truth = truth_at(*in.uav_truth, pg->keyframe_stamp(k));
+      kf_csv << k << ',' << to_seconds(pg->keyframe_stamp(k)) << ',' << est.translation().x() << ',' << est.translation().y() << ','
+             << est.translation().z();
+      write_rpy_deg(est.linear());
+      kf_csv << ',' << truth.x << ',' << truth.y << ',' << truth.z;
+      write_rpy_deg(to_isometry(truth).linear());
+      kf_csv << '\n';
       se += std::pow(est.translation().x() - truth.x, 2) + std::pow(est.translation().y() - truth.y, 2);
       ze += std::pow(est.translation().z() - truth.z, 2);
       const Eigen::Matrix3d rt = to_isometry(truth).linear();

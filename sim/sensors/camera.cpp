@@ -42,7 +42,7 @@ constexpr ParamSpec kShadingParams[] = {
     ParamSpec::boolean("detail_texture", kDefaultShading.detail_texture, "world-fixed fine texture for stereo"),
     ParamSpec::real("max_range_m", kDefaultShading.max_range_m, 1.0, 1.0e6, "m", "longest ray; beyond is sky"),
 };
-constexpr CameraSensor kDefaultSensor{};
+constexpr CameraSensor kDefaultSensor = CameraSensor::field();  // a section's defaults: the real camera
 constexpr ParamSpec kSensorParams[] = {
     ParamSpec::boolean("noise", kDefaultSensor.noise, "photon shot and read noise, gain, 8-bit quantisation"),
     ParamSpec::real("full_well_e", kDefaultSensor.full_well_e, 100.0, 1.0e6, "e-", "full-well capacity per sensor pixel"),

@@ -53,7 +53,7 @@ void OrthoMap::touched_tiles(Patch& patch) const {
   patch.tiles.clear();
   const std::int64_t t = p_.tile_cells;
   for (const PatchCell& c : patch.cells) {
-    const Eigen::Vector3d p = patch.pose * Eigen::Vector3d(c.x, c.y, c.z);
+    const Eigen::Vector3d p = patch.pose * (patch.depth_scale * Eigen::Vector3d(c.x, c.y, c.z));
     const TileKey key{static_cast<std::int32_t>(floor_div(cell_index(p.x(), inv_res_), t)),
                       static_cast<std::int32_t>(floor_div(cell_index(p.y(), inv_res_), t))};
     const std::uint64_t k = key.packed();
@@ -66,7 +66,7 @@ void OrthoMap::apply(const Patch& patch, bool to_base, const std::unordered_map<
   const auto gate = static_cast<float>(p_.elevation_gate_m);
   const auto min_points = static_cast<std::uint32_t>(p_.min_points);
   for (const PatchCell& c : patch.cells) {
-    const Eigen::Vector3d p = patch.pose * Eigen::Vector3d(c.x, c.y, c.z);
+    const Eigen::Vector3d p = patch.pose * (patch.depth_scale * Eigen::Vector3d(c.x, c.y, c.z));
     const std::int64_t cx = cell_index(p.x(), inv_res_), cy = cell_index(p.y(), inv_res_);
     Tile* tile = nullptr;
     if (only != nullptr) {
@@ -120,7 +120,8 @@ void OrthoMap::apply(const Patch& patch, bool to_base, const std::unordered_map<
   ++version_;
 }
 
-void OrthoMap::add_keyframe(std::uint32_t id, const Eigen::Isometry3d& map_from_camera, std::span<const MapPoint> points) {
+void OrthoMap::add_keyframe(std::uint32_t id, const Eigen::Isometry3d& map_from_camera, std::span<const MapPoint> points,
+                            std::uint32_t partner, double baseline_m) {
   ++stats_.keyframes;
   stats_.points += points.size();
   if (points.empty()) return;
@@ -243,6 +244,8 @@ void OrthoMap::add_keyframe(std::uint32_t id, const Eigen::Isometry3d& map_from_
   Patch patch;
   patch.id = id;
   patch.pose = map_from_camera;
+  patch.partner = partner;
+  patch.baseline_m = baseline_m;
   const Eigen::Isometry3d camera_from_map = map_from_camera.inverse();
   for (const Acc& a : acc_) {
     if (a.n == 0) continue;
@@ -251,6 +254,9 @@ void OrthoMap::add_keyframe(std::uint32_t id, const Eigen::Isometry3d& map_from_
     patch.cells.push_back(PatchCell{static_cast<float>(c.x()), static_cast<float>(c.y()), static_cast<float>(c.z()), a.n,
                                     std::max(a.cos, a.cls_cos), a.r, a.g, a.b, a.cls});
   }
+  double depth_sum = 0;
+  for (const PatchCell& c : patch.cells) depth_sum += std::fabs(static_cast<double>(c.z));
+  patch.depth_m = patch.cells.empty() ? 0.0F : static_cast<float>(depth_sum / static_cast<double>(patch.cells.size()));
   touched_tiles(patch);
   apply(patch, false, nullptr);
   window_.push_back(std::move(patch));
@@ -292,10 +298,19 @@ std::size_t OrthoMap::correct(std::span<const std::pair<std::uint32_t, Eigen::Is
     if (it == window_.end() || it->id != id) continue;
     const double moved = (pose.translation() - it->pose.translation()).norm();
     const double turned = rotation_angle(pose.linear(), it->pose.linear());
-    if (moved <= p_.rebuild_translation_m && turned <= p_.rebuild_rotation_rad) continue;
+    double depth_scale = it->depth_scale;
+    if (p_.rescale_depth && it->partner != kNoPartner && it->baseline_m > 0) {
+      const auto q = std::lower_bound(poses.begin(), poses.end(), it->partner,
+                                      [](const std::pair<std::uint32_t, Eigen::Isometry3d>& e, std::uint32_t v) { return e.first < v; });
+      if (q != poses.end() && q->first == it->partner)
+        depth_scale = (pose.translation() - q->second.translation()).norm() / it->baseline_m;
+    }
+    const double rescaled = std::fabs(depth_scale - it->depth_scale) * static_cast<double>(it->depth_m);
+    if (moved <= p_.rebuild_translation_m && turned <= p_.rebuild_rotation_rad && rescaled <= p_.rebuild_translation_m) continue;
     ++stats_.keyframes_moved;
     mark(*it);
     it->pose = pose;
+    it->depth_scale = depth_scale;
     touched_tiles(*it);
     for (const std::uint64_t k : it->tiles) {  // tiles it now reaches for the first time
       const std::int64_t t = p_.tile_cells;

@@ -282,6 +282,7 @@ Status OrthoMapStage::init(StageContext& ctx) {
   mp.window_keyframes = static_cast<int>(v.integer("window_keyframes"));
   mp.rebuild_translation_m = v.real("rebuild_translation_m");
   mp.rebuild_rotation_rad = v.real("rebuild_rotation_rad");
+  mp.rescale_depth = v.boolean("rescale_depth");
   mp.max_tiles = static_cast<std::size_t>(v.integer("max_tiles"));
   const PinholeCamera cam = load_camera_calibration(ctx.config);
   stereo_ = std::make_unique<DenseStereo>(cam, sp);
@@ -382,7 +383,7 @@ void OrthoMapStage::step(TimeNs now) noexcept {
     corrections_.clear();
     for (std::uint32_t i = 0; i < latest.count; ++i) {
       const std::uint32_t id = latest.first_id + i;
-      if (map_->keyframe_pose(id) != nullptr) corrections_.emplace_back(id, camera_pose(latest.poses[i]));
+      corrections_.emplace_back(id, camera_pose(latest.poses[i]));  // all: stereo partners too (rescale_depth)
     }
     map_->correct(corrections_);
     initialised_ = latest.initialised;
@@ -431,7 +432,7 @@ void OrthoMapStage::step(TimeNs now) noexcept {
       c_.last_stereo_ms = cpu_ms_since(t0);
       if (r) {
         const TimeNs t1 = thread_cpu_now();
-        map_->add_keyframe(kf->id, cur, points_);
+        map_->add_keyframe(kf->id, cur, points_, partner->id, (cur.translation() - partner_pose.translation()).norm());
         c_.last_bin_ms = cpu_ms_since(t1);
         ++c_.pairs_matched;
         c_.last_baseline_m = (cur.translation() - partner_pose.translation()).norm();

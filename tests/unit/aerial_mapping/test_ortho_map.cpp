@@ -230,6 +230,38 @@ TEST(OrthoMap, CorrectionRebuildsOnlyTheTilesTheMovedKeyframeTouched) {
     }
 }
 
+// Stereo depth is baseline x focal / disparity: when the graph finds the pair 2 % further apart than it
+// was matched at (its scale corrected by GPS), every point lies 2 % further from the camera.
+TEST(OrthoMap, DepthFollowsTheCorrectedStereoBaseline) {
+  for (const bool rescale : {true, false}) {
+    OrthoMapParams p;
+    p.rescale_depth = rescale;
+    OrthoMap map(p);
+    const Eigen::Isometry3d partner = nadir_at(0, 0, 40), cur = nadir_at(7.2, 0, 40);
+    map.add_keyframe(0, partner, {}, OrthoMap::kNoPartner, 0.0);  // the partner: no points of its own
+    map.add_keyframe(1, cur, square(7.2, 0, 4, 0.0, 0), 0, 7.2);   // ground at z = 0, 40 m below
+    ASSERT_NEAR(map.cell_at(7.25, 0.25)->elevation(), 0.0, 1e-4);
+    // Only the partner moves (back 0.144 m): baseline 7.344 m, 2 % longer; points 40.8 m below the camera.
+    std::vector<std::pair<std::uint32_t, Eigen::Isometry3d>> poses{{0, nadir_at(-0.144, 0, 40)}, {1, cur}};
+    const std::size_t rebuilt = map.correct(poses);
+    const Cell* c = map.cell_at(7.25, 0.25);
+    ASSERT_NE(c, nullptr);
+    if (rescale) {
+      EXPECT_GE(rebuilt, 1u) << "0.8 m of depth change is past rebuild_translation_m";
+      EXPECT_NEAR(c->elevation(), -0.8, 1e-3);
+      EXPECT_NEAR(map.cell_at(10.25, -2.75)->elevation(), -0.8, 1e-3) << "off nadir too";
+    } else {
+      EXPECT_EQ(rebuilt, 0u);
+      EXPECT_NEAR(c->elevation(), 0.0, 1e-4);
+    }
+    // A partner the corrections do not name (it left the graph's window): the depth stays as it is.
+    const double before = c->elevation();
+    std::vector<std::pair<std::uint32_t, Eigen::Isometry3d>> only_cur{{1, cur}};
+    map.correct(only_cur);
+    EXPECT_NEAR(map.cell_at(7.25, 0.25)->elevation(), before, 1e-4);
+  }
+}
+
 TEST(OrthoMap, KeyframesLeavingTheWindowStayInTheMapAndMemoryIsBounded) {
   OrthoMapParams p;
   p.window_keyframes = 4;

@@ -21,7 +21,9 @@ std::string slurp(const fs::path& p) {
   return ss.str();
 }
 
-RunOptions run_in(const std::string& dir, int threads, bool real_camera) {
+enum class Camera { kShippedFile, kBuiltIn, kIdeal };
+
+RunOptions run_in(const std::string& dir, int threads, Camera camera) {
   RunOptions o;
   o.out_dir = (fs::path(::testing::TempDir()) / dir).string();
   o.seed = 9;
@@ -33,19 +35,25 @@ RunOptions run_in(const std::string& dir, int threads, bool real_camera) {
   o.record = RecordLevel::kFull;
   o.threads = threads;
   o.progress = false;
-  if (real_camera) {  // the shipped camera file: every effect on
+  if (camera == Camera::kShippedFile) {  // the shipped camera file: every effect on
     const fs::path cfg = fs::path(::testing::TempDir()) / "camera_sensor_cfg";
     fs::create_directories(cfg);
     fs::copy_file(fs::path(AG_SOURCE_DIR) / "config/sensors/camera.yaml", cfg / "camera.yaml", fs::copy_options::overwrite_existing);
+    o.config_dir = cfg.string();
+  } else if (camera == Camera::kIdeal) {  // a user's file switching every effect off
+    const fs::path cfg = fs::path(::testing::TempDir()) / "camera_ideal_cfg";
+    fs::create_directories(cfg);
+    std::ofstream(cfg / "camera.yaml") << "camera_sensor:\n  noise: false\n  auto_exposure: false\n  motion_blur: false\n"
+                                          "  vignetting: false\n";
     o.config_dir = cfg.string();
   }
   return o;
 }
 
 TEST(TeamRunnerCameraSensor, FramesRenderedAheadEqualFramesRenderedWhenDue) {
-  auto one = run_team(run_in("cs_one", 1, true));
+  auto one = run_team(run_in("cs_one", 1, Camera::kShippedFile));
   ASSERT_TRUE(one.ok()) << one.error().message;
-  auto two = run_team(run_in("cs_two", 2, true));
+  auto two = run_team(run_in("cs_two", 2, Camera::kShippedFile));
   ASSERT_TRUE(two.ok()) << two.error().message;
   ASSERT_GE(one->camera_frames, 9u);
   ASSERT_EQ(one->camera_frames, two->camera_frames);
@@ -60,8 +68,12 @@ TEST(TeamRunnerCameraSensor, FramesRenderedAheadEqualFramesRenderedWhenDue) {
   EXPECT_EQ(frames, 2 * one->camera_frames);
   EXPECT_EQ(slurp(a / "camera_frames.csv"), slurp(b / "camera_frames.csv"));
 
-  // The sensor was on: the ideal camera's frames differ.
-  auto ideal = run_team(run_in("cs_ideal", 1, false));
+  // With no camera file the robots get the same real camera (field mode); the ideal camera's frames differ.
+  auto builtin = run_team(run_in("cs_builtin", 1, Camera::kBuiltIn));
+  ASSERT_TRUE(builtin.ok()) << builtin.error().message;
+  EXPECT_EQ(slurp(a / "camera" / "frame_000002_rgb.png"), slurp(fs::path(::testing::TempDir()) / "cs_builtin" / "camera" / "frame_000002_rgb.png"))
+      << "the built-in camera is not the shipped file's";
+  auto ideal = run_team(run_in("cs_ideal", 1, Camera::kIdeal));
   ASSERT_TRUE(ideal.ok()) << ideal.error().message;
   EXPECT_NE(slurp(a / "camera" / "frame_000002_rgb.png"), slurp(fs::path(::testing::TempDir()) / "cs_ideal" / "camera" / "frame_000002_rgb.png"));
 }

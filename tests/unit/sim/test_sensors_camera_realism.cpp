@@ -419,7 +419,12 @@ TEST(CameraSensor, YamlSectionWithUnitsAndClearErrors) {
   auto file = CameraSensor::load_file(std::string(AG_SOURCE_DIR) + "/config/sensors/camera.yaml");
   ASSERT_TRUE(file.ok()) << file.error().message;
   EXPECT_TRUE(file->noise && file->auto_exposure && file->motion_blur && file->vignetting);
-  EXPECT_FALSE(CameraSensor{}.active()) << "the built-in default is the ideal camera";
+  EXPECT_FALSE(CameraSensor{}.active()) << "a default-constructed sensor is the ideal camera";
+  // A camera file without the section: the robots' real camera (field mode), every effect on.
+  auto bare = CameraSensor::load_string("camera:\n  width: 640\n", "bare.yaml");
+  ASSERT_TRUE(bare.ok()) << bare.error().message;
+  EXPECT_TRUE(bare->noise && bare->auto_exposure && bare->motion_blur && bare->vignetting);
+  EXPECT_TRUE(CameraSensor::field().active());
 }
 
 }  // namespace

@@ -79,8 +79,9 @@ struct CameraShading {
 // What the image sensor and its lens add to the rendered scene (same YAML file, section `camera_sensor:`):
 // photon shot and read noise with 8-bit quantisation, the exposure and gain an auto-exposure loop picks,
 // motion blur over the exposure, vignetting. The renderer's value 255 is a white, sun-lit flat surface at
-// full well after `full_scale_exposure_s` at gain 1. Every effect is off by default (the ideal camera the
-// renderer always was); config/sensors/camera.yaml turns them on. Sources: docs/simulator.md.
+// full well after `full_scale_exposure_s` at gain 1. A default-constructed CameraSensor is the ideal camera
+// (every effect off: the renderer's unit tests); what the simulator's robots get is field(): every effect
+// on, as on a real camera, and the defaults of the YAML section. Sources: docs/simulator.md.
 struct CameraSensor {
   bool noise{false};                   // photon shot noise + read noise, then gain and 8-bit quantisation
   double full_well_e{10500};           // [e-] per sensor pixel
@@ -106,6 +107,14 @@ struct CameraSensor {
   // Any effect on, or an exposure that scales the image: the renderer runs the sensor model.
   [[nodiscard]] bool active() const noexcept {
     return noise || auto_exposure || motion_blur || vignetting || exposure_s * gain != full_scale_exposure_s;
+  }
+
+  // The camera the robots fly with: noise, auto-exposure, motion blur and vignetting on, the rest as above
+  // (a typical global-shutter camera; the YAML section's defaults).
+  [[nodiscard]] static constexpr CameraSensor field() noexcept {
+    CameraSensor s;
+    s.noise = s.auto_exposure = s.motion_blur = s.vignetting = true;
+    return s;
   }
 
   static Result<CameraSensor> load_file(const std::string& path);

@@ -46,6 +46,12 @@ struct OrthoMapParams {
   int window_keyframes{256};         // keyframes kept re-binnable (>= the pose graph's free window)
   double rebuild_translation_m{0.2}; // [m] a keyframe moved further than this is re-binned
   double rebuild_rotation_rad{0.005};  // [rad] ... or turned by more than this
+  // Stereo depth is metric only through the pair's baseline, which the pose graph keeps correcting after
+  // the pair was matched (the newest frames' scale is a prediction until GPS has seen them travel). On,
+  // a keyframe's points are re-scaled about its camera by (baseline now / baseline matched) whenever the
+  // graph moves it or its stereo partner; off, they keep the depth of the moment they were matched
+  // (ASOOM, OpenREALM).
+  bool rescale_depth{true};
   std::size_t max_tiles{16384};      // refuse (and count) points beyond this many tiles (16 km^2 at defaults)
 };
 
@@ -108,11 +114,16 @@ class OrthoMap {
  public:
   explicit OrthoMap(const OrthoMapParams& params = {});
 
+  static constexpr std::uint32_t kNoPartner = 0xffffffffU;
   // Bins one keyframe's stereo points (map frame, made with camera pose `map_from_camera`) into the map.
-  void add_keyframe(std::uint32_t id, const Eigen::Isometry3d& map_from_camera, std::span<const MapPoint> points);
+  // `partner`: the keyframe it was matched with, at `baseline_m` between the two cameras (for rescale_depth).
+  void add_keyframe(std::uint32_t id, const Eigen::Isometry3d& map_from_camera, std::span<const MapPoint> points,
+                    std::uint32_t partner = kNoPartner, double baseline_m = 0.0);
 
-  // New camera poses of keyframes (id, map_from_camera). Keyframes still in the window that moved beyond
-  // the thresholds are re-binned; returns the number of tiles rebuilt.
+  // New camera poses of keyframes (id, map_from_camera), sorted by id; they may include keyframes without
+  // points (stereo partners). Keyframes still in the window that moved beyond the thresholds, or whose
+  // depth scale (rescale_depth) changed by as much at their median depth, are re-binned; returns the
+  // number of tiles rebuilt.
   std::size_t correct(std::span<const std::pair<std::uint32_t, Eigen::Isometry3d>> poses);
 
   [[nodiscard]] const Cell* cell_at(double x, double y) const noexcept;
@@ -146,6 +157,10 @@ class OrthoMap {
   struct Patch {
     std::uint32_t id{0};
     Eigen::Isometry3d pose{Eigen::Isometry3d::Identity()};  // map_from_camera it is binned with
+    std::uint32_t partner{kNoPartner};  // its stereo partner
+    double baseline_m{0};               // [m] between the two cameras when they were matched
+    double depth_scale{1};              // [-] the cells' positions are multiplied by this (rescale_depth)
+    float depth_m{0};                   // [m] mean cell depth, to judge a scale change in metres
     std::vector<PatchCell> cells;
     std::vector<std::uint64_t> tiles;  // packed keys of the tiles it touches at `pose`
   };

@@ -164,6 +164,7 @@ class OrthoMapStage final : public Stage {
       ParamSpec::integer("window_keyframes", 256, 2, 512, "keyframes", "keyframes kept re-binnable after pose-graph corrections"),
       ParamSpec::real("rebuild_translation_m", 0.2, 0.0, 100.0, "m", "a keyframe moved further than this is re-binned (ASOOM: 2)"),
       ParamSpec::real("rebuild_rotation_rad", 0.005, 0.0, 3.2, "rad", "... or turned more than this (ASOOM: 0.1)"),
+      ParamSpec::boolean("rescale_depth", true, "re-scale a keyframe's stereo depth by its baseline as the pose graph corrects it (off: ASOOM)"),
       ParamSpec::integer("max_tiles", 16384, 1, 1000000, "tiles", "map size limit; points beyond are refused (counted)"),
       ParamSpec::text("keyframes_channel", "keyframes", "keyframes|keyframes_labelled",
                       "keyframes from pose_graph directly (their camera classes), or relabelled by the segmentation stage"),
