@@ -5,16 +5,17 @@ JOBS ?= $(shell nproc)
 export CMAKE_BUILD_PARALLEL_LEVEL := $(JOBS)
 export CTEST_PARALLEL_LEVEL := $(JOBS)
 
-.PHONY: deps build cross tsan asan test test-native test-cross test-tsan test-asan bench package demo clean help fuzz
+.PHONY: deps build cross tsan asan test test-native test-cross test-tsan test-asan test-slurm bench package demo clean help fuzz
 
 help:
 	@echo "make deps     install missing Debian packages (apt-get; root or sudo) and the arm64 sysroot"
 	@echo "make build    build the native (x86-64-v3) tree: role binaries, tests, benchmarks"
 	@echo "make test     native tests, the aarch64 cross build with its unit tests under qemu, the ring stress under TSan"
 	@echo "make bench    ring throughput/latency vs moodycamel, scheduler wake-up lateness"
-	@echo "make package  .deb per role for amd64 and arm64 in build/*/packages"
+	@echo "make package  .deb per role (stripped) and its -dbgsym for amd64 and arm64 in build/*/packages, checked by lintian"
 	@echo "make demo     the default simulated mission (1 quadrotor, 3 ground robots, region investigation) and its report in build/demo"
 	@echo "make fuzz     build the libFuzzer targets with clang and run each FUZZ_SECONDS (default 60)"
+	@echo "make test-slurm  a 4-mission study through a single-node Slurm started for the test, against the same grid run locally (~4 min; not in make test)"
 
 deps:
 	@tools/install-deps.sh
@@ -50,13 +51,22 @@ test-asan: asan
 test: test-native test-cross test-tsan
 	@echo "make test: native, aarch64 (qemu) and ThreadSanitizer suites passed"
 
+# Not part of `make test` (minutes, and it starts its own munged, slurmctld and slurmd as root):
+# Debian's Slurm and MUNGE come from tools/install-slurm.sh, not from `make deps`.
+test-slurm: build
+	@tools/install-slurm.sh
+	tests/slurm/test_slurm_study.sh build/native/sim/airground-sim
+
 bench: build
 	cmake --build --preset native --target bench
 
+# Each role's package (stripped binary) and its -dbgsym package, then lintian on every one: an error fails.
 package: build cross
+	rm -f build/native/packages/*.deb build/xavier-nx/packages/*.deb
 	cd build/native && cpack -G DEB
 	cd build/xavier-nx && cpack -G DEB
-	@ls -1 build/native/packages/*.deb build/xavier-nx/packages/*.deb
+	lintian --fail-on error --tag-display-limit 0 build/native/packages/*.deb build/xavier-nx/packages/*.deb
+	@ls -l build/native/packages/*.deb build/xavier-nx/packages/*.deb
 
 DEMO_OUT ?= build/demo
 DEMO_ARGS ?=

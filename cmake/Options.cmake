@@ -10,8 +10,10 @@ if(AG_SANITIZE)
 endif()
 target_link_libraries(airground_options INTERFACE airground_warnings)
 
-# A role binary: one static executable per robot role.
+# A role binary: one static executable per robot role, with a build id (the -dbgsym package files its
+# symbols under /usr/lib/debug/.build-id/, where gdb looks them up).
 function(airground_role_binary target)
+  target_link_options(${target} PRIVATE -Wl,--build-id=sha1)
   if(AG_STATIC_ROLES AND NOT AG_SANITIZE)
     set_target_properties(${target} PROPERTIES AG_FULLY_STATIC ON)
     target_link_options(${target} PRIVATE -static)

@@ -35,6 +35,8 @@ fi
 "$here/install-browser-test.sh" || echo "install-deps: the browser test's npm package is missing (the browser test will skip)" >&2
 # The official MCAP readers the recording tests read their files back with (@mcap/core, @mcap/support; pinned).
 "$here/install-mcap-reader.sh" || echo "install-deps: the MCAP readers are missing (the recording tests will fail: run tools/install-mcap-reader.sh)" >&2
+# Foxglove's WebSocket client (@foxglove/ws-protocol, ws; pinned) the live-connection test connects with.
+"$here/install-foxglove-ws-client.sh" || echo "install-deps: the Foxglove WebSocket client is missing (the live Foxglove test will fail: run tools/install-foxglove-ws-client.sh)" >&2
 
 # The cross build: arm64 architecture for apt, then the arm64 -dev packages unpacked into a sysroot
 # folder (several -dev packages are not co-installable with their amd64 twins, so they are not installed).

@@ -10,6 +10,7 @@
 #include "airground/drivers/mavlink/stage.hpp"
 #include "airground/drivers/ublox/stage.hpp"
 #include "airground/mission/stages.hpp"
+#include "airground/drivers/recording/recorder_stage.hpp"
 #include "airground/platform/status_stage.hpp"
 #include "airground/segmentation/stage.hpp"
 #include "airground/visual_odometry/stage.hpp"
@@ -47,6 +48,10 @@ constexpr StageSpec kUavStages[] = {
     // One extraction over the default 1 km^2 area (4M cells) takes ~250 ms (bench_mission: 63 ms per 1M cells); its own thread.
     {"regions", &mission::RegionsStage::make, 1.0, 500'000, 15, -1, mission::RegionsStage::kParams,
      "regions of interest: vehicle cells of the map clustered, a reachable goal each, versioned on gossip"},
+    // The robot's own recorder (off unless recorder.path is set): taps the channels above without ever
+    // holding a writer back, zstd and disk writes on its own lowest-priority thread.
+    {"recorder", &recording::RecorderStage::make_uav, 10.0, 50'000, 1, -1, recording::RecorderStage::kUavParams,
+     "MCAP recording of the robot's channels in recorder.path (Foxglove JSON, rotating files, bounded total)"},
 };
 static_assert(role_table_ok(kUavStages));
 

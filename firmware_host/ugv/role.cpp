@@ -8,6 +8,7 @@
 #include "airground/localization/stage.hpp"
 #include "airground/mission/stages.hpp"
 #include "airground/planning/stages.hpp"
+#include "airground/drivers/recording/recorder_stage.hpp"
 #include "airground/platform/status_stage.hpp"
 
 namespace ag {
@@ -48,6 +49,10 @@ constexpr StageSpec kUgvStages[] = {
      "mission manager: choose, claim and visit regions, resolve clashes by priority, report failures, return to start"},
     {"targets", &mission::TargetsStage::make, 10.0, 10'000, 21, -1, mission::TargetsStage::kParams,
      "target mapping: vehicles in the labelled LiDAR points, an EKF per object, on 'objects' (shared by the mission stage)"},
+    // The robot's own recorder (off unless recorder.path is set): taps the channels above without ever
+    // holding a writer back, zstd and disk writes on its own lowest-priority thread.
+    {"recorder", &recording::RecorderStage::make_ugv, 10.0, 50'000, 1, -1, recording::RecorderStage::kUgvParams,
+     "MCAP recording of the robot's channels in recorder.path (Foxglove JSON, rotating files, bounded total)"},
 };
 static_assert(role_table_ok(kUgvStages));
 }  // namespace

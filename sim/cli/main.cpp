@@ -41,6 +41,8 @@ int segment_cmd(int argc, char** argv);  // segment.cpp
 int vo_cmd(int argc, char** argv);       // vo.cpp
 int eval_vo_cmd(int argc, char** argv);  // vo.cpp
 int lidar_info_cmd(int argc, char** argv);  // lidar_info.cpp
+int study_cmd(int argc, char** argv);       // study.cpp
+int survey_plan_cmd(int argc, char** argv);  // survey_plan.cpp
 using namespace ag;
 using namespace ag::sim;
 
@@ -66,7 +68,9 @@ constexpr const char* kUsage =
     "  airground-sim mission --world W --ugvs N --seed S [--comm-range METRES] [--mission FILE.yaml] --out DIR\n"
     "  airground-sim hil --world W --mission FILE.yaml --out DIR   (the real role binaries over the wire protocols)\n"
     "                        (a whole team mission and its report; see mission --help)\n"
-    "  airground-sim study --ugvs 1,2,3,5,10 --comm-range 50,150,1000 --seeds K --out DIR   (a grid of missions)\n"
+    "  airground-sim study --ugvs 1,2,3,5,10 --comm-range 50,150,1000 --seeds K --out DIR   (a grid of missions;\n"
+    "                        --slurm SDIR writes it as a Slurm job array)\n"
+    "  airground-sim survey-plan --world W --out FILE.plan   (the quadrotor's survey as a QGroundControl plan)\n"
     "  airground-sim segment --weights FILE --image IMAGE.png --out DIR [--threads N]   (ErfNet: logits.npy,\n"
     "                        classes.png; see segment --help)\n"
     "  airground-sim lidar-info --pcap FILE --metadata FILE [--out DIR]   (an Ouster capture: sensor, profile,\n"
@@ -132,7 +136,8 @@ constexpr const char* kEvalMappingHelp =
     "  --config-dir DIR        simulator model overrides (as for run)\n"
     "  --erfnet WEIGHTS.agw    ErfNet with these weights instead of the shipped ones (config/erfnet/erfnet_c7.agw)\n"
     "  --set SECTION.KEY=VALUE quadrotor role parameter (repeatable), e.g. segmentation.threads=2\n"
-    "  --quiet                 no progress line\n";
+    "  --quiet                 no progress line\n"
+    "  --record none|mcap      DIR/recording.mcap (mcap, the default) or nothing\n";
 
 constexpr const char* kEvalPlanningHelp =
     "airground-sim eval planning --world W --seed S --pairs 20 --out DIR [options]\n\n"
@@ -158,7 +163,8 @@ constexpr const char* kEvalPlanningHelp =
     "  --set SECTION.KEY=VALUE  a planner.* or drive.* parameter (repeatable)\n"
     "  --oracle labels          with --pose localizer: ablation, the LiDAR points carry the true classes and the\n"
     "                           localizer uses them (metrics.json lists it)\n"
-    "  --quiet                  no progress line\n";
+    "  --quiet                  no progress line\n"
+    "  --record none|mcap       with --pose localizer: each drive's DIR/drive_N/recording.mcap (mcap) or nothing\n";
 
 constexpr const char* kEvalLocalizationHelp =
     "airground-sim eval localization --world W --seed S --init-error 16 --map gt|online --out DIR [options]\n\n"
@@ -200,7 +206,8 @@ constexpr const char* kEvalLocalizationHelp =
     "  --max-duration T         stop after T simulated seconds (default from the route length)\n"
     "  --config-dir DIR         simulator model overrides (as for run)\n"
     "  --threads N              sensor worker threads (all cores)\n"
-    "  --quiet                  no progress line\n";
+    "  --quiet                  no progress line\n"
+    "  --record none|mcap       DIR/recording.mcap (mcap, the default) or nothing\n";
 
 struct Args {
   std::vector<std::string> pos;
@@ -215,6 +222,13 @@ struct Args {
 [[noreturn]] void usage_error(const std::string& msg) {
   std::fprintf(stderr, "airground-sim: %s (see --help)\n", msg.c_str());
   std::exit(2);
+}
+
+// --record none|mcap of the evaluations and hil: whether they write DIR/recording.mcap.
+bool record_mcap(const Args& a) {
+  const std::string r = a.get("record", "mcap");
+  if (r != "none" && r != "mcap") usage_error("--record must be none or mcap, got '" + r + "'");
+  return r == "mcap";
 }
 
 // Options take the following words up to the next "--" option; --pose takes several numbers.
@@ -646,28 +660,6 @@ int mission_cmd(const Args& a) {
   return 0;
 }
 
-constexpr const char* kStudyHelp =
-    "airground-sim study — the paper's simulation study: a grid of team missions over team size, radio\n"
-    "range and seed, run as parallel 'airground-sim mission' processes, then a table and plots.\n\n"
-    "Usage: airground-sim study --ugvs 1,2,3,5,10 --comm-range 50,150,1000 --seeds K --out DIR [options]\n\n"
-    "Writes DIR/runs/u<N>_r<R>_s<S>/ (each mission's report), DIR/study.csv (one row per mission),\n"
-    "DIR/study.md (the table and the summary: targets reached in every run, false visits, localization\n"
-    "error, mission time by team size and range), DIR/mission_time.png, DIR/pose_error.png, DIR/targets.png.\n"
-    "A mission whose folder already has metrics.json is not run again (resume an interrupted study).\n"
-    "Defaults: --ugvs 1,2,3 --comm-range 150 --seeds 1 --out study --jobs (cores / 2, at least 1).\n\n"
-    "Options:\n"
-    "  --world W              (default)\n"
-    "  --first-seed S         seeds S .. S+K-1 (1)\n"
-    "  --jobs J               missions at once (each gets cores / J sensor threads)\n"
-    "  --max-duration T       per mission (as mission: 4x the survey's flying time, >= 1800 s)\n"
-    "  --altitude A           quadrotor altitude (40 m; the paper flew 60 m)\n"
-    "  --lidar-columns C      (1024)\n"
-    "  --set SECTION.KEY=VALUE  passed to every mission (repeatable)\n"
-    "  --set-uav SECTION.KEY=VALUE  passed to every mission (repeatable)\n"
-    "  --oracle labels,vo     ablation passed to every mission; study.csv and study.md list each mission's oracles\n"
-    "  --report-only          run nothing: write the table and plots from the missions already done\n"
-    "                         (also while another study process is still running into DIR)\n";
-
 constexpr const char* kHilHelp =
     "airground-sim hil — hardware in the loop: the simulated world served to the real role binaries over\n"
     "the devices' wire protocols, in real time. Each ground robot's airground-ugv gets Ouster OS-1 packets on\n"
@@ -693,7 +685,8 @@ constexpr const char* kHilHelp =
     "                         RNG19_RFL8_SIG16_NIR16_DUAL or RNG15_RFL8_NIR8\n"
     "  --seed S               sensor noise (1)\n"
     "  --oracle labels        ablation: the true class in the frames and the reflectivity byte, used by the robots\n"
-    "  --quiet                no progress lines\n";
+    "  --quiet                no progress lines\n"
+    "  --record none|mcap     DIR/recording.mcap (mcap, the default: truth, the poses the base heard, sensors) or nothing\n";
 
 int hil_cmd(const Args& a) {
   HilOptions o;
@@ -706,6 +699,7 @@ int hil_cmd(const Args& a) {
   o.lidar_profile = a.get("lidar-profile", o.lidar_profile);
   o.seed = static_cast<std::uint64_t>(number(a, "seed", static_cast<double>(o.seed)));
   o.progress = !a.has("quiet");
+  o.record = record_mcap(a);
   o.oracles = oracles_from(a);
   if (o.mission_file.empty()) usage_error("hil needs --mission FILE.yaml");
   if (!(o.max_duration_s > 0)) usage_error("--max-duration must be positive");
@@ -727,124 +721,6 @@ int hil_cmd(const Args& a) {
   return h.mission_done ? 0 : 1;
 }
 
-std::vector<double> number_list(const Args& a, const std::string& k, const std::string& def) {
-  std::vector<double> out;
-  std::string v = a.has(k) ? "" : def;
-  if (a.has(k))
-    for (const auto& p : a.opt.at(k)) v += (v.empty() ? "" : ",") + p;
-  std::size_t i = 0;
-  while (i <= v.size()) {
-    const std::size_t j = std::min(v.find(',', i), v.size());
-    const std::string tok = v.substr(i, j - i);
-    if (!tok.empty()) {
-      char* end = nullptr;
-      const double d = std::strtod(tok.c_str(), &end);
-      if (*end != '\0' || !std::isfinite(d)) usage_error("--" + k + ": '" + tok + "' is not a number");
-      out.push_back(d);
-    }
-    i = j + 1;
-  }
-  if (out.empty()) usage_error("--" + k + " needs at least one value");
-  return out;
-}
-
-int study_cmd(const Args& a, const char* self) {
-  (void)oracles_from(a);  // an unknown oracle stops the study here, not in every mission
-  const auto ugvs = number_list(a, "ugvs", "1,2,3");
-  const auto ranges = number_list(a, "comm-range", "150");
-  const int seeds = static_cast<int>(number(a, "seeds", 1));
-  const int first_seed = static_cast<int>(number(a, "first-seed", 1));
-  const std::string out = a.get("out", "study");
-  const std::string world = a.get("world", "default");
-  const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  const int jobs = std::max(1, static_cast<int>(number(a, "jobs", std::max(1, cores / 2))));
-  const int threads = std::max(1, cores / jobs);
-  if (seeds < 1) usage_error("--seeds must be >= 1");
-  for (double u : ugvs)
-    if (u < 1 || u > 32 || u != std::floor(u)) usage_error("--ugvs: team sizes 1..32");
-  struct Job {
-    int ugvs;
-    double range;
-    int seed;
-    std::string dir;
-    pid_t pid{0};
-    bool done{false};
-    int status{0};
-  };
-  std::vector<Job> grid;
-  for (double u : ugvs)
-    for (double r : ranges)
-      for (int k = 0; k < seeds; ++k) {
-        char d[128];
-        std::snprintf(d, sizeof d, "u%d_r%.0f_s%d", static_cast<int>(u), r, first_seed + k);
-        grid.push_back(Job{static_cast<int>(u), r, first_seed + k, (std::filesystem::path(out) / "runs" / d).string()});
-      }
-  std::filesystem::create_directories(std::filesystem::path(out) / "runs");
-  if (a.has("report-only")) grid.clear();
-  else
-    std::fprintf(stderr, "study: %zu missions (%zu team sizes x %zu ranges x %d seeds), %d at once -> %s\n", grid.size(), ugvs.size(), ranges.size(), seeds, jobs, out.c_str());
-  std::size_t next = 0, running = 0, finished = 0;
-  const auto t0 = std::chrono::steady_clock::now();
-  auto launch = [&](Job& j) {
-    std::vector<std::string> args = {self, "mission", "--world", world, "--ugvs", std::to_string(j.ugvs), "--seed", std::to_string(j.seed),
-                                     "--comm-range", std::to_string(j.range), "--out", j.dir, "--threads", std::to_string(threads), "--quiet",
-                                     "--record", "none", "--altitude", a.get("altitude", "40"),
-                                     "--lidar-columns", a.get("lidar-columns", "1024")};
-    if (a.has("max-duration")) {
-      args.emplace_back("--max-duration");
-      args.push_back(a.get("max-duration"));
-    }
-    for (const char* key : {"set", "set-uav", "oracle"})
-      if (a.has(key))
-        for (const auto& s : a.opt.at(key)) {
-          args.push_back(std::string("--") + key);
-          args.push_back(s);
-        }
-    std::filesystem::create_directories(j.dir);
-    const pid_t pid = fork();
-    if (pid == 0) {
-      const std::string log = j.dir + "/mission.log";
-      if (std::freopen(log.c_str(), "w", stdout) == nullptr || std::freopen(log.c_str(), "a", stderr) == nullptr) _exit(127);
-      std::vector<char*> argv;
-      for (auto& s : args) argv.push_back(s.data());
-      argv.push_back(nullptr);
-      execv(self, argv.data());
-      _exit(127);
-    }
-    j.pid = pid;
-    ++running;
-  };
-  for (;;) {
-    while (running < static_cast<std::size_t>(jobs) && next < grid.size()) {
-      Job& j = grid[next++];
-      if (std::filesystem::exists(j.dir + "/metrics.json")) {
-        j.done = true;
-        ++finished;
-        continue;
-      }
-      launch(j);
-    }
-    if (running == 0) break;
-    int st = 0;
-    const pid_t pid = waitpid(-1, &st, 0);
-    if (pid <= 0) break;
-    for (auto& j : grid)
-      if (j.pid == pid && !j.done) {
-        j.done = true;
-        j.status = st;
-        --running;
-        ++finished;
-        const double el = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-        std::fprintf(stderr, "[%zu/%zu] %s %s (%.0f s elapsed)\n", finished, grid.size(), j.dir.c_str(),
-                     WIFEXITED(st) && WEXITSTATUS(st) == 0 ? "done" : "FAILED (see its mission.log)", el);
-      }
-  }
-  auto s = summarise_study(out);
-  if (!s) return fail(s.error());
-  std::printf("%s", s.value().c_str());
-  return 0;
-}
-
 int eval_mapping_cmd(const Args& a) {
   EvalMappingOptions o;
   o.oracles = oracles_from(a);
@@ -864,6 +740,7 @@ int eval_mapping_cmd(const Args& a) {
   o.max_duration_s = number(a, "max-duration", o.max_duration_s);
   o.config_dir = a.get("config-dir");
   o.quiet = a.has("quiet");
+  o.record = record_mcap(a);
   if (a.has("set")) {
     for (const auto& s : a.opt.at("set")) {
       if (s.find('=') == std::string::npos || s.find('.') == std::string::npos) usage_error("--set needs SECTION.KEY=VALUE, got '" + s + "'");
@@ -948,6 +825,7 @@ int eval_localization_cmd(const Args& a) {
   o.config_dir = a.get("config-dir");
   o.threads = static_cast<int>(number(a, "threads", 0));
   o.quiet = a.has("quiet");
+  o.record = record_mcap(a);
   if (!(o.init_error_m >= 0) || !(o.init_yaw_error_deg >= 0) || o.init_yaw_error_deg > 180)
     usage_error("--init-error must be >= 0 and --init-yaw-error in 0..180");
   if (!(o.route_km > 0) || !(o.speed_mps > 0) || !(o.convergence_radius_m > 0)) usage_error("--route-km, --speed and --radius must be positive");
@@ -1001,6 +879,7 @@ int eval_planning_cmd(const Args& a) {
   if (pose != "truth" && pose != "localizer") usage_error("--pose must be truth or localizer");
   o.localizer_pose = pose == "localizer";
   o.quiet = a.has("quiet");
+  o.record = record_mcap(a);
   if (a.has("set")) o.set = a.opt.at("set");
   for (const auto& s : o.set)
     if (s.rfind("planner.", 0) != 0 && s.rfind("drive.", 0) != 0) usage_error("--set takes planner.KEY=VALUE or drive.KEY=VALUE, got '" + s + "'");
@@ -1103,13 +982,8 @@ int main(int argc, char** argv) {
       }
       return hil_cmd(parse(argc, argv, 2));
     }
-    if (cmd == "study") {
-      if (help) {
-        std::fputs(kStudyHelp, stdout);
-        return 0;
-      }
-      return study_cmd(parse(argc, argv, 2), "/proc/self/exe");
-    }
+    if (cmd == "study") return study_cmd(argc, argv);
+    if (cmd == "survey-plan") return survey_plan_cmd(argc, argv);
     if (cmd == "run" && help) {
       std::fputs(kRunHelp, stdout);
       return 0;

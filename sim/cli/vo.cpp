@@ -55,7 +55,8 @@ constexpr const char* kEvalVoHelp =
     "  --attitude FILE     the autopilot attitude error model (YAML, see airground-sim config)\n"
     "  --no-attitude       vision only: no autopilot attitude (gravity) prior\n"
     "  --set KEY=VALUE     a vo stage parameter (repeatable)\n"
-    "  --quiet             no progress line\n";
+    "  --quiet             no progress line\n"
+    "  --record none|mcap  DIR/recording.mcap (mcap, the default: the true flight, every 5th frame) or nothing\n";
 
 struct Options {
   std::map<std::string, std::vector<std::string>> opt;
@@ -214,7 +215,7 @@ int eval_vo_cmd(int argc, char** argv) {
       return 0;
     }
   const Options a = parse("eval vo", argc, argv, 3,
-                          {"world", "seed", "out", "altitude", "speed", "overlap", "camera-hz", "max-duration", "camera", "attitude", "set"},
+                          {"world", "seed", "out", "altitude", "speed", "overlap", "camera-hz", "max-duration", "camera", "attitude", "set", "record"},
                           {"no-attitude", "quiet"});
   ag::sim::EvalVoOptions o;
   o.world = a.get("world", o.world);
@@ -230,6 +231,9 @@ int eval_vo_cmd(int argc, char** argv) {
   o.attitude = !a.has("no-attitude");
   o.quiet = a.has("quiet");
   if (a.has("set")) o.set = a.opt.at("set");
+  const std::string record = a.get("record", "mcap");
+  if (record != "none" && record != "mcap") usage("eval vo", "--record must be none or mcap, got '" + record + "'");
+  o.record = record == "mcap";
   if (!(o.altitude_m > 0) || !(o.speed_mps > 0) || !(o.camera_hz > 0) || !(o.max_duration_s > 0))
     usage("eval vo", "--altitude, --speed, --camera-hz and --max-duration must be positive");
   const bool tty = isatty(2) != 0;

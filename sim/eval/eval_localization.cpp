@@ -19,7 +19,8 @@
 #include "airground/platform/log.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "airground/sim/diff_drive.hpp"
-#include "airground/sim/rng.hpp"
+#include "airground/core/geometry.hpp"
+#include "airground/platform/rng.hpp"
 #include "airground/sim/scripted_driver.hpp"
 #include "airground/sim/world_png.hpp"
 #include "roles.hpp"
@@ -252,7 +253,7 @@ Result<LocalizationMetrics> eval_localization(const EvalLocalizationOptions& o, 
   r.ugv_speed_mps = o.speed_mps;
   r.survey_overlap = 0.3;  // as eval mapping
   r.config_dir = models.value();
-  r.record = RecordLevel::kNone;
+  r.record = o.record ? RecordLevel::kMcap : RecordLevel::kNone;  // recording.mcap, no CSV streams
   r.threads = o.threads;
   r.progress = !o.quiet;
   r.ugv_map = o.map;

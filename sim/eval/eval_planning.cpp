@@ -16,7 +16,8 @@
 #include "airground/planning/stages.hpp"
 #include "airground/platform/config.hpp"
 #include "airground/sim/diff_drive.hpp"
-#include "airground/sim/rng.hpp"
+#include "airground/core/geometry.hpp"
+#include "airground/platform/rng.hpp"
 #include "airground/sim/runner.hpp"
 
 namespace ag::sim {
@@ -185,7 +186,7 @@ Result<PlanningMetrics> eval_planning(const EvalPlanningOptions& o, const std::f
       r.ugv_map = UgvMapSource::kGroundTruth;
       r.drive_by_stages = true;
       r.lidar_columns = 512;
-      r.record = RecordLevel::kNone;
+      r.record = o.record ? RecordLevel::kMcap : RecordLevel::kNone;  // the drive's recording.mcap
       r.progress = false;
       RunOptions::UgvStart st;
       st.has_start = true;
@@ -214,7 +215,12 @@ Result<PlanningMetrics> eval_planning(const EvalPlanningOptions& o, const std::f
       r.stop_when = [&](TimeNs, bool) { return reached_at >= 0; };
       auto run = run_team(r);
       if (!run) return run.error();
-      fs::remove_all(r.out_dir, ec);
+      // keep the drive's recording (recording.mcap, recording.json), nothing else of its folder
+      std::vector<fs::path> rest;
+      for (const auto& e : fs::directory_iterator(r.out_dir, ec))
+        if (!o.record || e.path().filename().string().rfind("recording.", 0) != 0) rest.push_back(e.path());
+      for (const fs::path& p : rest) fs::remove_all(p, ec);
+      if (!o.record) fs::remove_all(r.out_dir, ec);
       res.drive_time_s = reached_at >= 0 ? to_seconds(reached_at) : run.value().sim_s;
       res.final_error_m = closest;
       res.collisions = run.value().ugvs.at(0).collisions;

@@ -12,6 +12,7 @@
 #include <iterator>
 #include <cstdio>
 #include <cstdlib>
+#include <memory>
 #include <optional>
 
 #include "airground/core/camera.hpp"
@@ -25,6 +26,7 @@
 #include "airground/sim/runner.hpp"
 #include "airground/sim/survey.hpp"
 #include "airground/visual_odometry/visual_odometry.hpp"
+#include "../runner/team_recording.hpp"
 
 namespace ag::sim {
 
@@ -84,8 +86,7 @@ Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress
   CameraModel model = CameraModel{}.scaled(0.5);
   CameraShading shading;
   // The goals hold with a real camera's noise, exposure, blur and vignetting: on unless a file says otherwise.
-  CameraSensor sensor;
-  sensor.noise = sensor.auto_exposure = sensor.motion_blur = sensor.vignetting = true;
+  CameraSensor sensor = CameraSensor::field();
   if (!o.camera_config.empty()) {
     auto cs = CameraSensor::load_file(o.camera_config);
     if (!cs) return cs.error();
@@ -144,6 +145,19 @@ Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress
   VoMetrics m;
   int last_pct = -1;
   double yaw_rate = 0;
+  // recording.mcap: the true flight (10 Hz) and every 5th camera frame, as a team run records the quadrotor
+  std::unique_ptr<TeamRecording> rec;
+  if (o.record) {
+    std::error_code mk;
+    fs::create_directories(o.out_dir, mk);
+    TeamRecordingOptions ro;
+    ro.scheduler_period_s = 0;
+    ro.mission = false;
+    auto r = TeamRecording::open((fs::path(o.out_dir) / "recording.mcap").string(), w, true, 0, o.seed, ro);
+    if (!r) return r.error();
+    rec = std::move(r).value();
+  }
+  std::uint64_t steps = 0;
   while (t < t_end && !quad.finished()) {
     last_yaw = quad.pose().yaw;
     quad.step(dt);
@@ -155,6 +169,10 @@ Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress
     const TimeNs stamp = static_cast<TimeNs>(std::llround(t * 1e9));
     AttitudeSample as;
     if (attitude.sample(stamp, p, as)) att_R = rotation_matrix(as.roll, as.pitch, as.yaw);
+    if (rec && steps++ % 5 == 0) {
+      rec->uav_pose(stamp, p);
+      rec->tick(stamp, nullptr);
+    }
     if (t + 1e-9 < next_frame) continue;
     next_frame += frame_dt;
     const TimeNs r0 = thread_cpu_now();
@@ -167,6 +185,7 @@ Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress
     renderer.render(p, frame, stamp, shot);
     ae.observe(frame);
     render_s += to_seconds(thread_cpu_now() - r0);
+    if (rec) rec->camera_frame(stamp, frame_no, frame.rgb);
     const TimeNs v0 = thread_cpu_now();
     const vo::VoFrame f = odo.process(stamp, frame.rgb.ptr<std::uint8_t>(0), o.attitude ? att_R : std::nullopt);
     vo_ms.push_back(to_seconds(thread_cpu_now() - v0) * 1e3);
@@ -184,6 +203,8 @@ Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress
       progress(t / t_end);
     }
   }
+  if (rec)
+    if (Status st = rec->close(t); !st) return st.error();
   m.frames = samples.size();
   m.distance_m = dist;
   m.duration_s = t;

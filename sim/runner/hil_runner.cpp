@@ -50,13 +50,15 @@
 #include "airground/sim/gps.hpp"
 #include "airground/sim/lidar.hpp"
 #include "airground/sim/quadrotor.hpp"
-#include "airground/sim/rng.hpp"
+#include "airground/core/geometry.hpp"
+#include "airground/platform/rng.hpp"
 #include "airground/sim/runner.hpp"
 #include "airground/sim/survey.hpp"
 #include "airground/sim/visual_odometry.hpp"
 #include "airground/sim/world_png.hpp"
 #include "roles.hpp"
 #include "sensor_labels_check.hpp"
+#include "team_recording.hpp"
 #include "worker_pool.hpp"
 
 namespace ag::sim {
@@ -476,6 +478,23 @@ Result<HilResult> run_hil(const HilOptions& opt) {
                  static_cast<unsigned>(web_port), out.c_str());
 
   std::atomic<std::uint64_t> cam_written{0}, cam_dropped{0}, cam_skipped{0}, vo_written{0};
+  // recording.mcap: the truth, the poses the base heard, GPS, LiDAR and camera frames; log times from
+  // here on (wall clock: HIL runs in real time), written by the sensor loop and the camera thread in turn.
+  std::unique_ptr<TeamRecording> rec;
+  std::mutex rec_mu;
+  const TimeNs rec0 = monotonic_now();
+  if (opt.record) {
+    TeamRecordingOptions ro;
+    ro.scheduler_period_s = 0;  // the robots' stages run in their own processes (their hil_report.md timing)
+    ro.mission = false;
+    ro.lidar_mount_height_m = opt.lidar_mount_height_m;
+    auto r = TeamRecording::open((out / "recording.mcap").string(), w, true, static_cast<int>(ugvs.size()), opt.seed, ro);
+    if (!r) {
+      stop_all(SIGTERM);
+      return r.error();
+    }
+    rec = std::move(r).value();
+  }
   // Physics thread.
   std::mutex mu;
   std::atomic<bool> stop{false};
@@ -521,6 +540,7 @@ Result<HilResult> run_hil(const HilOptions& opt) {
     TimeNs next = monotonic_now() + kNsPerS;
     std::vector<VoMsg> vo_out;
     WorkerPool cam_pool(2);
+    std::uint64_t rendered = 0;
     while (!stop_camera.load(std::memory_order_relaxed)) {
       timespec ts{static_cast<time_t>(next / kNsPerS), static_cast<long>(next % kNsPerS)};
       ::clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
@@ -550,6 +570,10 @@ Result<HilResult> run_hil(const HilOptions& opt) {
         const int h = cf.rgb.rows, b = static_cast<int>(j);
         camera.render_rows(qp, h * b / kBands, h * (b + 1) / kBands, cf);
       });
+      if (rec) {
+        std::lock_guard<std::mutex> lk(rec_mu);
+        rec->camera_frame(monotonic_now() - rec0, ++rendered, cf.rgb);
+      }
       vo_out.clear();
       {
         std::lock_guard<std::mutex> lk(vo_mu);
@@ -582,7 +606,7 @@ Result<HilResult> run_hil(const HilOptions& opt) {
   const TimeNs t0 = monotonic_now();
   const TimeNs lidar_period = kNsPerS / 10, state_period = kNsPerS;
   TimeNs next_lidar = t0 + kNsPerS, next_state = t0 + 2 * kNsPerS, next_progress = t0 + 5 * kNsPerS;
-  TimeNs next_trail = t0;
+  TimeNs next_trail = t0, next_rec = t0;
   std::vector<std::uint8_t> pkt(ouster::kMaxPacketSize);
   std::string last_state;
   std::string failure;
@@ -616,9 +640,25 @@ Result<HilResult> run_hil(const HilOptions& opt) {
       }
     }
     if (now >= next_trail) next_trail += kNsPerS / 2;
+    if (rec && now >= next_rec) {
+      next_rec += kNsPerS / 10;
+      std::lock_guard<std::mutex> lk(rec_mu);
+      const TimeNs t = monotonic_now() - rec0;
+      rec->uav_pose(t, qp);
+      for (std::size_t k = 0; k < ugvs.size(); ++k) {
+        Pose3 p = lidar_poses[k];
+        p.z -= opt.lidar_mount_height_m;
+        rec->ugv_pose(t, static_cast<int>(k), p, nullptr, ugvs[k]->has_est ? &ugvs[k]->est : nullptr);
+      }
+      rec->tick(t, nullptr);
+    }
     // GNSS: UBX NAV-PVT on the serial line.
     GpsFix fix;
     if (gps.sample(now, qp, fix)) {
+      if (rec) {
+        std::lock_guard<std::mutex> lk(rec_mu);
+        rec->uav_gps(monotonic_now() - rec0, fix.lat_deg, fix.lon_deg, fix.height_m, fix.h_accuracy_m);
+      }
       ublox::NavPvt p;
       p.itow_ms = static_cast<std::uint32_t>((now / kNsPerMs) % (7 * 24 * 3600 * 1000LL));
       p.fix_type = fix.fix_type == GpsFixType::kNoFix ? ublox::FixType::kNone : ublox::FixType::k3D;
@@ -656,6 +696,10 @@ Result<HilResult> run_hil(const HilOptions& opt) {
     const bool lidar_due = now >= next_lidar;
     if (lidar_due) {
       for (std::size_t k = 0; k < ugvs.size(); ++k) lidar.scan(lidar_poses[k], opt.seed ^ static_cast<std::uint64_t>(now) ^ k, ugvs[k]->scan);
+      if (rec) {
+        std::lock_guard<std::mutex> lk(rec_mu);
+        for (std::size_t k = 0; k < ugvs.size(); ++k) rec->ugv_scan(monotonic_now() - rec0, static_cast<int>(k), res.lidar_revolutions + 1, &ugvs[k]->scan, 1);
+      }
       {
         // A revolution every 100 ms; one the simulator could not cast in time is skipped, not sent late.
         next_lidar += lidar_period;
@@ -786,6 +830,8 @@ Result<HilResult> run_hil(const HilOptions& opt) {
     res.can_frames_in += u->odrive->commands_received();
   }
   if (!last_state.empty()) std::ofstream(out / "base_state.json") << last_state << "\n";
+  if (rec)
+    if (Status st = rec->close(to_seconds(monotonic_now() - rec0)); !st) return st.error();
 
   // Each process's final stage timing, against its table's budget.
   auto budgets = [](const std::string& role) {

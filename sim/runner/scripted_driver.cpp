@@ -8,6 +8,9 @@
 #include <limits>
 #include <queue>
 
+#include "airground/core/geometry.hpp"
+#include "airground/platform/rng.hpp"
+
 namespace ag::sim {
 
 RoadRouter::RoadRouter(const World& world, double cell_m, double clearance_m) {
@@ -61,10 +64,8 @@ bool RoadRouter::nearest_drivable(double x, double y, double radius_m, Eigen::Ve
 
 Eigen::Vector2d RoadRouter::pick_drivable(std::uint64_t key) const {
   if (free_cells_.empty()) return {0, 0};
-  std::uint64_t z = key + 0x9e3779b97f4a7c15ull;  // splitmix64 finaliser: a hash, not a stream
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-  z ^= z >> 31;
+  std::uint64_t state = key;
+  const std::uint64_t z = splitmix64(state);  // one splitmix64 output: a hash of the key, not a stream
   const std::int32_t cell = free_cells_[z % free_cells_.size()];
   return {geo_.x_of(cell % geo_.width), geo_.y_of(cell / geo_.width)};
 }

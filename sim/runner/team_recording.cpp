@@ -1,6 +1,7 @@
 // recording.mcap of a team run: frame tree map -> uav -> uav/camera and map -> ugvN -> ugvN/lidar (the
 // truth), the robots' own estimates, camera frames as JPEG, LiDAR scans as point clouds, the quadrotor's
-// map tiles as grids (class, elevation, RGB), radio and scheduler counters.
+// map tiles as grids (class, elevation, RGB), radio and scheduler counters (recording_counters), planned
+// paths, regions, claims and visits (recording_mission).
 #include "team_recording.hpp"
 
 #include <opencv2/imgcodecs.hpp>
@@ -15,6 +16,7 @@
 #include "airground/drivers/recording/foxglove_json.hpp"
 #include "airground/platform/perf_counters.hpp"
 #include "airground/platform/role_instance.hpp"
+#include "recording_counters.hpp"
 
 namespace ag::sim {
 namespace fg = ag::foxglove;
@@ -56,21 +58,38 @@ Result<std::unique_ptr<TeamRecording>> TeamRecording::open(const std::string& pa
     c.lidar = r->channel("foxglove.PointCloud", n + "/lidar/points");
     r->ugv_.push_back(c);
   }
-  r->radio_ = r->writer_.add_channel(0, "/radio", "json");
-  r->topics_[r->radio_] = "/radio";
-  if (options.scheduler_period_s > 0) {
-    r->scheduler_ = r->writer_.add_channel(0, "/scheduler", "json");
-    r->topics_[r->scheduler_] = "/scheduler";
+  MissionRecorder::Channels mc;
+  if (options.mission) {
+    for (int i = 0; i < ugvs; ++i) mc.paths.push_back(r->channel("foxglove.SceneUpdate", "/ugv" + std::to_string(i + 1) + "/path"));
+    if (uav || ugvs > 0) mc.regions = r->channel("foxglove.SceneUpdate", "/mission/regions");
+    if (ugvs > 0) mc.events = r->channel("foxglove.Log", "/mission/events");
   }
+  TeamRecording* self = r.get();
+  r->mission_ = std::make_unique<MissionRecorder>(std::move(mc), [self](std::uint16_t ch, TimeNs now, const std::string& json) { self->put(ch, now, json); });
+  r->radio_ = r->channel("airground.RadioTraffic", "/radio");
+  if (options.scheduler_period_s > 0) r->scheduler_ = r->channel("airground.SchedulerCounters", "/scheduler");
   return r;
 }
 
 std::uint16_t TeamRecording::channel(const std::string& schema, const std::string& topic) {
   auto it = schema_ids_.find(schema);
-  if (it == schema_ids_.end()) it = schema_ids_.emplace(schema, writer_.add_schema(schema, fg::kSchemaEncoding, fg::schema(schema))).first;
+  if (it == schema_ids_.end()) it = schema_ids_.emplace(schema, writer_.add_schema(schema, fg::kSchemaEncoding, recording_schema(schema))).first;
   const std::uint16_t id = writer_.add_channel(it->second, topic, fg::kMessageEncoding);
   topics_[id] = topic;
   return id;
+}
+
+void TeamRecording::watch(std::vector<std::pair<std::string, RoleInstance*>> roles, const mapping::OrthoMap* map) {
+  roles_ = std::move(roles);
+  map_ = map;
+  RoleInstance* uav = nullptr;
+  std::vector<RoleInstance*> ugvs(ugv_.size(), nullptr);
+  for (const auto& [name, role] : roles_) {
+    if (name == "uav") uav = role;
+    const int n = name.rfind("ugv", 0) == 0 ? std::atoi(name.c_str() + 3) : 0;
+    if (n >= 1 && static_cast<std::size_t>(n) <= ugvs.size()) ugvs[static_cast<std::size_t>(n - 1)] = role;
+  }
+  mission_->watch(uav, std::move(ugvs));
 }
 
 void TeamRecording::put(std::uint16_t ch, TimeNs now, const std::string& json) {
@@ -98,11 +117,11 @@ void TeamRecording::camera_frame(TimeNs now, std::uint64_t frame, const cv::Mat&
   put(camera_, now, fg::compressed_image(ns(now), "uav/camera", "jpeg", jpeg));
 }
 
-void TeamRecording::ugv_pose(TimeNs now, int i, const Pose3& truth, const Pose2& odometry_in_map, const Pose2* estimate) {
+void TeamRecording::ugv_pose(TimeNs now, int i, const Pose3& truth, const Pose2* odometry_in_map, const Pose2* estimate) {
   const UgvChannels& c = ugv_[static_cast<std::size_t>(i)];
   const std::string name = "ugv" + std::to_string(i + 1);
   put(c.truth, now, fg::pose_in_frame(ns(now), "map", pose3(truth)));
-  put(c.odometry, now, fg::pose_in_frame(ns(now), "map", pose2(odometry_in_map)));
+  if (odometry_in_map != nullptr) put(c.odometry, now, fg::pose_in_frame(ns(now), "map", pose2(*odometry_in_map)));
   if (estimate != nullptr) put(c.estimate, now, fg::pose_in_frame(ns(now), "map", pose2(*estimate)));
   put(tf_, now, fg::frame_transforms(ns(now), {{"map", name, {truth.x, truth.y, truth.z}, fg::quat_from_rpy(truth.roll, truth.pitch, truth.yaw)},
                                                {name, name + "/lidar", {0, 0, opt_.lidar_mount_height_m}, {}}}));
@@ -160,32 +179,16 @@ void TeamRecording::tick(TimeNs now, const LinkStats* radio) {
                               scratch_));
     }
   }
-  if (radio != nullptr && now >= next_radio_) {
+  if (now >= next_radio_) {
     next_radio_ = now + kNsPerS;
-    put(radio_, now, "{\"t_s\":" + fg::json_number(to_seconds(now)) + ",\"sent\":" + std::to_string(radio->sent) +
-                         ",\"delivered\":" + std::to_string(radio->delivered) + ",\"dropped_range\":" + std::to_string(radio->dropped_range) +
-                         ",\"dropped_loss\":" + std::to_string(radio->dropped_loss) + ",\"dropped_queue\":" + std::to_string(radio->dropped_queue) +
-                         ",\"dropped_collision\":" + std::to_string(radio->dropped_collision) + ",\"bytes_sent\":" +
-                         std::to_string(radio->bytes_sent) + ",\"bytes_delivered\":" + std::to_string(radio->bytes_delivered) + "}");
+    const std::vector<RobotTraffic> traffic = robot_traffic(roles_);
+    if (radio != nullptr || !traffic.empty()) put(radio_, now, radio_traffic(ns(now), radio, traffic));
   }
   if (scheduler_ != 0 && opt_.scheduler_period_s > 0 && now >= next_scheduler_) {
     next_scheduler_ = now + from_seconds(opt_.scheduler_period_s);
-    std::string s = "{\"t_s\":" + fg::json_number(to_seconds(now)) + ",\"stages\":[";
-    bool first = true;
-    for (const auto& [robot, role] : roles_) {
-      if (role == nullptr) continue;
-      for (std::size_t k = 0; k < role->perf().size(); ++k) {
-        const StagePerfSnapshot p = snapshot(role->perf().at(k));
-        s += (first ? "" : ",") + std::string("{\"robot\":") + fg::json_string(robot) + ",\"stage\":" + fg::json_string(role->perf().at(k).name) +
-             ",\"runs\":" + std::to_string(p.runs) + ",\"overruns\":" + std::to_string(p.overruns) + ",\"slips\":" + std::to_string(p.slips) +
-             ",\"exec_p50_us\":" + fg::json_number(static_cast<double>(p.exec_p50) * 1e-3) + ",\"exec_p99_us\":" +
-             fg::json_number(static_cast<double>(p.exec_p99) * 1e-3) + ",\"exec_max_us\":" + fg::json_number(static_cast<double>(p.exec_max) * 1e-3) +
-             ",\"budget_us\":" + fg::json_number(static_cast<double>(p.budget_ns) * 1e-3) + "}";
-        first = false;
-      }
-    }
-    put(scheduler_, now, s + "]}");
+    put(scheduler_, now, scheduler_counters(ns(now), roles_));
   }
+  mission_->tick(now);
 }
 
 Status TeamRecording::close(double sim_s) {

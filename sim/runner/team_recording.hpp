@@ -19,6 +19,7 @@
 #include "airground/sim/lidar.hpp"
 #include "airground/sim/radio.hpp"
 #include "airground/sim/world.hpp"
+#include "recording_mission.hpp"
 
 namespace ag {
 class RoleInstance;
@@ -37,6 +38,7 @@ struct TeamRecordingOptions {
   double map_period_s{10};       // changed map tiles at most this often
   double scheduler_period_s{10};  // 0: no scheduler channel (its times are CPU times: not repeatable)
   double lidar_mount_height_m{0.6};
+  bool mission{true};             // the mission channels (paths, regions, events; recording_mission.hpp)
 };
 
 class TeamRecording {
@@ -45,19 +47,21 @@ class TeamRecording {
   static Result<std::unique_ptr<TeamRecording>> open(const std::string& path, const World& world, bool uav, int ugvs,
                                                      std::uint64_t seed, const TeamRecordingOptions& options);
 
-  // The roles whose stage counters go on /scheduler, and the quadrotor's map (may be null).
-  void watch(std::vector<std::pair<std::string, RoleInstance*>> roles, const mapping::OrthoMap* map) {
-    roles_ = std::move(roles);
-    map_ = map;
-  }
+  // The roles whose stage and comms counters go on /scheduler and /radio ("uav", "ugv1".., "base"; the
+  // quadrotor's and the ground robots' also feed the mission channels), and the quadrotor's map (may be null).
+  void watch(std::vector<std::pair<std::string, RoleInstance*>> roles, const mapping::OrthoMap* map);
 
   void uav_pose(TimeNs now, const Pose3& truth);
   void uav_gps(TimeNs now, double lat_deg, double lon_deg, double height_m, double h_accuracy_m);
   void camera_frame(TimeNs now, std::uint64_t frame, const cv::Mat& rgb);
-  // Ground robot i (0-based): truth, odometry in the map frame, and its own estimate when it has one.
-  void ugv_pose(TimeNs now, int i, const Pose3& truth, const Pose2& odometry_in_map, const Pose2* estimate);
+  // Ground robot i (0-based): truth, odometry in the map frame and its own estimate when it has them.
+  void ugv_pose(TimeNs now, int i, const Pose3& truth, const Pose2* odometry_in_map, const Pose2* estimate);
   void ugv_scan(TimeNs now, int i, std::uint64_t scan, const std::vector<LidarPoint>* parts, std::size_t n_parts);
-  // Once per tick: map tiles, radio counters, scheduler counters when due.
+  // Ground robot i's route when the simulator drives it (written to /ugvN/path when it changes).
+  void ugv_route(TimeNs now, int i, const std::vector<Eigen::Vector2d>& path) {
+    if (mission_) mission_->route(now, i, path);
+  }
+  // Once per tick: map tiles, radio counters, scheduler counters, mission channels when due.
   void tick(TimeNs now, const LinkStats* radio);
 
   // Closes the file and writes DIR/recording.json (per topic message counts, size); the error names the file.
@@ -74,6 +78,7 @@ class TeamRecording {
   std::string path_;
   std::map<std::string, std::uint16_t> schema_ids_;
   std::map<std::uint16_t, std::string> topics_;
+  std::unique_ptr<MissionRecorder> mission_;
   std::uint16_t tf_{0}, uav_truth_{0}, uav_gps_{0}, camera_{0}, radio_{0}, scheduler_{0}, map_ch_{0};
   struct UgvChannels {
     std::uint16_t truth{0}, odometry{0}, estimate{0}, lidar{0};

@@ -47,9 +47,11 @@
 #include "airground/sim/radio.hpp"
 #include "airground/sim/radio_link.hpp"
 #include "airground/sim/raycast.hpp"
-#include "airground/sim/rng.hpp"
+#include "airground/core/geometry.hpp"
+#include "airground/platform/rng.hpp"
 #include "airground/sim/scripted_driver.hpp"
 #include "airground/sim/survey.hpp"
+#include "airground/sim/survey_plan.hpp"
 #include "airground/sim/visual_odometry.hpp"
 #include "airground/sim/wheel_odometry.hpp"
 #include "airground/sim/world_png.hpp"
@@ -949,7 +951,11 @@ void SimWorldStage::step(TimeNs now) noexcept {
       if (u.truth_log) std::fprintf(u.truth_log.get(), "%.3f,%.3f,%.3f,%.3f,%.4f,%.4f,%.4f\n", to_seconds(now), p.x, p.y, p.z, p.roll, p.pitch, p.yaw);
       if (u.odom_log) std::fprintf(u.odom_log.get(), "%.3f,%.3f,%.3f,%.4f,%.4f,%.4f\n", to_seconds(now), od.pose.x, od.pose.y, od.pose.yaw, od.wheel_left_rad_s, od.wheel_right_rad_s);
       u.trail.emplace_back(p.x, p.y);
-      if (t.mcap) t.mcap->ugv_pose(now, u.index, p, u.odometry_in_map(od.pose), u.loc_has_pose ? &u.loc_pose : nullptr);
+      if (t.mcap) {
+        const Pose2 om = u.odometry_in_map(od.pose);
+        t.mcap->ugv_pose(now, u.index, p, &om, u.loc_has_pose ? &u.loc_pose : nullptr);
+      }
+      if (t.mcap && !t.opt.drive_by_stages) t.mcap->ugv_route(now, u.index, u.pursuit.path());
     }
     if (t.air) t.air->set_position(u.node, u.killed ? kFarAway : u.vehicle.pose().x, u.killed ? kFarAway : u.vehicle.pose().y);
   }
@@ -1328,7 +1334,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
 
   CameraModel cam_model;
   CameraShading shading;
-  CameraSensor cam_sensor;
+  CameraSensor cam_sensor = CameraSensor::field();  // a real camera unless camera.yaml says otherwise
   LidarNoise lidar_noise;
   if (!opt.config_dir.empty()) {
     const fs::path cam = fs::path(opt.config_dir) / "camera.yaml";
@@ -1401,7 +1407,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     reg("base", base_node);
   }
 
-  const bool rec = opt.record != RecordLevel::kNone;
+  const bool rec = opt.record == RecordLevel::kLight || opt.record == RecordLevel::kFull;  // the CSV streams
   SimClock clock(0);
   // Robot role instances: the real stage tables, quiet status stages (the runner reports instead).
   // Each robot starts from its role's shipped configuration (built in from firmware_host/<role>/<role>.yaml),
@@ -1448,20 +1454,20 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
 
   double survey_time_s = 0;  // the quadrotor's route, estimated [s]
   if (opt.uav) {
-    const Pose3 start{staging.x, staging.y, w.terrain.at<float>(w.grid().row(staging.y), w.grid().col(staging.x)), 0, 0, staging.yaw};
+    const Pose3 start = uav_launch_pose(w);
     auto u = std::make_unique<Uav>(Uav{Quadrotor(quad_cfg.value(), start), GpsSimulator(gps_cfg.value(), w.header.datum, opt.seed ^ std::uint64_t{0x67707331}),
                                        VisualOdometrySimulator(vo_cfg.value(), opt.seed ^ std::uint64_t{0x766f3031}), CameraFrame{}, 0, 0, 0, 0, 0, {}, {}, {}, {}, {}, nullptr});
-    const GridGeometry& g = w.grid();
-    const double margin = opt.survey_margin_m;
-    SurveyOptions so;
-    so.speed_mps = opt.uav_speed_mps;
     const double hfov = 2.0 * std::atan(0.5 * cam_model.width / cam_model.fx);
-    const bool own_area = opt.survey_x1 > opt.survey_x0 && opt.survey_y1 > opt.survey_y0;
-    auto route = own_area ? survey_lawnmower(opt.survey_x0, opt.survey_y0, opt.survey_x1, opt.survey_y1, opt.uav_altitude_m, opt.survey_overlap, hfov, so)
-                          : survey_lawnmower(g.origin_x + margin, g.origin_y - g.size_y() + margin, g.origin_x + g.size_x() - margin,
-                                             g.origin_y - margin, opt.uav_altitude_m, opt.survey_overlap, hfov, so);
+    const UavSurveyOptions so{opt.uav_altitude_m, opt.survey_overlap, opt.uav_speed_mps, opt.survey_margin_m, opt.survey_x0, opt.survey_y0, opt.survey_x1, opt.survey_y1};
+    auto route = uav_survey_route(w, so, hfov);
     if (!route) return route.error();
     std::vector<Waypoint> wps = std::move(route).value();
+    // The same route as an autopilot's mission (QGroundControl .plan), as a field team would load it.
+    if (auto st = write_survey_plan((t.out / "survey.plan").string(), SurveyPlan{wps, start, w.header.datum, AutopilotFirmware::kPx4,
+                                                                                 opt.uav_speed_mps > 0 ? opt.uav_speed_mps : quad_cfg.value().cruise_speed_mps,
+                                                                                 quad_cfg.value().waypoint_tolerance_m, opt.uav_return_home});
+        !st)
+      return st.error();
     if (opt.uav_return_home && !wps.empty()) wps.push_back(Waypoint{start.x, start.y, wps.back().z, 0});
     survey_time_s = estimate_route_time_s(quad_cfg.value(), start, wps);
     u->vehicle.set_waypoints(std::move(wps));

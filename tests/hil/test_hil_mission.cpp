@@ -14,6 +14,7 @@
 #include <set>
 #include <string>
 
+#include "../mcap_reader/mcap_read.hpp"
 #include "process.hpp"
 
 namespace ag::test {
@@ -72,6 +73,17 @@ TEST(Hil, AShortMissionRunsToTheEndOverTheWireProtocols) {
   for (const char* file : {"hil_report.md", "trajectories.png", "base_state.json", "config/ugv1.yaml", "config/uav.yaml", "logs/ugv1.log"})
     EXPECT_TRUE(fs::exists(out / file)) << file;
   EXPECT_GT(fs::file_size(out / "logs" / "can-ugv1.log"), 10000U);
+
+  // recording.mcap: the truth, the pose the base heard, GPS, LiDAR and camera, read back by the official
+  // reader with the counts recording.json reports
+  std::string why;
+  const std::string script = mcap_reader_script(source_dir(), &why);
+  ASSERT_FALSE(script.empty()) << why;
+  const nlohmann::json rec = read_mcap(script, (out / "recording.mcap").string(), {"--expect", (out / "recording.json").string()});
+  EXPECT_TRUE(rec.contains("ok") && rec.at("ok") == true) << rec.dump().substr(0, 300);
+  EXPECT_TRUE(rec.value("problems", nlohmann::json::array()).empty()) << rec["problems"].dump();
+  for (const char* topic : {"/tf", "/uav/truth", "/uav/gps", "/uav/camera/image", "/ugv1/truth", "/ugv1/pose", "/ugv1/lidar/points"})
+    EXPECT_GT(rec["counts"].value(topic, 0), 0) << topic;
 }
 
 }  // namespace

@@ -6,6 +6,7 @@
 #include <sstream>
 #include <string>
 
+#include "../mcap_reader/mcap_read.hpp"
 #include "process.hpp"
 
 namespace ag::test {
@@ -86,6 +87,7 @@ TEST(SimCli, EvalLocalizationHelpAndAShortRun) {
     EXPECT_NE(help.out.find(s), std::string::npos) << s;
   EXPECT_EQ(run({sim_bin(), "eval", "localization", "--map", "satellite"}).exit_code, 2);
   EXPECT_EQ(run({sim_bin(), "eval", "localization", "--set", "novalue"}).exit_code, 2);
+  EXPECT_EQ(run({sim_bin(), "eval", "localization", "--record", "csv"}).exit_code, 2);
 
   const std::string w = tmp("loc-world");
   fs::remove_all(w);
@@ -104,6 +106,15 @@ TEST(SimCli, EvalLocalizationHelpAndAShortRun) {
   for (const char* k : {"\"converged\"", "\"convergence_time_s\"", "\"loc_error_mean_m\"", "\"loc_error_p95_m\"", "\"yaw_error_mean_deg\"",
                         "\"odom_only_error_mean_m\""})
     EXPECT_NE(metrics.find(k), std::string::npos) << k;
+  // recording.mcap, read back by the official reader with the counts recording.json reports
+  std::string why;
+  const std::string script = mcap_reader_script(source_dir(), &why);
+  ASSERT_FALSE(script.empty()) << why;
+  const nlohmann::json rec = read_mcap(script, out + "/recording.mcap", {"--expect", out + "/recording.json"});
+  EXPECT_TRUE(rec.value("ok", false)) << rec.dump().substr(0, 300);
+  EXPECT_TRUE(rec.value("problems", nlohmann::json::array()).empty()) << rec["problems"].dump();
+  EXPECT_GT(rec["counts"].value("/ugv1/truth", 0), 100);
+  EXPECT_GT(rec["counts"].value("/ugv1/lidar/points", 0), 0);
   // An unknown ground-robot parameter is the user's error, named.
   const auto bad = run({sim_bin(), "eval", "localization", "--world", w, "--route-km", "0.1", "--max-duration", "2", "--lidar-columns", "512",
                         "--quiet", "--set", "nosuch.key=1", "--out", tmp("loc-bad")}, 120);

@@ -1,10 +1,13 @@
 // Reads an MCAP file with the official readers and prints what it holds as JSON, for our tests:
-//   node read_mcap.mjs FILE [--dump TOPIC]... [--max N]
+//   node read_mcap.mjs FILE [--dump TOPIC]... [--max N] [--expect recording.json]
 // McapIndexedReader (summary, chunk indexes, every message through the indexes, chunk CRCs) and
 // McapStreamReader (every record in file order, CRCs validated); the data section CRC is checked with
 // @foxglove/crc. Each JSON message is parsed and its keys compared with its channel's JSON schema.
-// Exit 0 and {"ok":true,...} when the file reads; 1 and {"ok":false,"error":...} when it does not (a
-// truncated or corrupted file); 2 on bad arguments.
+// "schemaless" lists the channels without a schema. --expect compares the per-topic counts
+// with what the writer reported (recording.json's channel_messages): every mismatch is a problem.
+// Exit 0 and {"ok":true,...} when the file reads; 1 and {"ok":false,"error":...,"damage":"truncated" or
+// "corrupted"} when it does not (no closing magic: truncated; otherwise a CRC, a record or a
+// decompression failed: corrupted); 2 on bad arguments.
 import fs from 'node:fs';
 import { McapIndexedReader, McapStreamReader } from '@mcap/core';
 import { loadDecompressHandlers } from '@mcap/support';
@@ -12,16 +15,17 @@ import { crc32 } from '@foxglove/crc';
 
 const args = process.argv.slice(2);
 if (args.includes('--help')) {
-  console.log('usage: node read_mcap.mjs FILE [--dump TOPIC]... [--max N]   (prints JSON: header, schemas, channels, statistics, counts)');
+  console.log('usage: node read_mcap.mjs FILE [--dump TOPIC]... [--max N] [--expect recording.json]   (prints JSON: header, schemas, channels, statistics, counts, chunks)');
   process.exit(0);
 }
 let file;
 const dump = new Set();
 let max = 3;
+let expect;
 for (let i = 0; i < args.length; i++) {
-  if (args[i] === '--dump' || args[i] === '--max') {
+  if (args[i] === '--dump' || args[i] === '--max' || args[i] === '--expect') {
     if (i + 1 >= args.length) { console.error(`read_mcap: ${args[i]} needs a value`); process.exit(2); }
-    if (args[i] === '--dump') dump.add(args[++i]); else max = Number(args[++i]);
+    if (args[i] === '--dump') dump.add(args[++i]); else if (args[i] === '--max') max = Number(args[++i]); else expect = args[++i];
   } else if (args[i].startsWith('--')) { console.error(`read_mcap: unknown option ${args[i]}`); process.exit(2); }
   else if (file === undefined) file = args[i];
   else { console.error(`read_mcap: one file only (got ${file} and ${args[i]})`); process.exit(2); }
@@ -49,6 +53,8 @@ async function main() {
     channel_message_counts: Object.fromEntries([...st.channelMessageCounts].map(([id, n]) => [reader.channelsById.get(id)?.topic ?? String(id), big(n)])),
   };
   out.chunk_indexes = reader.chunkIndexes.length;
+  out.chunks = reader.chunkIndexes.map((c) => ({ offset: big(c.chunkStartOffset), length: big(c.chunkLength), compression: c.compression,
+    compressed_size: big(c.compressedSize), uncompressed_size: big(c.uncompressedSize) }));
   out.chunk_compression = [...new Set(reader.chunkIndexes.map((c) => c.compression))];
   out.summary_offsets = [...reader.summaryOffsetsByOpcode.keys()].sort((a, b) => a - b);
   out.metadata = [];
@@ -85,6 +91,12 @@ async function main() {
       }
     }
   }
+  out.schemaless = [...reader.channelsById.values()].filter((c) => c.schemaId === 0).map((c) => c.topic);
+  if (expect !== undefined) {
+    const want = JSON.parse(fs.readFileSync(expect, 'utf8')).channel_messages ?? {};
+    for (const t of new Set([...Object.keys(want), ...Object.keys(counts)]))
+      if ((want[t] ?? 0) !== (counts[t] ?? 0)) problems.push(`${t}: ${counts[t] ?? 0} messages read, ${want[t] ?? 0} reported by ${expect}`);
+  }
   out.counts = counts;
   out.dumps = dumps;
   out.problems = problems;
@@ -112,4 +124,12 @@ async function main() {
 
 // process.exit() right after a large write to a pipe would cut it short: exit once it is flushed.
 const emit = (obj, code) => process.stdout.write(JSON.stringify(obj) + '\n', () => process.exit(code));
-main().then((out) => emit(out, 0)).catch((e) => emit({ ok: false, error: String(e && e.message ? e.message : e) }, 1));
+// A file that does not end with the closing magic was cut short; one that does but fails was damaged.
+const MAGIC = [0x89, 0x4d, 0x43, 0x41, 0x50, 0x30, 0x0d, 0x0a];
+function damage() {
+  try {
+    const b = fs.readFileSync(file);
+    return b.length >= 8 && MAGIC.every((v, k) => b[b.length - 8 + k] === v) ? 'corrupted' : 'truncated';
+  } catch { return 'unreadable'; }
+}
+main().then((out) => emit(out, 0)).catch((e) => emit({ ok: false, error: String(e && e.message ? e.message : e), damage: damage() }, 1));

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "airground/aerial_mapping/stages.hpp"
+#include "airground/drivers/recording/recorder_stage.hpp"
 #include "airground/segmentation/stage.hpp"
 #include "airground/platform/calibration.hpp"
 #include "airground/platform/perf_counters.hpp"
@@ -30,12 +31,16 @@ struct Measured {
 };
 
 // Runs the uav stages over a generated 200 m world for `duration_s` and checks every stage's p99 against
-// its scaled budget; `config` overrides the quadrotor's parameters.
-void check_uav_budgets(const std::string& name, double duration_s, const std::vector<std::string>& config, std::uint64_t min_keyframes,
-                       std::uint64_t min_pairs, std::uint64_t min_segmented) {
+// its scaled budget; `config` overrides the quadrotor's parameters ("{root}" in a value: the test's folder).
+// `recorder` (when given) receives the recorder stage's counters.
+void check_uav_budgets(const std::string& name, double duration_s, std::vector<std::string> config, std::uint64_t min_keyframes,
+                       std::uint64_t min_pairs, std::uint64_t min_segmented, recording::RecorderCounters* recorder = nullptr) {
   const char* b = std::getenv("AG_BINARY_DIR");
   const fs::path root = fs::path(b != nullptr ? b : fs::temp_directory_path().string()) / name;
   fs::create_directories(root);
+  for (std::string& c : config)
+    if (const std::size_t at = c.find("{root}"); at != std::string::npos) c.replace(at, 6, root.string());
+  fs::remove_all(root / "recording");  // the recorder's files of an earlier run
   GeneratorOptions g;
   g.seed = 11;
   g.size_m = 200;
@@ -62,6 +67,8 @@ void check_uav_budgets(const std::string& name, double duration_s, const std::ve
       if (auto* pg = dynamic_cast<const mapping::PoseGraphStage*>(slot.stage.get())) keyframes = pg->keyframes();
       if (auto* om = dynamic_cast<const mapping::OrthoMapStage*>(slot.stage.get())) pairs = om->counters().pairs_matched;
       if (auto* sg = dynamic_cast<const seg::SegmentationStage*>(slot.stage.get())) segmented = sg->counters().segmented;
+      if (auto* rec = dynamic_cast<const recording::RecorderStage*>(slot.stage.get()); rec != nullptr && recorder != nullptr)
+        *recorder = rec->counters();
       if (auto* v = dynamic_cast<const vo::VoStage*>(slot.stage.get())) {
         vo_counters = v->counters();
         vo_seen = true;
@@ -112,6 +119,27 @@ TEST(UavBudgetsInTheRunner, TheErfNetSegmentationStageKeepsItsBudget) {
                     {"segmentation.labels=erfnet", "segmentation.weights=" + src + "/config/erfnet/erfnet_c7.agw",
                      "ortho_map.keyframes_channel=keyframes_labelled"},
                     30, 20, 30);
+}
+
+// The same with the robot's own recorder on (every GPS fix, map tile and keyframe pose into MCAP files
+// on its own lowest-priority stage): every stage, the recorder included, keeps its budget (issue 29).
+TEST(UavBudgetsInTheRunner, TheStagesKeepTheirBudgetsWithTheRecorderOn) {
+  recording::RecorderCounters rec;
+  const double seconds = 20;
+  check_uav_budgets("timing-uav-recorder", seconds, {"recorder.path={root}/recording", "recorder.scheduler_period_s=1"}, 5, 2, 0, &rec);
+  std::printf("recorder: %llu poses, %llu GPS fixes, %llu map tiles, %llu scheduler reports written; drops: %llu GPS, %llu tiles; %llu file(s), %llu write errors\n",
+              static_cast<unsigned long long>(rec.pose.written), static_cast<unsigned long long>(rec.gps.written),
+              static_cast<unsigned long long>(rec.map_tiles.written), static_cast<unsigned long long>(rec.scheduler.written),
+              static_cast<unsigned long long>(rec.gps.drops), static_cast<unsigned long long>(rec.map_tiles.drops),
+              static_cast<unsigned long long>(rec.files_opened), static_cast<unsigned long long>(rec.write_errors));
+  // It recorded the flight: every GPS fix (5 Hz), the map as it grew, the counters every second.
+  EXPECT_EQ(rec.write_errors, 0u);
+  EXPECT_EQ(rec.files_opened, 1u);
+  EXPECT_GT(static_cast<double>(rec.gps.written), 4.5 * seconds);
+  EXPECT_EQ(rec.gps.written, rec.gps.read);
+  EXPECT_GT(rec.map_tiles.written, 5u);
+  EXPECT_GT(rec.pose.written, 2u);
+  EXPECT_GE(rec.scheduler.written, static_cast<std::uint64_t>(seconds) - 1);
 }
 
 }  // namespace

@@ -57,7 +57,7 @@ std::vector<std::uint8_t> encode_tile_frame(const WebTile& t) {
 
 WebService::WebService(const WebServiceParams& p, LatestValue<MissionModel>& snapshot, SpscRing<WebTile, kWebTileRing>& tiles,
                        SpscRing<LogItem, kLogRing>& log, TimeNs start)
-    : p_(p), snapshot_(snapshot), tiles_in_(tiles), log_in_(log), start_(start) {}
+    : p_(p), snapshot_(snapshot), tiles_in_(tiles), log_in_(log), start_(start), fox_(p.client_buffer_bytes, p.push_hz) {}
 
 WebService::~WebService() {
   if (log_ != nullptr) std::fclose(log_);
@@ -86,7 +86,8 @@ std::string WebService::hello_json() {
 }
 
 std::string WebService::state_json(const MissionModel& m, TimeNs start, const net::http::HttpServerCounters* http,
-                                   std::uint64_t tiles_held, std::uint64_t log_lines, std::uint64_t log_errors) {
+                                   std::uint64_t tiles_held, std::uint64_t log_lines, std::uint64_t log_errors,
+                                   const std::string& foxglove) {
   std::string s;
   s.reserve(16384);
   JsonOut j(s);
@@ -175,6 +176,7 @@ std::string WebService::state_json(const MissionModel& m, TimeNs start, const ne
     j.end_object();
   }
   j.end_object();
+  if (!foxglove.empty()) s.insert(s.size() - 1, ",\"foxglove\":{" + foxglove + "}");
   return s;
 }
 
@@ -295,6 +297,7 @@ void WebService::take_tiles() noexcept {
       for (int b = 0; b < 8; ++b) held_version |= std::uint64_t{it->second[16 + static_cast<std::size_t>(b)]} << (8 * b);
     if (it == tiles_.end() || t->version > held_version) {
       tiles_[k] = encode_tile_frame(*t);
+      if (p_.foxglove) fox_.tile(*t);
       for (auto& [id, c] : clients_)
         if (c.queued.insert(k).second) c.pending.push_back(k);
       if (log_ != nullptr) {
@@ -309,11 +312,15 @@ void WebService::take_tiles() noexcept {
   if (wrote) std::fflush(log_);
 }
 
-const std::string& WebService::current_state(const net::http::HttpServer* s) {
+void WebService::refresh_model() noexcept {
   if (snapshot_.fresh() || model_ == nullptr) model_ = &snapshot_.read();
+}
+
+const std::string& WebService::current_state(const net::http::HttpServer* s) {
+  refresh_model();
   if (s != nullptr) http_ = &s->counters();
   if (model_->seq != state_seq_ || state_.empty()) {
-    state_ = state_json(*model_, start_, http_, tiles_.size(), log_lines_, log_errors_);
+    state_ = state_json(*model_, start_, http_, tiles_.size(), log_lines_, log_errors_, p_.foxglove ? fox_.counters_json() : std::string());
     state_seq_ = model_->seq;
   }
   return state_;
@@ -345,6 +352,7 @@ void WebService::tick(net::http::HttpServer& s) {
     const std::string& st = current_state(&s);
     if (state_seq_ != pushed_seq_ || now - last_push_ >= kNsPerS) {
       for (auto id : s.ws_clients()) {
+        if (fox_.has(id)) continue;  // Foxglove clients get their own messages
         if (s.ws_pending(id) > p_.client_buffer_bytes / 2) {
           ++state_skipped_;  // it still has the last one to read; the next push carries everything
           continue;
@@ -356,9 +364,47 @@ void WebService::tick(net::http::HttpServer& s) {
     }
   }
   push_tiles(s);
+  if (p_.foxglove) {
+    refresh_model();
+    fox_.tick(s, *model_, [this] { return counters_members(); });
+  }
+}
+
+std::string WebService::counters_members() const {
+  std::string s;
+  JsonOut j(s);
+  j.begin_object();
+  if (model_ != nullptr) {
+    const ModelCounters& k = model_->counters;
+    j.key("model").begin_object().ku("records_in", k.records_in).ku("poses_in", k.poses_in).ku("tiles_in", k.tiles_in);
+    j.ku("decode_errors", k.decode_errors).ku("stale_regions", k.stale_regions).ku("table_full", k.table_full);
+    j.ku("tiles_held_back", k.tiles_held_back).ku("log_dropped", k.log_dropped).ku("log_lines", log_lines_).ku("log_errors", log_errors_);
+    j.end_object();
+  }
+  if (http_ != nullptr) {
+    j.key("server").begin_object().ku("clients", http_->clients.load()).ku("ws_clients", http_->ws_clients.load());
+    j.ku("requests", http_->requests.load()).ku("bad_requests", http_->bad_requests.load()).ku("ws_bad_frames", http_->ws_bad_frames.load());
+    j.ku("slow_dropped", http_->slow_dropped.load()).ku("bytes_out", http_->bytes_out.load()).end_object();
+  }
+  j.end_object();
+  return s.size() > 2 ? s.substr(1, s.size() - 2) : std::string("\"model\":{}");
+}
+
+std::string WebService::ws_subprotocol(const net::http::HttpRequest& req) {
+  if (p_.foxglove && req.header_has_token("sec-websocket-protocol", kFoxgloveSubprotocol)) return std::string(kFoxgloveSubprotocol);
+  return {};
+}
+
+void WebService::ws_message(net::http::HttpServer& s, net::http::HttpServer::ClientId id, net::http::WsOpcode op,
+                            std::span<const std::uint8_t> payload) {
+  if (fox_.has(id)) fox_.message(s, id, op, payload);  // the page's own clients send nothing we read
 }
 
 void WebService::ws_open(net::http::HttpServer& s, net::http::HttpServer::ClientId id) {
+  if (s.ws_protocol(id) == kFoxgloveSubprotocol) {
+    fox_.open(s, id);
+    return;
+  }
   Client& c = clients_[id];
   for (const auto& [k, v] : tiles_)
     if (c.queued.insert(k).second) c.pending.push_back(k);
@@ -366,7 +412,10 @@ void WebService::ws_open(net::http::HttpServer& s, net::http::HttpServer::Client
   s.ws_send_text(id, current_state(&s));
 }
 
-void WebService::ws_close(net::http::HttpServer::ClientId id) { clients_.erase(id); }
+void WebService::ws_close(net::http::HttpServer::ClientId id) {
+  clients_.erase(id);
+  fox_.close(id);
+}
 
 net::http::HttpResponse WebService::get(const net::http::HttpRequest& req) {
   std::string_view path = req.path;
@@ -375,7 +424,8 @@ net::http::HttpResponse WebService::get(const net::http::HttpRequest& req) {
     if (path == a.path) return {200, a.mime, std::string(reinterpret_cast<const char*>(a.data), a.size), {}};
   if (path == "/api/state") return {200, "application/json", current_state(nullptr), {}};
   if (path == "/api/hello" || path == "/api/classes") return {200, "application/json", hello_json(), {}};
-  return {404, "text/plain; charset=utf-8", "not found: " + std::string(req.path) + "\n(try / , /api/state or the WebSocket /ws)\n", {}};
+  return {404, "text/plain; charset=utf-8",
+          "not found: " + std::string(req.path) + "\n(try / , /api/state, the WebSocket /ws, or Foxglove's WebSocket (foxglove.websocket.v1) at /)\n", {}};
 }
 
 }  // namespace ag::base

@@ -14,6 +14,7 @@
 #include "airground/base_station/model.hpp"
 #include "airground/base_station/web_stage.hpp"
 #include "airground/net/http/server.hpp"
+#include "foxglove_service.hpp"
 
 namespace ag::base {
 
@@ -36,6 +37,7 @@ struct WebServiceParams {
   std::string log_path;
   double push_hz{4.0};
   std::size_t client_buffer_bytes{4u << 20};
+  bool foxglove{true};  // answer WebSocket clients that offer foxglove.websocket.v1 (at any path)
 };
 
 class WebService final : public net::http::HttpServer::Handler {
@@ -49,7 +51,12 @@ class WebService final : public net::http::HttpServer::Handler {
   net::http::HttpResponse get(const net::http::HttpRequest& req) override;
   void ws_open(net::http::HttpServer& s, net::http::HttpServer::ClientId id) override;
   void ws_close(net::http::HttpServer::ClientId id) override;
+  void ws_message(net::http::HttpServer& s, net::http::HttpServer::ClientId id, net::http::WsOpcode op,
+                  std::span<const std::uint8_t> payload) override;
+  std::string ws_subprotocol(const net::http::HttpRequest& req) override;
   void tick(net::http::HttpServer& s) override;
+  // Any thread (atomics).
+  [[nodiscard]] std::string foxglove_counters_json() const { return fox_.counters_json(); }
   // Writes what waits in the log ring.
   void drain_log() noexcept;
   // At stop (server thread joined): takes and logs the tiles handed over, then the log ring.
@@ -59,8 +66,10 @@ class WebService final : public net::http::HttpServer::Handler {
   }
 
   // JSON of the model (what /api/state and the "state" WebSocket messages carry).
+  // `foxglove`: FoxgloveService::counters_json() ("" = none).
   static std::string state_json(const MissionModel& m, TimeNs start, const net::http::HttpServerCounters* http,
-                                std::uint64_t tiles_held, std::uint64_t log_lines, std::uint64_t log_errors);
+                                std::uint64_t tiles_held, std::uint64_t log_lines, std::uint64_t log_errors,
+                                const std::string& foxglove = {});
   static std::string hello_json();
   // One mission-log line (no newline) for a record or a pose.
   static std::string log_line(const LogItem& item, TimeNs start);
@@ -75,6 +84,9 @@ class WebService final : public net::http::HttpServer::Handler {
   void take_tiles() noexcept;
   void push_tiles(net::http::HttpServer& s);
   const std::string& current_state(const net::http::HttpServer* s);
+  void refresh_model() noexcept;
+  // The model, server and Foxglove counters as JSON object members (the /base/counters channel).
+  [[nodiscard]] std::string counters_members() const;
 
   WebServiceParams p_;
   LatestValue<MissionModel>& snapshot_;
@@ -92,6 +104,7 @@ class WebService final : public net::http::HttpServer::Handler {
   std::uint64_t pushed_seq_{~std::uint64_t{0}};
   const net::http::HttpServerCounters* http_{nullptr};
   std::uint64_t state_skipped_{0};
+  FoxgloveService fox_;
 };
 
 }  // namespace ag::base

@@ -35,6 +35,7 @@ Status WebStage::init(StageContext& ctx) {
   sp.log_path = p.text("log_path");
   sp.push_hz = p.real("push_hz");
   sp.client_buffer_bytes = static_cast<std::size_t>(p.integer("client_buffer_kb")) * 1024;
+  sp.foxglove = p.boolean("foxglove");
   service_ = std::make_unique<WebService>(sp, *snapshot_, *tiles_to_server_, *log_to_server_, ctx.clock.now());
   if (auto st = service_->open_log(); !st) return st.error();
 
@@ -106,5 +107,7 @@ void WebStage::stop() noexcept {
 int WebStage::port() const noexcept { return server_ ? server_->port() : 0; }
 
 const net::http::HttpServerCounters* WebStage::server_counters() const noexcept { return server_ ? &server_->counters() : nullptr; }
+
+std::string WebStage::foxglove_counters_json() const { return service_ ? service_->foxglove_counters_json() : std::string(); }
 
 }  // namespace ag::base

@@ -1,5 +1,6 @@
 // The HTTP/WebSocket server on real loopback sockets: pages, 400/404/405/503 with their counters, the
-// RFC 6455 handshake, frames both ways, and a client that stops reading dropped while another keeps up.
+// RFC 6455 handshake (and a subprotocol picked by the handler), frames both ways, and a client that stops
+// reading dropped while another keeps up.
 // GCC 12 reports a false -Warray-bounds inside std::string for short literal payloads below.
 #pragma GCC diagnostic ignored "-Warray-bounds"
 #pragma GCC diagnostic ignored "-Wstringop-overflow"
@@ -238,6 +239,60 @@ TEST(HttpServer, AnInvalidBindAddressIsAnErrorAndABusyPortIsRetried) {
   const int port = first->port();
   first.reset();  // the port frees: the retry takes it
   EXPECT_TRUE(eventually([&] { return second.value()->port() == port; }, 3.0));
+}
+
+}  // namespace
+}  // namespace ag::net::http
+
+namespace ag::net::http {
+namespace {
+
+// Accepts the subprotocol "chat.v2" (RFC 6455 §1.9) and greets each client with the one it was opened with.
+class ProtocolHandler final : public HttpServer::Handler {
+ public:
+  HttpResponse get(const HttpRequest&) override { return {200, "text/html", "<html>page</html>", {}}; }
+  std::string ws_subprotocol(const HttpRequest& r) override { return r.header_has_token("sec-websocket-protocol", "chat.v2") ? "chat.v2" : ""; }
+  void ws_open(HttpServer& s, HttpServer::ClientId id) override { s.ws_send_text(id, "proto=" + std::string(s.ws_protocol(id)) + ";"); }
+  void tick(HttpServer&) override {}
+};
+
+std::string upgrade_with(const std::string& path, const std::string& protocols, const std::string& key = "dGhlIHNhbXBsZSBub25jZQ==") {
+  return "GET " + path + " HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: " + key +
+         "\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: " + protocols + "\r\n\r\n";
+}
+
+TEST(HttpServer, ASubprotocolIsNegotiatedAtAnyPathTheHandlerAccepts) {
+  ProtocolHandler h;
+  HttpServerParams p;
+  p.bind = "127.0.0.1";
+  p.port = 0;
+  auto started = HttpServer::start(p, h);
+  ASSERT_TRUE(started.ok());
+  auto s = std::move(started).value();
+  for (int i = 0; i < 200 && s->port() == 0; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  // Offered among others at a path that is not ws_path: accepted, named in the 101, known per client.
+  Client a(s->port());
+  a.send(upgrade_with("/live", "x.v1, chat.v2"));
+  ASSERT_TRUE(a.read_contains("proto=chat.v2;")) << a.buf;
+  EXPECT_EQ(a.buf.find("HTTP/1.1 101 Switching Protocols"), 0U);
+  EXPECT_NE(a.buf.find("\r\nSec-WebSocket-Protocol: chat.v2\r\n"), std::string::npos) << a.buf;
+  // ws_path without one: upgraded with none, and no Sec-WebSocket-Protocol in the answer.
+  Client b(s->port());
+  b.send(base::test::ws_upgrade());
+  ASSERT_TRUE(b.read_contains("proto=;")) << b.buf;
+  EXPECT_EQ(b.buf.find("Sec-WebSocket-Protocol"), std::string::npos);
+  // Only a subprotocol the handler does not speak, elsewhere: no upgrade, the handler's GET answers.
+  Client c(s->port());
+  c.send(upgrade_with("/live", "x.v1"));
+  ASSERT_TRUE(c.read_contains("<html>page</html>")) << c.buf;
+  EXPECT_EQ(c.buf.find("HTTP/1.1 200 OK"), 0U);
+  // The subprotocol with a bad handshake: 400, counted.
+  const auto bad0 = s->counters().bad_requests.load();
+  Client d(s->port());
+  d.send(upgrade_with("/live", "chat.v2", "short"));
+  ASSERT_TRUE(d.read_contains("400 Bad Request")) << d.buf;
+  EXPECT_EQ(s->counters().bad_requests.load(), bad0 + 1);
+  EXPECT_EQ(s->counters().ws_opened.load(), 2U);
 }
 
 }  // namespace

@@ -97,6 +97,27 @@ TEST(Channels, FreeSlotsIsTheFullestReadersRoom) {
   EXPECT_EQ(w.value().free_slots(), 1u);
 }
 
+// A recorder's tap: the producer's free_slots() ignores it, so a stalled tap loses messages (counted
+// per reader) while the real reader keeps getting everything.
+TEST(Channels, ATapNeverHoldsTheProducerBackAndCountsItsDrops) {
+  ChannelRegistry reg;
+  auto w = reg.ring_writer<int, 4>("q");
+  auto reader = reg.ring_reader<int, 4>("q");
+  auto tap = reg.ring_tap<int, 4>("q");
+  ASSERT_TRUE(w.ok() && reader.ok() && tap.ok());
+  for (int i = 0; i < 10; ++i) {
+    EXPECT_EQ(w.value().free_slots(), 4u) << "the stalled tap must not count, message " << i;
+    EXPECT_EQ(w.value().push(i), i < 4 ? 0u : 1u);
+    ASSERT_NE(reader.value().front(), nullptr);
+    EXPECT_EQ(*reader.value().front(), i);
+    reader.value().pop();
+  }
+  EXPECT_EQ(reader.value().drops(), 0u);
+  EXPECT_EQ(tap.value().drops(), 6u);
+  EXPECT_EQ(tap.value().size(), 4u);
+  EXPECT_EQ(*tap.value().front(), 0);
+}
+
 TEST(Channels, ReadersMaySubscribeBeforeTheWriterAdvertises) {
   ChannelRegistry reg;
   auto r = reg.latest_reader<int>("pose");

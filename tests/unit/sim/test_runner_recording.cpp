@@ -52,9 +52,12 @@ TEST(TeamRecording, TheOfficialReaderSeesEveryChannelAndTheCountsTheRunReports) 
   ASSERT_TRUE(r) << r.error().message;
   const fs::path file = fs::path(o.out_dir) / "recording.mcap";
   ASSERT_TRUE(fs::exists(file));
-  const json j = test::read_mcap(script, file.string(), {"--dump", "/tf", "--dump", "/ugv1/lidar/points", "--dump", "/uav/camera/image", "--max", "3"});
+  const json j = test::read_mcap(script, file.string(),
+                                 {"--dump", "/tf", "--dump", "/ugv1/lidar/points", "--dump", "/uav/camera/image", "--dump", "/radio", "--dump",
+                                  "/ugv1/path", "--dump", "/mission/events", "--dump", "/scheduler", "--max", "3", "--expect",
+                                  (fs::path(o.out_dir) / "recording.json").string()});
   ASSERT_TRUE(j.value("ok", false)) << j.dump().substr(0, 500);
-  EXPECT_TRUE(j["problems"].empty()) << j["problems"].dump(1);
+  EXPECT_TRUE(j["problems"].empty()) << j["problems"].dump(1);  // with --expect: every count as recording.json says
   EXPECT_TRUE(j["data_section_crc_ok"].get<bool>());
 
   std::map<std::string, std::string> schema_of;
@@ -66,9 +69,15 @@ TEST(TeamRecording, TheOfficialReaderSeesEveryChannelAndTheCountsTheRunReports) 
       {"/ugv1/pose", "foxglove.PoseInFrame"},       {"/ugv1/odometry", "foxglove.PoseInFrame"},
       {"/ugv1/lidar/points", "foxglove.PointCloud"}, {"/ugv2/truth", "foxglove.PoseInFrame"},
       {"/ugv2/pose", "foxglove.PoseInFrame"},       {"/ugv2/odometry", "foxglove.PoseInFrame"},
-      {"/ugv2/lidar/points", "foxglove.PointCloud"}, {"/radio", ""},
-      {"/scheduler", ""}};
+      {"/ugv2/lidar/points", "foxglove.PointCloud"}, {"/ugv1/path", "foxglove.SceneUpdate"},
+      {"/ugv2/path", "foxglove.SceneUpdate"},       {"/mission/regions", "foxglove.SceneUpdate"},
+      {"/mission/events", "foxglove.Log"},          {"/radio", "airground.RadioTraffic"},
+      {"/scheduler", "airground.SchedulerCounters"}};
   EXPECT_EQ(schema_of, want);
+  // one encoding: every schema JSON Schema, every channel JSON
+  for (const json& sc : j["schemas"]) EXPECT_EQ(sc["encoding"], "jsonschema") << sc["name"];
+  for (const json& c : j["channels"]) EXPECT_EQ(c["message_encoding"], "json") << c["topic"];
+  EXPECT_TRUE(j["schemaless"].empty()) << j["schemaless"].dump();
 
   // the counts the run reports (recording.json, RunSummary) are what the reader counts
   const json rep = json::parse(slurp(fs::path(o.out_dir) / "recording.json"));
@@ -86,6 +95,25 @@ TEST(TeamRecording, TheOfficialReaderSeesEveryChannelAndTheCountsTheRunReports) 
   EXPECT_EQ(j["counts"]["/ugv1/lidar/points"], 7);
   EXPECT_EQ(j["counts"]["/radio"], 13);
   EXPECT_EQ(j["counts"]["/scheduler"], 2);
+  // the simulator's routes (each robot's first leg at least), each robot's first mission state
+  EXPECT_GE(j["counts"].value("/ugv1/path", 0), 1);
+  EXPECT_GE(j["counts"].value("/mission/events", 0), 2);
+
+  // radio traffic and scheduler counters under their own schemas: totals, per robot, per stage
+  const json& radio = j["dumps"]["/radio"].back()["data"];
+  EXPECT_GT(radio["link"]["sent"].get<std::uint64_t>(), 0u);
+  std::set<std::string> robots;
+  for (const json& rb : radio["robots"]) robots.insert(rb["robot"].get<std::string>());
+  EXPECT_EQ(robots, (std::set<std::string>{"uav", "ugv1", "ugv2", "base"}));
+  const json& sched = j["dumps"]["/scheduler"].back()["data"];  // at 10 s (the first, at 0 s, counts no run yet)
+  ASSERT_FALSE(sched["stages"].empty());
+  EXPECT_GT(sched["stages"][0]["runs"].get<std::uint64_t>(), 0u);
+  bool drawn = false;  // a route with points, drawn in the map frame
+  for (const json& m : j["dumps"]["/ugv1/path"])
+    for (const json& e : m["data"]["entities"])
+      if (e["frame_id"] == "map" && e["id"] == "ugv1/path" && !e["lines"].empty() && e["lines"][0]["points"].size() >= 2) drawn = true;
+  EXPECT_TRUE(drawn) << j["dumps"]["/ugv1/path"].dump().substr(0, 400);
+  EXPECT_EQ(j["dumps"]["/mission/events"][0]["data"]["name"], "ugv1");
 
   // the frame tree: map -> uav -> uav/camera, map -> ugvN -> ugvN/lidar
   std::set<std::pair<std::string, std::string>> edges;
@@ -112,6 +140,60 @@ TEST(TeamRecording, TheSameSeedGivesTheSameFileWithoutTheSchedulerChannel) {
   const std::string fa = slurp(fs::path(a.out_dir) / "recording.mcap"), fb = slurp(fs::path(b.out_dir) / "recording.mcap");
   EXPECT_GT(fa.size(), 10000u);
   EXPECT_TRUE(fa == fb) << "sizes " << fa.size() << " and " << fb.size();
+}
+
+std::vector<char> read_all(const fs::path& p) {
+  const std::string s = slurp(p);
+  return {s.begin(), s.end()};
+}
+void write_all(const fs::path& p, const std::vector<char>& b) {
+  std::ofstream(p, std::ios::binary).write(b.data(), static_cast<std::streamsize>(b.size()));
+}
+
+TEST(TeamRecording, ACorruptedOrTruncatedRecordingIsReportedAsSuch) {
+  std::string why;
+  const std::string script = test::mcap_reader_script(source_dir(), &why);
+  ASSERT_FALSE(script.empty()) << why;
+  RunOptions o = small_run("rec_damaged");
+  o.duration_s = 3;
+  ASSERT_TRUE(run_team(o));
+  const fs::path file = fs::path(o.out_dir) / "recording.mcap", bad = fs::path(o.out_dir) / "bad.mcap";
+  const json good = test::read_mcap(script, file.string());
+  ASSERT_TRUE(good.value("ok", false)) << good.dump().substr(0, 300);
+  ASSERT_FALSE(good["chunks"].empty());
+  const json& chunk = good["chunks"][0];
+  const auto at = chunk["offset"].get<std::size_t>(), len = chunk["length"].get<std::size_t>();
+  const std::vector<char> bytes = read_all(file);
+  // a byte flipped in the chunk's compressed records, then in its CRC field (opcode 1 + length 8 + start
+  // time 8 + end time 8 + uncompressed size 8 = byte 33): the chunk's CRC no longer matches
+  for (const std::size_t k : {at + len / 2, at + len - 200, at + 33}) {
+    std::vector<char> b = bytes;
+    b[k] = static_cast<char>(b[k] ^ 0x20);
+    write_all(bad, b);
+    const json j = test::read_mcap(script, bad.string());
+    EXPECT_FALSE(j.value("ok", true)) << "byte " << k;
+    EXPECT_NE(j.value("exit_status", 0), 0);
+    EXPECT_EQ(j.value("damage", std::string()), "corrupted") << j.dump();
+    const std::string e = j.value("error", std::string());
+    EXPECT_TRUE(e.find("CRC") != std::string::npos || e.find("decompression") != std::string::npos) << "byte " << k << ": " << e;
+    if (k == at + 33) {
+      EXPECT_NE(e.find("Incorrect chunk CRC"), std::string::npos) << e;
+    }
+  }
+  // cut short (a crash): inside the data, and inside the footer
+  for (const std::size_t keep : {bytes.size() / 2, bytes.size() - 5}) {
+    write_all(bad, std::vector<char>(bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(keep)));
+    const json j = test::read_mcap(script, bad.string());
+    EXPECT_FALSE(j.value("ok", true)) << "kept " << keep;
+    EXPECT_EQ(j.value("damage", std::string()), "truncated") << j.dump();
+  }
+  // and a count the writer did not report is a problem the reader names
+  json rep = json::parse(slurp(fs::path(o.out_dir) / "recording.json"));
+  rep["channel_messages"]["/tf"] = rep["channel_messages"]["/tf"].get<int>() + 1;
+  std::ofstream(fs::path(o.out_dir) / "wrong.json") << rep.dump();
+  const json j = test::read_mcap(script, file.string(), {"--expect", (fs::path(o.out_dir) / "wrong.json").string()});
+  ASSERT_EQ(j["problems"].size(), 1u) << j["problems"].dump();
+  EXPECT_NE(j["problems"][0].get<std::string>().find("/tf"), std::string::npos);
 }
 
 TEST(TeamRecording, RecordNoneWritesNoRecording) {

@@ -48,6 +48,7 @@ struct HttpServer::Conn {
   bool close_after_flush{false};
   bool dead{false};
   bool want_out{false};
+  std::string protocol;  // the WebSocket subprotocol accepted ("" none)
   std::int64_t last_progress_ns{0};  // last time output drained a byte (or became non-empty)
   std::int64_t last_request_ns{0};   // accept or the last complete request
   char peer[48]{};
@@ -247,34 +248,42 @@ void HttpServer::handle_http(Conn& c) noexcept {
       respond(c, HttpResponse{405, "text/plain; charset=utf-8", "only GET is served\n", "Allow: GET\r\n"}, req.keep_alive());
       continue;
     }
-    if (req.path == p_.ws_path) {
-      const std::string_view key = req.header("sec-websocket-key");
-      if (!req.header_has_token("upgrade", "websocket") || !req.header_has_token("connection", "upgrade") || key.size() != 24 ||
-          key.substr(22) != "==" || req.version_minor != 1) {
-        c_.bad_requests.fetch_add(1, std::memory_order_relaxed);
-        respond(c, HttpResponse{400, "text/plain; charset=utf-8", "bad WebSocket handshake (RFC 6455 §4.2.1)\n", {}}, false);
-        return;
-      }
-      if (req.header("sec-websocket-version") != "13") {
-        c_.bad_requests.fetch_add(1, std::memory_order_relaxed);
-        respond(c, HttpResponse{426, "text/plain; charset=utf-8", "WebSocket version 13 only\n", "Sec-WebSocket-Version: 13\r\n"}, false);
-        return;
-      }
-      const std::string head = "HTTP/1.1 101 Switching Protocols\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Accept: " +
-                               websocket_accept(key) + "\r\n\r\n";
-      queue(c, {reinterpret_cast<const std::uint8_t*>(head.data()), head.size()});
-      c.ws = true;
-      ws_ids_.push_back(c.id);
-      c_.ws_opened.fetch_add(1, std::memory_order_relaxed);
-      c_.ws_clients.store(static_cast<std::uint32_t>(ws_ids_.size()), std::memory_order_relaxed);
-      h_.ws_open(*this, c.id);
-      if (!c.dead && !c.in.empty()) handle_ws(c);
+    const bool wants_ws = req.header_has_token("upgrade", "websocket");
+    std::string protocol;
+    if (wants_ws && !req.header("sec-websocket-protocol").empty()) protocol = h_.ws_subprotocol(req);
+    if (req.path == p_.ws_path || (wants_ws && !protocol.empty())) {
+      upgrade(c, req, protocol);
       return;
     }
     HttpResponse resp = h_.get(req);
     if (resp.status == 404) c_.not_found.fetch_add(1, std::memory_order_relaxed);
     respond(c, resp, req.keep_alive());
   }
+}
+
+void HttpServer::upgrade(Conn& c, const HttpRequest& req, const std::string& protocol) noexcept {
+  const std::string_view key = req.header("sec-websocket-key");
+  if (!req.header_has_token("upgrade", "websocket") || !req.header_has_token("connection", "upgrade") || key.size() != 24 ||
+      key.substr(22) != "==" || req.version_minor != 1) {
+    c_.bad_requests.fetch_add(1, std::memory_order_relaxed);
+    respond(c, HttpResponse{400, "text/plain; charset=utf-8", "bad WebSocket handshake (RFC 6455 §4.2.1)\n", {}}, false);
+    return;
+  }
+  if (req.header("sec-websocket-version") != "13") {
+    c_.bad_requests.fetch_add(1, std::memory_order_relaxed);
+    respond(c, HttpResponse{426, "text/plain; charset=utf-8", "WebSocket version 13 only\n", "Sec-WebSocket-Version: 13\r\n"}, false);
+    return;
+  }
+  const std::string head = "HTTP/1.1 101 Switching Protocols\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Accept: " +
+                           websocket_accept(key) + "\r\n" + (protocol.empty() ? "" : "Sec-WebSocket-Protocol: " + protocol + "\r\n") + "\r\n";
+  queue(c, {reinterpret_cast<const std::uint8_t*>(head.data()), head.size()});
+  c.ws = true;
+  c.protocol = protocol;
+  ws_ids_.push_back(c.id);
+  c_.ws_opened.fetch_add(1, std::memory_order_relaxed);
+  c_.ws_clients.store(static_cast<std::uint32_t>(ws_ids_.size()), std::memory_order_relaxed);
+  h_.ws_open(*this, c.id);
+  if (!c.dead && !c.in.empty()) handle_ws(c);
 }
 
 void HttpServer::handle_ws(Conn& c) noexcept {
@@ -357,6 +366,11 @@ bool HttpServer::ws_send(ClientId id, WsOpcode op, std::span<const std::uint8_t>
   c_.ws_frames_out.fetch_add(1, std::memory_order_relaxed);
   flush(*c);
   return !c->dead;
+}
+
+std::string_view HttpServer::ws_protocol(ClientId id) const noexcept {
+  const Conn* c = find(id);
+  return c == nullptr ? std::string_view{} : std::string_view(c->protocol);
 }
 
 std::size_t HttpServer::ws_pending(ClientId id) const noexcept {

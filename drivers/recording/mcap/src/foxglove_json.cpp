@@ -115,6 +115,12 @@ std::map<std::string, std::string, std::less<>> make_schemas() {
       {prop("timestamp", time("Timestamp of image")), prop("frame_id", string("Frame of reference for the image. The origin of the frame is the optical center of the camera. +x points to the right in the image, +y points down, and +z points into the plane of the image.")),
        prop("data", bytes("Compressed image data")),
        prop("format", string("Image format (webp, jpeg, png)"))});
+  m["foxglove.RawImage"] = top(
+      "foxglove.RawImage", "A raw image",
+      {prop("timestamp", time("Timestamp of image")), prop("frame_id", string("Frame of reference for the image. The origin of the frame is the optical center of the camera. +x points to the right in the image, +y points down, and +z points into the plane of the image.")),
+       prop("width", integer("Image width")), prop("height", integer("Image height")),
+       prop("encoding", string("Encoding of the raw image data")), prop("step", integer("Byte length of a single row")),
+       prop("data", bytes("Raw image data"))});
   const std::string line = object(
       "foxglove.LinePrimitive", "A primitive representing a series of points connected by lines",
       {prop("type", enumeration("foxglove.LineType", "Drawing primitive to use for lines", {{"LINE_STRIP", 0}, {"LINE_LOOP", 1}, {"LINE_LIST", 2}})),
@@ -272,6 +278,13 @@ std::string grid(std::uint64_t t_ns, std::string_view frame_id, const Pose& corn
 std::string compressed_image(std::uint64_t t_ns, std::string_view frame_id, std::string_view format, std::span<const std::uint8_t> data) {
   return "{\"timestamp\":" + ts(t_ns) + ",\"frame_id\":" + json_string(frame_id) + ",\"data\":\"" + mcap::base64(data) +
          "\",\"format\":" + json_string(format) + "}";
+}
+
+std::string raw_image(std::uint64_t t_ns, std::string_view frame_id, std::uint32_t width, std::uint32_t height, std::string_view encoding,
+                      std::uint32_t step, std::span<const std::uint8_t> data) {
+  return "{\"timestamp\":" + ts(t_ns) + ",\"frame_id\":" + json_string(frame_id) + ",\"width\":" + std::to_string(width) +
+         ",\"height\":" + std::to_string(height) + ",\"encoding\":" + json_string(encoding) + ",\"step\":" + std::to_string(step) +
+         ",\"data\":\"" + mcap::base64(data) + "\"}";
 }
 
 std::string scene_update(std::uint64_t t_ns, const std::vector<SceneEntity>& entities) {

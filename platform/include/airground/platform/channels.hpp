@@ -3,6 +3,7 @@
 #pragma once
 
 #include <algorithm>
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -41,7 +42,9 @@ struct LatestChannel final : ChannelBase {
 template <typename T, std::size_t N>
 struct RingChannel final : ChannelBase {
   std::vector<std::unique_ptr<SpscRing<T, N>>> readers;
-  std::vector<std::uint64_t> drops;  // per reader: pushes refused because that reader's ring was full
+  // Per reader: pushes refused because its ring was full (written by the producer only, read by anyone).
+  std::vector<std::unique_ptr<std::atomic<std::uint64_t>>> drops;
+  std::vector<char> tap;  // per reader: a tap (recorder) never holds the producer back, see free_slots()
 };
 }  // namespace detail
 
@@ -83,17 +86,20 @@ class RingWriter {
     std::size_t refused = 0;
     for (std::size_t i = 0; i < ch_->readers.size(); ++i) {
       if (!ch_->readers[i]->try_push(v)) {
-        ++ch_->drops[i];
+        std::atomic<std::uint64_t>& d = *ch_->drops[i];
+        d.store(d.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);  // one producer: no RMW needed
         ++refused;
       }
     }
     return refused;
   }
   // Slots every reader still has free (from the producer's side: a reader may free more meanwhile), so a
-  // producer can hold back what some reader could not take instead of re-sending it to all.
+  // producer can hold back what some reader could not take instead of re-sending it to all. Taps do not
+  // count: a slow recorder loses messages (counted) instead of holding the robot back.
   [[nodiscard]] std::size_t free_slots() const noexcept {
     std::size_t f = N;
-    for (const auto& r : ch_->readers) f = std::min(f, N - std::min(N, r->size()));
+    for (std::size_t i = 0; i < ch_->readers.size(); ++i)
+      if (ch_->tap[i] == 0) f = std::min(f, N - std::min(N, ch_->readers[i]->size()));
     return f;
   }
 
@@ -105,13 +111,17 @@ template <typename T, std::size_t N>
 class RingReader {
  public:
   RingReader() = default;
-  explicit RingReader(SpscRing<T, N>* r) : ring_(r) {}
+  explicit RingReader(SpscRing<T, N>* r, const std::atomic<std::uint64_t>* drops = nullptr) : ring_(r), drops_(drops) {}
   [[nodiscard]] T* front() noexcept { return ring_->front(); }
   void pop() noexcept { ring_->pop(); }
   [[nodiscard]] std::size_t size() const noexcept { return ring_->size(); }
+  // Messages the writer could not give this reader because its ring was full.
+  [[nodiscard]] std::uint64_t drops() const noexcept { return drops_ ? drops_->load(std::memory_order_relaxed) : 0; }
+  [[nodiscard]] bool connected() const noexcept { return ring_ != nullptr; }
 
  private:
   SpscRing<T, N>* ring_{nullptr};
+  const std::atomic<std::uint64_t>* drops_{nullptr};
 };
 
 // One per robot instance. Lookups happen in init() only; the handles are what step() uses.
@@ -143,18 +153,29 @@ class ChannelRegistry {
   }
   template <typename T, std::size_t N>
   Result<RingReader<T, N>> ring_reader(std::string_view name) {
-    if (sealed_) return sealed_error(name);
-    auto ch = find_or_add<detail::RingChannel<T, N>>(name);
-    if (!ch) return ch.error();
-    ch.value()->readers.push_back(std::make_unique<SpscRing<T, N>>());
-    ch.value()->drops.push_back(0);
-    return RingReader<T, N>(ch.value()->readers.back().get());
+    return add_ring_reader<T, N>(name, false);
+  }
+  // A reader that never holds the producer back (free_slots() ignores it): when it falls behind, its
+  // ring refuses messages and counts them (RingReader::drops()). For recorders and monitors.
+  template <typename T, std::size_t N>
+  Result<RingReader<T, N>> ring_tap(std::string_view name) {
+    return add_ring_reader<T, N>(name, true);
   }
   // After every stage's init(): no more readers may be added (the fan-out lists are final).
   void seal() noexcept { sealed_ = true; }
   [[nodiscard]] std::size_t size() const noexcept { return channels_.size(); }
 
  private:
+  template <typename T, std::size_t N>
+  Result<RingReader<T, N>> add_ring_reader(std::string_view name, bool tap) {
+    if (sealed_) return sealed_error(name);
+    auto ch = find_or_add<detail::RingChannel<T, N>>(name);
+    if (!ch) return ch.error();
+    ch.value()->readers.push_back(std::make_unique<SpscRing<T, N>>());
+    ch.value()->drops.push_back(std::make_unique<std::atomic<std::uint64_t>>(0));
+    ch.value()->tap.push_back(tap ? 1 : 0);
+    return RingReader<T, N>(ch.value()->readers.back().get(), ch.value()->drops.back().get());
+  }
   template <typename C>
   Result<C*> find_or_add(std::string_view name) {
     using Tag = C;

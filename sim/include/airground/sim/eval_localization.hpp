@@ -22,6 +22,7 @@ struct EvalLocalizationOptions {
   std::string world{"default"};
   std::uint64_t seed{1};
   std::string out_dir{"eval-localization"};
+  bool record{true};  // DIR/recording.mcap (docs/simulator.md "Recordings"); --record none: off
   UgvMapSource map{UgvMapSource::kGroundTruth};
   double init_error_m{16};          // [m] the initial guess is exactly this far off (direction by seed)
   double init_yaw_error_deg{30};    // [deg] ... and turned by exactly this much (sign by seed)

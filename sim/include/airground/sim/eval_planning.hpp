@@ -19,6 +19,7 @@ struct EvalPlanningOptions {
   std::uint64_t seed{1};
   int pairs{20};
   std::string out_dir{"eval-planning"};
+  bool record{true};  // each driven pair's DIR/drive_N/recording.mcap (docs/simulator.md "Recordings"); --record none: off
   double min_pair_distance_m{40};   // pairs at least this far apart (straight line)
   bool drive{true};                 // drive every route (ground-truth pose)
   // Drive every pair with the robot's own stages in the lockstep runner instead: its localizer's pose

@@ -16,6 +16,7 @@ struct EvalVoOptions {
   std::string world{"default"};
   std::uint64_t seed{1};
   std::string out_dir{"eval-vo"};
+  bool record{true};  // DIR/recording.mcap (docs/simulator.md "Recordings"); --record none: off
   double altitude_m{40};
   double speed_mps{5};
   double overlap{0.3};           // survey side overlap

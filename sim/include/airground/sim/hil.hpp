@@ -22,6 +22,7 @@ struct HilOptions {
   std::string world{"default"};     // a world folder or "default"
   std::string mission_file;         // the mission (team, starts, guesses, waypoints, survey); required
   std::string out_dir{"build/hil"};
+  bool record{true};                // DIR/recording.mcap (truth, estimates, sensors; docs/simulator.md "Recordings")
   std::string bin_dir;              // where airground-uav/-ugv/-base are; empty = next to this executable
   double max_duration_s{300};       // [s] wall clock; the mission is cut off (and reported) after this
   std::uint64_t seed{1};

@@ -53,7 +53,9 @@ struct RunInspection {
 // for "uav", "ugv", "base"; empty for another name): what every simulated robot starts from.
 [[nodiscard]] std::string_view shipped_config_yaml(std::string_view role) noexcept;
 
-enum class RecordLevel { kNone, kLight, kFull };
+// What a run writes besides its summary: nothing, recording.mcap only (the evaluations), recording.mcap with
+// the CSV streams and every 20th camera frame as PNG (light), or every frame and the LiDAR's .bin (full).
+enum class RecordLevel { kNone, kMcap, kLight, kFull };
 
 // Where the ground robots' "map_tiles" channel gets the aerial map from.
 enum class UgvMapSource {

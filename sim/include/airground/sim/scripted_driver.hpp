@@ -53,6 +53,7 @@ class PurePursuit {
   // Linear [m/s] and angular [rad/s] velocity toward the path; done() once at the last point.
   void command(const Pose2& pose, double& v, double& w);
   [[nodiscard]] bool done() const noexcept { return path_.empty() || next_ >= path_.size(); }
+  [[nodiscard]] const std::vector<Eigen::Vector2d>& path() const noexcept { return path_; }
   // next_: the path segment (path_[next_] -> path_[next_ + 1]) the robot is on; path_.size() once done.
 
  private:

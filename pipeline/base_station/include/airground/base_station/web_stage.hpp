@@ -1,6 +1,7 @@
 // The base station's web stage: the team's poses, map tiles, gossip records and comms counters ->
 // a MissionModel (fixed arrays) -> the server thread (net/http) that serves the live page, /api/state
-// and /ws, and writes the mission log (JSON lines).
+// and /ws, Foxglove's WebSocket protocol (foxglove.websocket.v1, src/foxglove_service.hpp), and writes
+// the mission log (JSON lines).
 //   "team_poses" (latest), "map_tiles" (ring; comms.deliver_map_tiles must be on), "gossip_in" (ring),
 //   "comms_stats" (latest).
 // step() never allocates and never blocks: the model goes to the server thread through a triple
@@ -30,6 +31,7 @@ inline constexpr ParamSpec kWebStageParams[] = {
     ParamSpec::integer("client_buffer_kb", 4096, 64, 1 << 20, "KiB", "output held per client; a client that lets it fill is dropped"),
     ParamSpec::real("slow_client_s", 5.0, 0.5, 600.0, "s", "a client whose output has not drained for this long is dropped"),
     ParamSpec::integer("tiles_per_step", 16, 1, 64, "tiles", "map tiles handed to the server per step"),
+    ParamSpec::boolean("foxglove", true, "live Foxglove connection on the same port: WebSocket subprotocol foxglove.websocket.v1 (ws://<base>:<port>/)"),
 };
 
 // A map tile as the server keeps and sends it: classes and elevation in decimetres (INT16_MIN unknown).
@@ -75,6 +77,8 @@ class WebStage final : public Stage {
   // The listening port (0 until bound) and the server's counters (any thread).
   [[nodiscard]] int port() const noexcept;
   [[nodiscard]] const net::http::HttpServerCounters* server_counters() const noexcept;
+  // The Foxglove connection's counters as JSON object members ("" before init; any thread).
+  [[nodiscard]] std::string foxglove_counters_json() const;
 
  private:
   std::unique_ptr<MissionModel> model_;

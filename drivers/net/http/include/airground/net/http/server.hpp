@@ -1,6 +1,7 @@
 // The HTTP/1.1 + WebSocket server: one thread, non-blocking sockets, epoll. It serves what a Handler
-// answers to GET, upgrades /ws (or any path the handler accepts) to a WebSocket, and calls the handler's
-// tick() every tick period on the same thread, where the handler pushes frames to its clients.
+// answers to GET, upgrades /ws to a WebSocket (and any path where the handler picks one of the client's
+// subprotocols, RFC 6455 §1.9: e.g. foxglove.websocket.v1 at /), and calls the handler's tick() every
+// tick period on the same thread, where the handler pushes frames to its clients.
 //
 // Bounds: at most max_clients connections (more get 503 and are closed); a request head above
 // max_request_bytes, a malformed request or WebSocket frame gets 400 (or a close 1002) and is counted;
@@ -73,6 +74,9 @@ class HttpServer {
     virtual void ws_open(HttpServer& server, ClientId id) = 0;
     virtual void ws_close(ClientId /*id*/) {}
     virtual void ws_message(HttpServer& /*server*/, ClientId /*id*/, WsOpcode /*op*/, std::span<const std::uint8_t> /*payload*/) {}
+    // A WebSocket upgrade: the subprotocol to accept from the client's Sec-WebSocket-Protocol list ("" =
+    // none). A non-empty answer also accepts the upgrade at a path other than ws_path.
+    virtual std::string ws_subprotocol(const HttpRequest& /*req*/) { return {}; }
     // Every tick_ms: push updates to the clients.
     virtual void tick(HttpServer& server) = 0;
   };
@@ -96,6 +100,8 @@ class HttpServer {
   bool ws_send_text(ClientId id, std::string_view text) {
     return ws_send(id, WsOpcode::kText, {reinterpret_cast<const std::uint8_t*>(text.data()), text.size()});
   }
+  // The subprotocol a WebSocket client was accepted with ("" none or unknown client).
+  [[nodiscard]] std::string_view ws_protocol(ClientId id) const noexcept;
   // Bytes queued to a client and not yet written (SIZE_MAX if unknown).
   [[nodiscard]] std::size_t ws_pending(ClientId id) const noexcept;
   [[nodiscard]] const std::vector<ClientId>& ws_clients() const noexcept { return ws_ids_; }
@@ -109,6 +115,7 @@ class HttpServer {
   void on_readable(Conn& c) noexcept;
   void handle_http(Conn& c) noexcept;
   void handle_ws(Conn& c) noexcept;
+  void upgrade(Conn& c, const HttpRequest& req, const std::string& protocol) noexcept;
   void respond(Conn& c, const HttpResponse& r, bool keep_alive) noexcept;
   void queue(Conn& c, std::span<const std::uint8_t> bytes) noexcept;
   void flush(Conn& c) noexcept;

@@ -20,7 +20,7 @@ inline constexpr std::string_view kMessageEncoding = "json";
 [[nodiscard]] const std::string& schema(std::string_view name);
 inline constexpr std::string_view kSchemaNames[] = {
     "foxglove.PoseInFrame", "foxglove.FrameTransforms", "foxglove.PointCloud", "foxglove.Grid",
-    "foxglove.CompressedImage", "foxglove.SceneUpdate", "foxglove.Log", "foxglove.LocationFix"};
+    "foxglove.CompressedImage", "foxglove.RawImage", "foxglove.SceneUpdate", "foxglove.Log", "foxglove.LocationFix"};
 
 struct Vec3 {
   double x{0}, y{0}, z{0};
@@ -92,6 +92,10 @@ enum class LogLevel : int { kDebug = 1, kInfo = 2, kWarning = 3, kError = 4, kFa
                                const std::vector<PackedElementField>& fields, std::span<const std::uint8_t> data);
 [[nodiscard]] std::string compressed_image(std::uint64_t t_ns, std::string_view frame_id, std::string_view format,
                                            std::span<const std::uint8_t> data);
+// foxglove.RawImage: `encoding` "rgb8" etc., `step` bytes per row (the robots' recorder: no JPEG encoder
+// in the static binaries).
+[[nodiscard]] std::string raw_image(std::uint64_t t_ns, std::string_view frame_id, std::uint32_t width, std::uint32_t height,
+                                    std::string_view encoding, std::uint32_t step, std::span<const std::uint8_t> data);
 // Replaces the entities with these ids (no deletions; entities never expire).
 [[nodiscard]] std::string scene_update(std::uint64_t t_ns, const std::vector<SceneEntity>& entities);
 [[nodiscard]] std::string log(std::uint64_t t_ns, LogLevel level, std::string_view name, std::string_view message);
