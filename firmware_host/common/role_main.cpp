@@ -128,6 +128,8 @@ int run_role(const RoleDescription& role, int argc, char** argv) {
     std::fprintf(stderr, "airground-%s: %s\n", rname.c_str(), st.error().message.c_str());
     return 2;
   }
+  for (const std::string& w : sensor_label_warnings(cfg))  // before the logger starts: straight to stderr
+    std::fprintf(stderr, "airground-%s: warning: %s\n", rname.c_str(), w.c_str());
   if (check_config) {
     std::printf("%s: valid\n", config_path.empty() ? "built-in defaults" : config_path.c_str());
     return 0;

@@ -33,4 +33,13 @@ Status check_sensor_labels(const Config& c, std::string_view origin) {
   return ok_status();
 }
 
+std::vector<std::string> sensor_label_warnings(const Config& c) {
+  std::vector<std::string> w;
+  if (is(c, "lidar.classes", "reflectivity") && c.has("lidar.source") && c.get_text("lidar.source") != "none")
+    w.emplace_back("lidar.classes: reflectivity reads each point's class from the LiDAR's reflectivity byte, where only airground-sim "
+                   "hil's --oracle labels ablation writes classes: on a real Ouster the localizer would take reflectivity values for "
+                   "classes; use lidar.classes: none with localization.labels: geometric (docs/localization.md)");
+  return w;
+}
+
 }  // namespace ag

@@ -3,7 +3,9 @@
 // refused before any stage starts, naming the keys.
 #pragma once
 
+#include <string>
 #include <string_view>
+#include <vector>
 
 #include "airground/platform/config.hpp"
 #include "airground/platform/result.hpp"
@@ -18,5 +20,10 @@ namespace ag {
 // - localization.labels gt needs point classes: refused when lidar.classes is none and lidar.source is not none.
 // `origin` names the configuration (a file) in the message.
 [[nodiscard]] Status check_sensor_labels(const Config& c, std::string_view origin);
+
+// What may work but most likely does not on a real robot, said at start-up (and by --check-config):
+// - lidar.classes reflectivity with a live LiDAR: the class of each point is read from the Ouster's
+//   reflectivity byte, where only airground-sim hil's --oracle labels ablation writes classes.
+[[nodiscard]] std::vector<std::string> sensor_label_warnings(const Config& c);
 
 }  // namespace ag

@@ -19,11 +19,24 @@ namespace {
 TimeNs timer_now(ExecTimer t) noexcept { return t == ExecTimer::kThreadCpu ? thread_cpu_now() : monotonic_now(); }
 
 void append(std::vector<Runnable>& runs, RoleInstance& robot) {
-  for (auto& slot : robot.stages()) {
-    runs.push_back(Runnable{slot.stage.get(), slot.perf, slot.perf->name.c_str(), period_from_hz(slot.spec->rate_hz),
-                            static_cast<TimeNs>(slot.spec->budget_us) * kNsPerUs, slot.spec->priority,
-                            slot.spec->cpu, 0});
+  for (std::size_t i = 0; i < robot.stages().size(); ++i) {
+    StageSlot& slot = robot.stages()[i];
+    Runnable r{slot.stage.get(), slot.perf, slot.perf->name.c_str(), period_from_hz(slot.spec->rate_hz),
+               static_cast<TimeNs>(slot.spec->budget_us) * kNsPerUs, slot.spec->priority, slot.spec->cpu};
+    r.channels = &robot.channels();
+    r.stage_index = i;
+    runs.push_back(r);
   }
+}
+
+// One step's counters: `exec` is what the budget is held to, `host` this machine's time for it.
+void record_step(Runnable& r, TimeNs exec, TimeNs host, TimeNs lateness) noexcept {
+  StagePerf& p = *r.perf;
+  p.exec.record(exec);
+  p.exec_total.store(p.exec_total.load(std::memory_order_relaxed) + host, std::memory_order_relaxed);
+  p.lateness.record(lateness);
+  p.count(p.runs);
+  if (exec > r.budget) p.count(p.overruns);
 }
 }  // namespace
 
@@ -31,12 +44,8 @@ void run_measured(Runnable& r, TimeNs now, TimeNs lateness, ExecTimer timer) noe
   const TimeNs a = timer_now(timer);
   r.stage->step(now);
   const TimeNs exec = timer_now(timer) - a;
-  StagePerf& p = *r.perf;
-  p.exec.record(exec);
-  p.exec_total.store(p.exec_total.load(std::memory_order_relaxed) + exec, std::memory_order_relaxed);
-  p.lateness.record(lateness);
-  p.count(p.runs);
-  if (exec > r.budget) p.count(p.overruns);
+  (void)r.stage->take_work();  // only the lockstep compute-time model reads it
+  record_step(r, exec, exec, lateness);
 }
 
 // ---------------------------------------------------------------------------------------------- lockstep
@@ -50,13 +59,17 @@ void LockstepExecutor::add(RoleInstance& robot) {
 void LockstepExecutor::add_stage(Stage& stage, StagePerf& perf, double rate_hz) {
   perf.period_ns = period_from_hz(rate_hz);
   if (perf.budget_ns <= 0) perf.budget_ns = perf.period_ns;
-  runs_.push_back(Runnable{&stage, &perf, perf.name.c_str(), perf.period_ns, perf.budget_ns, 0, -1, 0});
+  runs_.push_back(Runnable{&stage, &perf, perf.name.c_str(), perf.period_ns, perf.budget_ns, 0, -1});
   lane_of_.push_back(0);
 }
 
 void LockstepExecutor::start(TimeNs t0) noexcept {
   clock_.set(t0);
-  for (auto& r : runs_) r.next_release = t0;
+  for (auto& r : runs_) {
+    r.next_release = t0;
+    r.busy_until = t0;
+    r.finish = Runnable::kNever;
+  }
   lane_runs_.assign(lanes_ + 1, {});
   for (std::size_t i = 0; i < runs_.size(); ++i) lane_runs_[lane_of_[i]].push_back(i);
   due_.reserve(lanes_);
@@ -78,6 +91,10 @@ TimeNs LockstepExecutor::next_release() const noexcept {
 }
 
 void LockstepExecutor::run_until(TimeNs t_end) noexcept {
+  if (cost_ != nullptr) {
+    run_until_timed(t_end);
+    return;
+  }
   const bool parallel = parallel_ != nullptr && trace_ == nullptr && lane_runs_.size() == lanes_ + 1;
   for (;;) {
     const TimeNs t = next_release();
@@ -111,6 +128,89 @@ void LockstepExecutor::run_until(TimeNs t_end) noexcept {
       run_measured(r, t, 0, timer_);
       r.next_release += r.period;
     }
+  }
+  clock_.set(t_end);
+}
+
+// ------------------------------------------------------------------------------- lockstep, compute time
+
+TimeNs LockstepExecutor::next_event() const noexcept {
+  TimeNs t = Runnable::kNever;
+  for (const auto& r : runs_) t = std::min({t, std::max(r.next_release, r.busy_until), r.finish});
+  return t;
+}
+
+void LockstepExecutor::release_finished(TimeNs t) noexcept {
+  for (auto& r : runs_) {
+    if (r.finish > t) continue;
+    r.channels->release_outputs(r.stage_index);
+    r.finish = Runnable::kNever;
+  }
+}
+
+void LockstepExecutor::step_timed(std::size_t i, TimeNs t) noexcept {
+  Runnable& r = runs_[i];
+  TimeNs late = t - r.next_release;
+  if (late >= r.period) {  // whole releases missed while the thread was busy: count them, serve the newest
+    const TimeNs missed = late / r.period;
+    r.perf->count(r.perf->slips, static_cast<std::uint64_t>(missed));
+    r.next_release += missed * r.period;
+    late = t - r.next_release;
+  }
+  const bool robot = r.channels != nullptr;
+  if (robot) r.channels->hold_outputs(r.stage_index);
+  const TimeNs a = timer_now(timer_);
+  r.stage->step(t);
+  const TimeNs host = timer_now(timer_) - a;
+  const double work = r.stage->take_work();
+  const TimeNs cost = robot ? std::max<TimeNs>(0, cost_(cost_user_, i, work, host)) : 0;
+  record_step(r, robot ? cost : host, host, late);
+  r.busy_until = t + cost;
+  if (robot) {
+    if (cost == 0) r.channels->release_outputs(r.stage_index);
+    else r.finish = t + cost;
+  }
+  r.next_release += r.period;
+}
+
+void LockstepExecutor::run_lane_timed(std::size_t lane, TimeNs t) noexcept {
+  for (const std::size_t i : lane_runs_[lane])
+    if (std::max(runs_[i].next_release, runs_[i].busy_until) == t) step_timed(i, t);
+}
+
+void LockstepExecutor::run_until_timed(TimeNs t_end) noexcept {
+  const bool parallel = parallel_ != nullptr && trace_ == nullptr && lane_runs_.size() == lanes_ + 1;
+  for (;;) {
+    const TimeNs t = next_event();
+    if (t > t_end) break;
+    clock_.set(t);
+    release_finished(t);  // what finished now is visible to everything that starts now
+    if (!parallel) {
+      for (std::size_t i = 0; i < runs_.size(); ++i) {
+        if (std::max(runs_[i].next_release, runs_[i].busy_until) != t) continue;
+        if (trace_ != nullptr) trace_(trace_user_, t, i);
+        step_timed(i, t);
+      }
+      continue;
+    }
+    run_lane_timed(0, t);
+    due_.clear();
+    for (std::size_t lane = 1; lane <= lanes_; ++lane)
+      for (const std::size_t i : lane_runs_[lane])
+        if (std::max(runs_[i].next_release, runs_[i].busy_until) == t) {
+          due_.push_back(lane);
+          break;
+        }
+    batch_t_ = t;
+    if (due_.size() == 1) {
+      run_lane_timed(due_[0], t);
+    } else if (!due_.empty()) {
+      parallel_(parallel_user_, due_.size(), [](void* self, std::size_t job) noexcept {
+        auto* ex = static_cast<LockstepExecutor*>(self);
+        ex->run_lane_timed(ex->due_[job], ex->batch_t_);
+      }, this);
+    }
+    if (after_ != nullptr) after_(parallel_user_);
   }
   clock_.set(t_end);
 }

@@ -45,7 +45,9 @@ Result<std::unique_ptr<RoleInstance>> RoleInstance::create(const RoleDescription
                                    period_from_hz(spec.rate_hz));
     r->stages_.push_back(StageSlot{&spec, spec.make(), &perf});
   }
-  for (auto& slot : r->stages_) {
+  for (std::size_t i = 0; i < r->stages_.size(); ++i) {
+    StageSlot& slot = r->stages_[i];
+    r->channels_.set_initialising(i);  // the writers this stage takes are its outputs (lockstep compute time)
     StageContext ctx{config, r->channels_, clock, r->perf_, r->name_, slot.spec->name, &slot.perf->device};
     Status st = slot.stage->init(ctx);
     if (!st) {

@@ -12,6 +12,9 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <set>
+#include <string_view>
+#include <cctype>
 #include <string>
 #include <thread>
 #include <vector>
@@ -101,6 +104,9 @@ constexpr const char* kRunHelp =
     "  --init-yaw-error D       ... and D degrees (30)\n"
     "  --wait-map-radius M      --ugv-map online: a robot starts driving once the map knows half the cells\n"
     "                           within M metres of it (30; 0 = at once)\n"
+    "  --compute-time MODE      model (default): a robot stage's outputs show after its modelled\n"
+    "                           compute time on the robot's CPU; measured: this machine's, scaled; off\n"
+    "  --target-cpu CPU         nuc|ryzen|xavier-nx for every robot (quadrotor NUC, ground robots Ryzen)\n"
     "  --oracle labels,vo       ablation (field mode without it): labels = the camera frames and LiDAR points carry\n"
     "                           the true classes and the robots use them instead of ErfNet and the geometric\n"
     "                           labeller; vo = the simulator's VO model (visual_odometry.yaml) feeds the pose\n"
@@ -125,6 +131,9 @@ constexpr const char* kEvalMappingHelp =
     "Options:\n"
     "  --altitude M            survey altitude above the start (40)   --speed V   survey speed (5 m/s)\n"
     "  --overlap F             side overlap of the survey lines (0.3)\n"
+    "  --compute-time MODE     model (default): a robot stage's outputs show after its modelled\n"
+    "                          compute time on the robot's CPU; measured: this machine's, scaled; off\n"
+    "  --target-cpu CPU        nuc|ryzen|xavier-nx for every robot (quadrotor NUC, ground robots Ryzen)\n"
     "  --oracle labels,vo      ablation: labels = the camera's true classes instead of ErfNet's (segmentation.labels\n"
     "                          gt); vo = the simulator's VO model (true motion, scaled, noisy) instead of the\n"
     "                          quadrotor's own vo stage on the rendered frames; the report says so\n"
@@ -161,6 +170,9 @@ constexpr const char* kEvalPlanningHelp =
     "  --pose truth|localizer   drive with the true pose (truth), or with the robot's own stages in the\n"
     "                           lockstep runner: its localizer's pose, planner, tracker, drive (localizer)\n"
     "  --set SECTION.KEY=VALUE  a planner.* or drive.* parameter (repeatable)\n"
+    "  --compute-time MODE      model (default): a robot stage's outputs show after its modelled\n"
+    "                           compute time on the robot's CPU; measured: this machine's, scaled; off\n"
+    "  --target-cpu CPU         nuc|ryzen|xavier-nx for every robot (quadrotor NUC, ground robots Ryzen)\n"
     "  --oracle labels          with --pose localizer: ablation, the LiDAR points carry the true classes and the\n"
     "                           localizer uses them (metrics.json lists it)\n"
     "  --quiet                  no progress line\n"
@@ -191,6 +203,9 @@ constexpr const char* kEvalLocalizationHelp =
     "  --route-km K             route length (2)                  --speed V   driving speed (1.2 m/s)\n"
     "  --labels gt|geometric    the robot's scan labelling (localization.labels; shipped: geometric); gt needs\n"
     "                           --oracle labels\n"
+    "  --compute-time MODE      model (default): a robot stage's outputs show after its modelled\n"
+    "                           compute time on the robot's CPU; measured: this machine's, scaled; off\n"
+    "  --target-cpu CPU         nuc|ryzen|xavier-nx for every robot (quadrotor NUC, ground robots Ryzen)\n"
     "  --oracle labels          ablation: the LiDAR points carry the world's classes and the robot labels its scans\n"
     "                           with them (gt); metrics.json and the report list it\n"
     "  --set SECTION.KEY=VALUE  any parameter of the ground robot's role config (repeatable)\n"
@@ -268,6 +283,21 @@ std::vector<std::string> oracles_from(const Args& a) {
     }
   }
   return out;
+}
+
+// --compute-time model|measured|off and --target-cpu nuc|ryzen|xavier-nx (docs/simulator.md, "Compute time").
+template <class O>
+void compute_time_from(const Args& a, O& o) {
+  if (a.has("compute-time")) {
+    auto m = ag::sim::parse_compute_time(a.get("compute-time"));
+    if (!m) usage_error("--compute-time: " + m.error().message);
+    o.compute_time = m.value();
+  }
+  if (a.has("target-cpu")) {
+    auto c = ag::sim::parse_target_cpu(a.get("target-cpu"));
+    if (!c) usage_error("--target-cpu: " + c.error().message);
+    o.target_cpu = c.value();
+  }
 }
 
 double number(const Args& a, const std::string& k, double def) {
@@ -481,6 +511,7 @@ int write_model_configs(const Args& a) {
 int run(const Args& a) {
   RunOptions o;
   o.oracles = oracles_from(a);
+  compute_time_from(a, o);
   o.world = a.get("world", o.world);
   o.ugvs = static_cast<int>(number(a, "ugvs", o.ugvs));
   o.seed = static_cast<std::uint64_t>(number(a, "seed", static_cast<double>(o.seed)));
@@ -572,6 +603,9 @@ constexpr const char* kMissionHelp =
     "  --kill-base T           power the base station off at T seconds\n"
     "  --set SECTION.KEY=VALUE any parameter of the ground robots' role config (repeatable)\n"
     "  --set-uav SECTION.KEY=VALUE  ... of the quadrotor's\n"
+    "  --compute-time MODE      model (default): a robot stage's outputs show after its modelled\n"
+    "                           compute time on the robot's CPU; measured: this machine's, scaled; off\n"
+    "  --target-cpu CPU         nuc|ryzen|xavier-nx for every robot (quadrotor NUC, ground robots Ryzen)\n"
     "  --oracle labels,vo       ablation (field mode without it): labels = true classes in the camera frames and\n"
     "                           LiDAR points, used instead of ErfNet and the geometric labeller; vo = the\n"
     "                           simulator's VO model instead of the quadrotor's own vo stage; metrics.json and the\n"
@@ -598,6 +632,7 @@ void progress_bar(double sim, double total, double rtf, bool tty, double& last_p
 int mission_cmd(const Args& a) {
   MissionOptions o;
   o.oracles = oracles_from(a);
+  compute_time_from(a, o);
   o.world = a.get("world", o.world);
   o.out_dir = a.get("out", o.out_dir);
   o.mission_file = a.get("mission");
@@ -724,6 +759,7 @@ int hil_cmd(const Args& a) {
 int eval_mapping_cmd(const Args& a) {
   EvalMappingOptions o;
   o.oracles = oracles_from(a);
+  compute_time_from(a, o);
   o.world = a.get("world", o.world);
   o.seed = static_cast<std::uint64_t>(number(a, "seed", static_cast<double>(o.seed)));
   o.out_dir = a.get("out", o.out_dir);
@@ -786,6 +822,7 @@ int eval_mapping_cmd(const Args& a) {
 int eval_localization_cmd(const Args& a) {
   EvalLocalizationOptions o;
   o.oracles = oracles_from(a);
+  compute_time_from(a, o);
   o.world = a.get("world", o.world);
   o.seed = static_cast<std::uint64_t>(number(a, "seed", static_cast<double>(o.seed)));
   o.out_dir = a.get("out", o.out_dir);
@@ -868,6 +905,7 @@ int eval_localization_cmd(const Args& a) {
 int eval_planning_cmd(const Args& a) {
   EvalPlanningOptions o;
   o.oracles = oracles_from(a);
+  compute_time_from(a, o);
   o.world = a.get("world", o.world);
   o.seed = static_cast<std::uint64_t>(number(a, "seed", static_cast<double>(o.seed)));
   o.pairs = static_cast<int>(number(a, "pairs", o.pairs));
@@ -907,6 +945,77 @@ int eval_planning_cmd(const Args& a) {
   return 0;
 }
 
+// ------------------------------------------------------------------------------------ the command table
+
+// A command parsed here: its help is its contract, every option the help names (--x) is allowed and any
+// other is an error naming it (exit 2), as the role binaries do.
+struct Command {
+  std::string_view name;  // "mission", "eval mapping", "world generate"
+  const char* help;
+  int (*handler)(const Args&);
+};
+// A command with its own parser (it checks its options itself, exit 2 on an unknown one).
+struct OwnCommand {
+  std::string_view name;
+  int (*handler)(int argc, char** argv);
+};
+
+constexpr Command kCommands[] = {
+    {"run", kRunHelp, &run},
+    {"mission", kMissionHelp, &mission_cmd},
+    {"hil", kHilHelp, &hil_cmd},
+    {"eval mapping", kEvalMappingHelp, &eval_mapping_cmd},
+    {"eval localization", kEvalLocalizationHelp, &eval_localization_cmd},
+    {"eval planning", kEvalPlanningHelp, &eval_planning_cmd},
+    {"world generate", kUsage, &world_generate},
+    {"world import", kUsage, &world_import},
+    {"world show", kUsage, &world_show},
+    {"render", kUsage, &render},
+    {"scan", kUsage, &scan},
+    {"config", kUsage, &write_model_configs},
+};
+constexpr OwnCommand kOwnCommands[] = {
+    {"eval vo", &eval_vo_cmd},  {"vo", &vo_cmd},        {"segment", &segment_cmd}, {"lidar-info", &lidar_info_cmd},
+    {"study", &study_cmd},      {"survey-plan", &survey_plan_cmd},
+};
+
+// The options a help text names: every "--word" in it.
+std::set<std::string> named_options(std::string_view help) {
+  std::set<std::string> out;
+  for (std::size_t i = help.find("--"); i != std::string_view::npos; i = help.find("--", i + 2)) {
+    std::size_t e = i + 2;
+    while (e < help.size() && (std::islower(static_cast<unsigned char>(help[e])) != 0 || std::isdigit(static_cast<unsigned char>(help[e])) != 0 ||
+                               (help[e] == '-' && e > i + 2)))
+      ++e;
+    if (e > i + 2) out.emplace(help.substr(i + 2, e - i - 2));
+  }
+  return out;
+}
+
+void check_options(const Args& a, const Command& c) {
+  const std::set<std::string> allowed = named_options(c.help);
+  for (const auto& [k, v] : a.opt)
+    if (allowed.count(k) == 0) usage_error("unknown option '--" + k + "' for " + std::string(c.name) + " (see airground-sim " + std::string(c.name) + " --help)");
+}
+
+// argv[1] [argv[2]] against the command names: the two-word name first ("eval mapping" before "eval").
+template <class C, std::size_t N>
+const C* find_command(const C (&table)[N], int argc, char** argv, int& words) {
+  const std::string one = argc > 1 ? argv[1] : "";
+  const std::string two = argc > 2 ? one + " " + argv[2] : "";
+  for (const C& c : table)
+    if (!two.empty() && c.name == two) {
+      words = 2;
+      return &c;
+    }
+  for (const C& c : table)
+    if (c.name == one) {
+      words = 1;
+      return &c;
+    }
+  return nullptr;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -914,93 +1023,34 @@ int main(int argc, char** argv) {
     std::fputs(kUsage, argc < 2 ? stderr : stdout);
     return argc < 2 ? 2 : 0;
   }
-  const std::string cmd = argv[1];
+  if (std::string(argv[1]) == "--version") {
+    std::printf("airground-sim 0.1.0\n");
+    return 0;
+  }
   const bool help = [&] {
     for (int i = 1; i < argc; ++i)
       if (std::string(argv[i]) == "--help" || std::string(argv[i]) == "-h") return true;
     return false;
   }();
   try {
-    if (cmd == "segment") return segment_cmd(argc, argv);
-    if (cmd == "lidar-info") return lidar_info_cmd(argc, argv);
-    if (cmd == "world") {
-      if (argc < 3) usage_error("world needs generate, import or show");
-      const std::string sub = argv[2];
+    int words = 0;
+    if (const OwnCommand* c = find_command(kOwnCommands, argc, argv, words)) return c->handler(argc, argv);
+    if (const Command* c = find_command(kCommands, argc, argv, words)) {
       if (help) {
-        std::fputs(kUsage, stdout);
+        std::fputs(c->help, stdout);
         return 0;
       }
-      const Args a = parse(argc, argv, 3);
-      if (sub == "generate") return world_generate(a);
-      if (sub == "import") return world_import(a);
-      if (sub == "show") return world_show(a);
-      usage_error("unknown world command '" + sub + "'");
-    }
-    if (cmd == "vo") return vo_cmd(argc, argv);
-    if (cmd == "eval") {
-      if (argc >= 3 && std::string(argv[2]) == "vo") return eval_vo_cmd(argc, argv);
-      if (argc >= 3 && std::string(argv[2]) == "planning") {
-        if (help) {
-          std::fputs(kEvalPlanningHelp, stdout);
-          return 0;
-        }
-        return eval_planning_cmd(parse(argc, argv, 3));
-      }
-      if (argc >= 3 && std::string(argv[2]) == "localization") {
-        if (help) {
-          std::fputs(kEvalLocalizationHelp, stdout);
-          return 0;
-        }
-        return eval_localization_cmd(parse(argc, argv, 3));
-      }
-      if (argc < 3 || std::string(argv[2]) != "mapping") {
-        if (help) {
-          std::fputs(kEvalMappingHelp, stdout);
-          std::fputs("\n", stdout);
-          std::fputs(kEvalLocalizationHelp, stdout);
-          return 0;
-        }
-        usage_error("eval needs 'mapping', 'vo', 'localization' or 'planning'");
-      }
-      if (help) {
-        std::fputs(kEvalMappingHelp, stdout);
-        return 0;
-      }
-      return eval_mapping_cmd(parse(argc, argv, 3));
-    }
-    if (cmd == "mission") {
-      if (help) {
-        std::fputs(kMissionHelp, stdout);
-        return 0;
-      }
-      return mission_cmd(parse(argc, argv, 2));
-    }
-    if (cmd == "hil") {
-      if (help) {
-        std::fputs(kHilHelp, stdout);
-        return 0;
-      }
-      return hil_cmd(parse(argc, argv, 2));
-    }
-    if (cmd == "study") return study_cmd(argc, argv);
-    if (cmd == "survey-plan") return survey_plan_cmd(argc, argv);
-    if (cmd == "run" && help) {
-      std::fputs(kRunHelp, stdout);
-      return 0;
+      const Args a = parse(argc, argv, 1 + words);
+      check_options(a, *c);
+      return c->handler(a);
     }
     if (help) {
       std::fputs(kUsage, stdout);
       return 0;
     }
-    const Args a = parse(argc, argv, 2);
-    if (cmd == "render") return render(a);
-    if (cmd == "scan") return scan(a);
-    if (cmd == "run") return run(a);
-    if (cmd == "config") return write_model_configs(a);
-    if (cmd == "--version") {
-      std::printf("airground-sim 0.1.0\n");
-      return 0;
-    }
+    const std::string cmd = argv[1];
+    if (cmd == "world") usage_error(argc < 3 ? "world needs generate, import or show" : "unknown world command '" + std::string(argv[2]) + "'");
+    if (cmd == "eval") usage_error("eval needs 'mapping', 'vo', 'localization' or 'planning'");
     usage_error("unknown command '" + cmd + "'");
   } catch (const std::exception& e) {
     std::fprintf(stderr, "airground-sim: %s\n", e.what());

@@ -36,6 +36,8 @@ constexpr const char* kStudyHelp =
     "Defaults: --ugvs 1,2,3 --comm-range 150 --seeds 1 --out study --jobs (cores / 2, at least 1).\n\n"
     "Options:\n"
     "  --world W              (default)\n"
+    "  --worlds W1,W2,...     several worlds (default, or world directories, e.g. made by 'world generate'):\n"
+    "                         the grid on each, in DIR/runs/<world>_u<N>_r<R>_s<S>/; study.md adds a table by world\n"
     "  --first-seed S         seeds S .. S+K-1 (1)\n"
     "  --jobs J               missions at once (each gets cores / J sensor threads); with --slurm the job\n"
     "                         array's limit of tasks at once (none unless given)\n"
@@ -45,6 +47,8 @@ constexpr const char* kStudyHelp =
     "  --set SECTION.KEY=VALUE  passed to every mission (repeatable)\n"
     "  --set-uav SECTION.KEY=VALUE  passed to every mission (repeatable)\n"
     "  --oracle labels,vo     ablation passed to every mission; study.csv and study.md list each mission's oracles\n"
+    "  --compute-time MODE    passed to every mission: model (default), measured or off (docs/simulator.md)\n"
+    "  --target-cpu CPU       passed to every mission: nuc|ryzen|xavier-nx (default: the paper's computers)\n"
     "  --report-only          run nothing: write the table and plots from the missions already done\n"
     "                         (also while another study process is still running into DIR)\n"
     "  --slurm SDIR           run nothing here: write SDIR/study.sbatch, a Slurm job array with one task per\n"
@@ -69,8 +73,9 @@ struct Options {
 
 // --key value pairs; flags take no value; an option that is neither is an error naming it.
 Options parse(int argc, char** argv) {
-  static const std::set<std::string> valued = {"world", "ugvs", "comm-range", "seeds", "first-seed", "out", "jobs", "max-duration", "altitude",
-                                               "lidar-columns", "set", "set-uav", "oracle", "slurm", "cpus-per-task"};
+  static const std::set<std::string> valued = {"world", "worlds", "ugvs", "comm-range", "seeds", "first-seed", "out", "jobs", "max-duration", "altitude",
+                                               "lidar-columns", "set", "set-uav", "oracle", "slurm", "cpus-per-task",
+                                               "compute-time", "target-cpu"};
   Options o;
   for (int i = 2; i < argc; ++i) {
     const std::string s = argv[i];
@@ -138,7 +143,39 @@ struct Cell {
   double range;
   int seed;
   std::string dir;
+  std::string world;  // as the mission takes it: "default" or an absolute directory
 };
+
+// --world W or --worlds W1,W2,...: each as the mission takes it, with the folder tag its runs get ("" for
+// a single world, so a one-world study keeps its folder names).
+std::vector<std::pair<std::string, std::string>> world_list(const Options& o) {
+  if (o.has("world") && o.has("worlds")) usage("--world and --worlds: give one of them");
+  std::vector<std::string> names;
+  const std::string v = o.has("worlds") ? o.get("worlds") : o.get("world", "default");
+  for (std::size_t b = 0; b <= v.size();) {
+    const std::size_t e = std::min(v.find(',', b), v.size());
+    if (e > b) names.push_back(v.substr(b, e - b));
+    b = e + 1;
+  }
+  if (names.empty()) usage("--worlds needs at least one world");
+  std::vector<std::pair<std::string, std::string>> out;
+  std::set<std::string> tags;
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    std::string world = names[i];
+    if (world != "default") {
+      if (!fs::is_directory(world)) usage("--worlds: '" + world + "' is not a world directory (or 'default')");
+      world = fs::absolute(world).lexically_normal().string();  // a task may start in another folder
+    }
+    std::string tag;
+    if (names.size() > 1) {
+      for (char ch : fs::path(world).filename().string()) tag += std::isalnum(static_cast<unsigned char>(ch)) != 0 ? ch : '-';
+      if (tag.empty() || tags.count(tag) != 0) tag += std::to_string(i + 1);
+      tags.insert(tag);
+    }
+    out.emplace_back(world, tag);
+  }
+  return out;
+}
 
 // The grid in the order both the local run and the Slurm array number it: team size, range, seed.
 std::vector<Cell> make_grid(const Options& o, const std::string& out, std::size_t& sizes, std::size_t& ranges, int& seeds) {
@@ -152,21 +189,23 @@ std::vector<Cell> make_grid(const Options& o, const std::string& out, std::size_
   for (double r : range_list)
     if (r < 0) usage("--comm-range: ranges must be >= 0");
   std::vector<Cell> grid;
-  for (double u : ugvs)
-    for (double r : range_list)
-      for (int k = 0; k < seeds; ++k) {
-        char d[128];
-        std::snprintf(d, sizeof d, "u%d_r%.0f_s%d", static_cast<int>(u), r, first_seed + k);
-        grid.push_back(Cell{static_cast<int>(u), r, first_seed + k, (fs::path(out) / "runs" / d).string()});
-      }
+  for (const auto& [world, tag] : world_list(o))
+    for (double u : ugvs)
+      for (double r : range_list)
+        for (int k = 0; k < seeds; ++k) {
+          char d[128];
+          std::snprintf(d, sizeof d, "u%d_r%.0f_s%d", static_cast<int>(u), r, first_seed + k);
+          const std::string name = tag.empty() ? std::string(d) : tag + "_" + d;
+          grid.push_back(Cell{static_cast<int>(u), r, first_seed + k, (fs::path(out) / "runs" / name).string(), world});
+        }
   sizes = ugvs.size();
   ranges = range_list.size();
   return grid;
 }
 
 // The mission's command line (without the program), the same for a local process and a Slurm task.
-std::vector<std::string> mission_args(const Options& o, const std::string& world, const Cell& c, const std::string& dir, const std::string& threads) {
-  std::vector<std::string> args = {"mission", "--world", world, "--ugvs", std::to_string(c.ugvs), "--seed", std::to_string(c.seed),
+std::vector<std::string> mission_args(const Options& o, const Cell& c, const std::string& dir, const std::string& threads) {
+  std::vector<std::string> args = {"mission", "--world", c.world, "--ugvs", std::to_string(c.ugvs), "--seed", std::to_string(c.seed),
                                    "--comm-range", std::to_string(c.range), "--out", dir, "--threads", threads, "--quiet",
                                    "--record", "none", "--altitude", o.get("altitude", "40"),
                                    "--lidar-columns", o.get("lidar-columns", "1024")};
@@ -174,7 +213,7 @@ std::vector<std::string> mission_args(const Options& o, const std::string& world
     args.emplace_back("--max-duration");
     args.push_back(o.get("max-duration"));
   }
-  for (const char* key : {"set", "set-uav", "oracle"})
+  for (const char* key : {"set", "set-uav", "oracle", "compute-time", "target-cpu"})
     if (o.has(key))
       for (const auto& s : o.opt.at(key)) {
         args.push_back(std::string("--") + key);
@@ -205,8 +244,6 @@ int write_slurm_array(const Options& o, const std::vector<Cell>& grid, const std
     std::fprintf(stderr, "airground-sim study: cannot resolve this program's path (/proc/self/exe): %s\n", ec.message().c_str());
     return 1;
   }
-  std::string world = o.get("world", "default");
-  if (world != "default") world = fs::absolute(world).lexically_normal().string();  // a task may start in another folder
   fs::create_directories(sdir / "logs", ec);
   if (ec) {
     std::fprintf(stderr, "airground-sim study: --slurm: cannot create %s: %s\n", (sdir / "logs").c_str(), ec.message().c_str());
@@ -229,7 +266,7 @@ int write_slurm_array(const Options& o, const std::vector<Cell>& grid, const std
   for (std::size_t i = 0; i < grid.size(); ++i) {
     const std::string dir = (out_abs / "runs" / fs::path(grid[i].dir).filename()).string();
     s += "  " + std::to_string(i) + ") dir=" + shell_word(dir) + "\n     set -- " + shell_word(self.string());
-    for (const std::string& a : mission_args(o, world, grid[i], dir, "@THREADS@")) s += " " + (a == "@THREADS@" ? std::string("\"$threads\"") : shell_word(a));
+    for (const std::string& a : mission_args(o, grid[i], dir, "@THREADS@")) s += " " + (a == "@THREADS@" ? std::string("\"$threads\"") : shell_word(a));
     s += " ;;\n";
   }
   s += "  *) echo \"study.sbatch: no mission $task (0.." + std::to_string(grid.size() - 1) + ")\" >&2; exit 2 ;;\nesac\n";
@@ -262,11 +299,10 @@ void run_local(const Options& o, std::vector<Cell>& grid, int jobs, int threads)
   };
   std::vector<Job> queue;
   for (Cell& c : grid) queue.push_back(Job{&c});
-  const std::string world = o.get("world", "default");
   std::size_t next = 0, running = 0, finished = 0;
   const auto t0 = std::chrono::steady_clock::now();
   auto launch = [&](Job& j) {
-    std::vector<std::string> args = mission_args(o, world, *j.cell, j.cell->dir, std::to_string(threads));
+    std::vector<std::string> args = mission_args(o, *j.cell, j.cell->dir, std::to_string(threads));
     args.insert(args.begin(), "/proc/self/exe");
     std::filesystem::create_directories(j.cell->dir);
     const pid_t pid = fork();
@@ -318,6 +354,10 @@ int study_cmd(int argc, char** argv) {
     }
   const Options o = parse(argc, argv);
   check_oracles(o);
+  if (o.has("compute-time"))
+    if (auto m = ag::sim::parse_compute_time(o.get("compute-time")); !m) usage("--compute-time: " + m.error().message);
+  if (o.has("target-cpu"))
+    if (auto c = ag::sim::parse_target_cpu(o.get("target-cpu")); !c) usage("--target-cpu: " + c.error().message);
   if (o.has("slurm") && o.has("report-only")) usage("--slurm writes the job array and --report-only merges its results: one at a time");
   if (o.has("cpus-per-task") && !o.has("slurm")) usage("--cpus-per-task is for --slurm (a local study uses --jobs)");
   if (o.has("slurm") && o.get("slurm").empty()) usage("--slurm needs a folder");

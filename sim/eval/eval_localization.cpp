@@ -274,6 +274,8 @@ Result<LocalizationMetrics> eval_localization(const EvalLocalizationOptions& o, 
                                             (o.map == UgvMapSource::kOnline ? 3600.0 : 0.0);
   r.ugv_config = o.set;
   r.oracles = o.oracles;
+  r.compute_time = o.compute_time;
+  r.target_cpu = o.target_cpu;
   // The shipped labeller (geometric), or the true classes in the labels ablation.
   m.labels = r.oracle("labels") ? "gt" : "geometric";
   if (!o.labels.empty()) {

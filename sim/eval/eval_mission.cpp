@@ -1,4 +1,5 @@
 // A team mission in the lockstep runner, scored against the world's targets and the true poses.
+#include <nlohmann/json.hpp>
 #include "airground/sim/eval_mission.hpp"
 
 #include <opencv2/imgcodecs.hpp>
@@ -180,6 +181,9 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
   r.uav_config = {kv("regions.area_x0_m", ax0), kv("regions.area_y0_m", ay0), kv("regions.area_x1_m", ax1), kv("regions.area_y1_m", ay1)};
   r.uav_config.insert(r.uav_config.end(), o.uav_config.begin(), o.uav_config.end());
   r.oracles = o.oracles;
+  r.compute_time = o.compute_time;
+  r.target_cpu = o.target_cpu;
+  r.step_sampler = o.step_sampler;
   r.ugv_config = o.ugv_config;
   r.ugv_config_for = [&mf](int i, const Pose2& start) {
     char b[3][96];
@@ -367,6 +371,10 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
   m.survey_estimate_s = sum.uav_route_estimate_s;
   m.realtime_factor = sum.real_time_factor;
   m.bytes_on_air = sum.radio_bytes_sent;
+  m.compute_time = sum.compute_time;
+  m.stage_overruns = sum.stage_overruns;
+  m.stage_slips = sum.stage_slips;
+  m.stages = sum.stages;
   m.targets_total = static_cast<std::uint32_t>(targets.size());
   m.regions_found = static_cast<std::uint32_t>(regions.size());
   bool all_done = true;
@@ -589,6 +597,15 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
     << ",\n  \"takeovers\": " << m.takeovers << ",\n  \"clashes_lost\": " << m.clashes_lost
     << ",\n  \"map_class_accuracy\": " << m.map_class_accuracy << ",\n  \"bytes_on_air\": " << m.bytes_on_air
     << ",\n  \"realtime_factor\": " << m.realtime_factor << ",\n  \"sim_s\": " << m.sim_s << ",\n  \"wall_s\": " << m.wall_s
+    << ",\n  \"compute_time\": \"" << m.compute_time << "\",\n  \"stage_overruns\": " << m.stage_overruns
+    << ",\n  \"stage_slips\": " << m.stage_slips << ",\n  \"stages\": [";
+  for (std::size_t i = 0; i < m.stages.size(); ++i) {
+    const auto& c = m.stages[i];
+    j << (i ? ", " : "") << "{\"name\": \"" << c.name << "\", \"runs\": " << c.runs << ", \"overruns\": " << c.overruns
+      << ", \"slips\": " << c.slips << ", \"exec_p99_ms\": " << c.exec_p99_ms << ", \"budget_ms\": " << c.budget_ms << "}";
+  }
+  j << "]"
+    << ",\n  \"world\": " << nlohmann::json(o.world).dump()
     << ",\n  \"ugvs\": " << n << ",\n  \"seed\": " << o.seed << ",\n  \"comm_range_m\": " << o.comm_range_m << ",\n  \"robots\": [";
   for (std::size_t i = 0; i < m.robots.size(); ++i) {
     const MissionRobot& x = m.robots[i];
@@ -622,7 +639,22 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
                 m.loc.max_m, m.loc.tracking_mean_m, m.loc.tracking_p95_m, 100 * m.loc.tracking_fraction, 100 * m.loc.within_fraction,
                 m.odom_only_error_mean_m, m.false_visits, m.non_target_visits, m.failed_goals, static_cast<unsigned long long>(m.collisions), m.map_class_accuracy,
                 static_cast<double>(m.bytes_on_air) / 1e6, m.realtime_factor, m.sim_s, m.wall_s);
-  md << line << "![mission](mission_map.png)\n\nTrails: true paths of the ground robots; orange circles: regions the quadrotor found "
+  md << line;
+  md << "Compute time: " << m.compute_time << " (docs/simulator.md): " << m.stage_overruns << " overruns and " << m.stage_slips
+     << " slips of the robots' stages on their CPUs";
+  if (m.stage_overruns + m.stage_slips > 0) {
+    md << "; the stages that had any:\n\n| stage | runs | overruns | slips | exec p99 [ms] | budget [ms] |\n|---|---|---|---|---|---|\n";
+    for (const auto& c : m.stages)
+      if (c.overruns + c.slips > 0) {
+        std::snprintf(line, sizeof line, "| %s | %llu | %llu | %llu | %.1f | %.1f |\n", c.name.c_str(), static_cast<unsigned long long>(c.runs),
+                      static_cast<unsigned long long>(c.overruns), static_cast<unsigned long long>(c.slips), c.exec_p99_ms, c.budget_ms);
+        md << line;
+      }
+    md << "\n";
+  } else {
+    md << ".\n\n";
+  }
+  md << "![mission](mission_map.png)\n\nTrails: true paths of the ground robots; orange circles: regions the quadrotor found "
      << "(diamonds: their goals, green once visited); stars: where a robot marked a visit (red: a false visit, its true position at that "
      << "moment was not within its visit radius of the goal; blue: a true visit to a region with no target near); yellow crosses: the "
      << "world's targets. Localization error: the robot's published pose against the truth at its stamp, every 0.2 s from its first "

@@ -198,6 +198,8 @@ Result<PlanningMetrics> eval_planning(const EvalPlanningOptions& o, const std::f
       r.ugv_goals = {Eigen::Vector2d(b.x, b.y)};
       r.ugv_config = o.set;
       r.oracles = o.oracles;
+      r.compute_time = o.compute_time;
+      r.target_cpu = o.target_cpu;
       r.duration_s = 60.0 + 3.0 * path->length_m / std::max(0.1, dp.max_speed_mps);
       r.sample_hz = 5;
       double closest = 1e18, err_sum = 0;

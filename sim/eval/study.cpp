@@ -30,6 +30,7 @@ struct Row {
   double repeat_visits{-1};                // visits of a region someone had visited already; -1: unknown
   double first_visit_s{-1}, last_visit_s{-1};  // from visits.csv; -1: none or no file
   bool completed{false};
+  std::string world{"?"};    // the mission's --world ("?": a metrics.json from before it was recorded)
   std::string oracles{"?"};  // the ground truth the robots got, "+"-joined; "none" in field mode; "?" not recorded
 };
 
@@ -108,6 +109,7 @@ Result<std::string> summarise_study(const std::string& dir) {
         if (o.is_string()) r.oracles += (r.oracles.empty() ? "" : "+") + o.get<std::string>();
       if (r.oracles.empty()) r.oracles = "none";
     }
+    if (j.contains("world") && j["world"].is_string()) r.world = j["world"].get<std::string>();
     read_visit_times(e.path() / "visits.csv", r);
     rows.push_back(r);
   }
@@ -117,11 +119,11 @@ Result<std::string> summarise_study(const std::string& dir) {
   });
   const fs::path out(dir);
   std::ofstream csv(out / "study.csv");
-  csv << "run,ugvs,comm_range_m,seed,oracles,targets_total,targets_visited,completed,mission_time_s,loc_error_mean_m,loc_error_p95_m,"
+  csv << "run,ugvs,comm_range_m,seed,oracles,world,targets_total,targets_visited,completed,mission_time_s,loc_error_mean_m,loc_error_p95_m,"
          "odom_only_error_mean_m,false_visits,failed_goals,collisions,bytes_on_air,realtime_factor,repeat_visits,first_visit_s,"
          "last_visit_s\n";
   for (const Row& r : rows)
-    csv << r.name << "," << r.ugvs << "," << r.range << "," << r.seed << "," << r.oracles << "," << r.targets_total << "," << r.targets_visited << ","
+    csv << r.name << "," << r.ugvs << "," << r.range << "," << r.seed << "," << r.oracles << "," << r.world << "," << r.targets_total << "," << r.targets_visited << ","
         << (r.completed ? 1 : 0) << "," << r.mission_time_s << "," << r.loc_mean << "," << r.loc_p95 << "," << r.odom_mean << ","
         << r.false_visits << "," << r.failed_goals << "," << r.collisions << "," << r.bytes << "," << r.rtf << "," << r.repeat_visits
         << "," << r.first_visit_s << "," << r.last_visit_s << "\n";
@@ -206,6 +208,45 @@ Result<std::string> summarise_study(const std::string& dir) {
     std::snprintf(line, sizeof line, " Localization error after convergence: mean %.2f m over the missions (worst mission %.2f m); wheel odometry alone %.1f m.",
                   loc_sum / static_cast<double>(loc_n), loc_max, odom_sum / static_cast<double>(rows.size()));
     md << line;
+  }
+  // By world, when the study ran on several: the goals per world (every target in 25 of 26, no false visit).
+  std::map<std::string, std::vector<const Row*>> by_world;
+  for (const Row& r : rows) by_world[r.world].push_back(&r);
+  if (by_world.size() > 1) {
+    md << "\n\nBy world:\n\n| world | missions | all targets reached | targets reached / total | no false visit | loc error mean (mean over missions) [m] | mission time mean [s] |\n"
+       << "|---|---|---|---|---|---|---|\n";
+    std::vector<PlotSeries> world_series;
+    std::size_t wk = 0;
+    for (const auto& [world, wr] : by_world) {
+      std::size_t all = 0, clean = 0, ln = 0;
+      double reached = 0, total = 0, loc = 0, time = 0;
+      PlotSeries ws{fs::path(world).filename().string(), {}, {}, series_colour(wk), true};
+      for (const Row* r : wr) {
+        all += r->targets_total > 0 && r->targets_visited >= r->targets_total ? 1 : 0;
+        clean += r->false_visits == 0 ? 1 : 0;
+        reached += r->targets_visited;
+        total += r->targets_total;
+        time += r->mission_time_s;
+        if (r->loc_mean >= 0) {
+          loc += r->loc_mean;
+          ++ln;
+        }
+        ws.x.push_back(r->ugvs + 0.08 * static_cast<double>(wk));
+        ws.y.push_back(r->targets_total > 0 ? r->targets_visited / r->targets_total : 0.0);
+      }
+      world_series.push_back(ws);
+      ++wk;
+      std::snprintf(line, sizeof line, "| %s | %zu | %zu | %.0f / %.0f | %zu | %s | %.0f |\n", world.c_str(), wr.size(), all, reached, total, clean,
+                    ln > 0 ? std::to_string(loc / static_cast<double>(ln)).substr(0, 4).c_str() : "–", time / static_cast<double>(wr.size()));
+      md << line;
+    }
+    PlotOptions wpo;
+    wpo.title = "Share of targets reached per mission, by world";
+    wpo.x_label = "ground robots";
+    wpo.y_label = "targets reached / total";
+    wpo.h_lines = {1.0};
+    cv::imwrite((out / "targets_by_world.png").string(), line_plot(world_series, wpo));
+    md << "\n![targets by world](targets_by_world.png)\n";
   }
   // Mission time by team size and range (mean over the seeds done), the paper's main figure as a table.
   std::set<int> sizes;

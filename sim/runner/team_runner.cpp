@@ -37,6 +37,7 @@
 #include "airground/platform/log.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "airground/sim/camera.hpp"
+#include "airground/sim/compute_time.hpp"
 #include "airground/sim/diff_drive.hpp"
 #include "airground/sim/generator.hpp"
 #include "airground/sim/attitude.hpp"
@@ -1211,7 +1212,11 @@ Status write_reports(const Team& t, const RunSummary& s) {
     << "\nuav_waypoints_reached: " << s.uav_waypoints_reached << "\nradio:\n  sent: " << s.radio_sent
     << "\n  delivered: " << s.radio_delivered << "\n  dropped_range: " << s.radio_dropped_range
     << "\n  dropped_loss: " << s.radio_dropped_loss << "\n  dropped_queue: " << s.radio_dropped_queue
-    << "\nstage_overruns: " << s.stage_overruns << "\nground_robots:\n";
+    << "\ncompute_time: " << s.compute_time << "\nstage_overruns: " << s.stage_overruns << "\nstage_slips: " << s.stage_slips << "\nstages:\n";
+  for (const auto& c : s.stages)
+    y << "  - {name: " << c.name << ", runs: " << c.runs << ", overruns: " << c.overruns << ", slips: " << c.slips
+      << ", exec_p99_ms: " << c.exec_p99_ms << ", budget_ms: " << c.budget_ms << "}\n";
+  y << "ground_robots:\n";
   for (const auto& r : s.ugvs)
     y << "  - {name: " << r.name << ", distance_m: " << r.distance_m << ", collisions: " << r.collisions
       << ", goals_reached: " << r.goals_reached << ", scans: " << r.scans << ", odometry_final_error_m: " << r.odometry_final_error_m
@@ -1228,7 +1233,14 @@ Status write_reports(const Team& t, const RunSummary& s) {
     << ", \"vo_segments\": " << s.vo_segments << ", \"uav_distance_m\": " << s.uav_distance_m
     << ", \"uav_route_estimate_s\": " << s.uav_route_estimate_s << ", \"duration_cap_s\": " << s.duration_cap_s
     << ", \"radio\": {\"sent\": " << s.radio_sent << ", \"delivered\": " << s.radio_delivered << "}"
-    << ", \"stage_overruns\": " << s.stage_overruns << ", \"ground_robots\": [";
+    << ", \"compute_time\": \"" << s.compute_time << "\", \"stage_overruns\": " << s.stage_overruns << ", \"stage_slips\": " << s.stage_slips
+    << ", \"stages\": [";
+  for (std::size_t i = 0; i < s.stages.size(); ++i) {
+    const auto& c = s.stages[i];
+    j << (i ? ", " : "") << "{\"name\": \"" << c.name << "\", \"runs\": " << c.runs << ", \"overruns\": " << c.overruns << ", \"slips\": " << c.slips
+      << ", \"exec_p99_ms\": " << c.exec_p99_ms << ", \"budget_ms\": " << c.budget_ms << "}";
+  }
+  j << "], \"ground_robots\": [";
   for (std::size_t i = 0; i < s.ugvs.size(); ++i) {
     const auto& r = s.ugvs[i];
     j << (i ? ", " : "") << "{\"name\": \"" << r.name << "\", \"distance_m\": " << r.distance_m << ", \"collisions\": " << r.collisions
@@ -1703,6 +1715,19 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   if (t.uav) exec.add(*t.uav->role);
   for (auto& u : t.ugvs) exec.add(*u->role);
   exec.add(*t.base);
+  // Which robot each runnable belongs to, by its channels (perf names are the stage names alone).
+  std::vector<std::pair<const ChannelRegistry*, std::string>> robot_names;
+  if (t.uav) robot_names.emplace_back(&t.uav->role->channels(), "uav");
+  for (auto& u : t.ugvs) robot_names.emplace_back(&u->role->channels(), u->name);
+  robot_names.emplace_back(&t.base->channels(), "base");
+  const auto robot_of = [&robot_names](const Runnable& r) {
+    for (const auto& [ch, name] : robot_names)
+      if (ch == r.channels) return name;
+    return std::string{};
+  };
+  ComputeTime compute(opt.compute_time, exec.runnables(), robot_of, [&opt](std::string_view robot) { return opt.target_of(robot); });
+  if (opt.step_sampler) compute.set_sampler(opt.step_sampler);
+  compute.attach(exec);
   // Robots side by side on the sensor workers: they share nothing but the radio (sends deferred to the
   // end of each release time, in node order) and the sampling callback (likewise, in robot order), so
   // the run is the serial one bit for bit. Not with channel taps: those hand out messages in place.
@@ -1815,7 +1840,15 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   s.radio_dropped_queue = tot.dropped_queue;
   s.radio_bytes_sent = tot.bytes_sent;
   s.radio_bytes_delivered = tot.bytes_delivered;
-  for (const auto& r : exec.runnables()) s.stage_overruns += r.perf == &world_perf ? 0 : r.perf->overruns.load();
+  s.compute_time = std::string(compute_time_name(opt.compute_time));
+  for (const auto& r : exec.runnables()) {
+    if (r.perf == &world_perf) continue;
+    const StagePerf& p = *r.perf;
+    s.stage_overruns += p.overruns.load();
+    s.stage_slips += p.slips.load();
+    s.stages.push_back({robot_of(r) + "/" + p.name, p.runs.load(), p.overruns.load(), p.slips.load(), static_cast<double>(p.exec.quantile(0.99)) / 1e6,
+                        static_cast<double>(r.budget) / 1e6});
+  }
   for (auto& up : t.ugvs) {
     Ugv& u = *up;
     RobotSummary r;

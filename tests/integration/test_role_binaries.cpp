@@ -107,6 +107,11 @@ TEST(RoleBinaryErrors, LabelsTheSensorsCannotGiveExit2NamingTheKeys) {
   const auto hil = run({role_bin("ugv"), "--config", source_dir() + "/firmware_host/ugv/ugv.yaml", "--set", "localization.labels=gt", "--set",
                         "lidar.classes=reflectivity", "--check-config"});
   EXPECT_EQ(hil.exit_code, 0) << hil.err;
+  // ... which a real Ouster does not do: accepted, but said at start-up.
+  EXPECT_NE(hil.err.find("warning: lidar.classes: reflectivity"), std::string::npos) << hil.err;
+  const auto shipped = run({role_bin("ugv"), "--config", source_dir() + "/firmware_host/ugv/ugv.yaml", "--check-config"});
+  EXPECT_EQ(shipped.exit_code, 0) << shipped.err;
+  EXPECT_EQ(shipped.err.find("warning"), std::string::npos) << "the shipped configuration warns of nothing: " << shipped.err;
 }
 
 TEST(RoleBinaryErrors, MissingConfigFileAndBadOptionsExit2) {

@@ -34,6 +34,28 @@ TEST(SimCli, HelpAndBadUsage) {
   }
 }
 
+TEST(SimCli, AnOptionTheCommandDoesNotHaveIsAnErrorNamingIt) {
+  // A mistyped --ugvs would otherwise run the default team without a word.
+  const auto typo = run({sim_bin(), "mission", "--ugv", "3", "--out", tmp("typo")});
+  EXPECT_EQ(typo.exit_code, 2);
+  EXPECT_NE(typo.err.find("unknown option '--ugv' for mission"), std::string::npos) << typo.err;
+  EXPECT_FALSE(fs::exists(tmp("typo"))) << "nothing ran";
+  // An option of another command is refused too: --duration is run's, mission has --max-duration.
+  const auto other = run({sim_bin(), "mission", "--duration", "60", "--out", tmp("typo")});
+  EXPECT_EQ(other.exit_code, 2);
+  EXPECT_NE(other.err.find("'--duration'"), std::string::npos) << other.err;
+  const auto eval = run({sim_bin(), "eval", "localization", "--init-eror", "4"});
+  EXPECT_EQ(eval.exit_code, 2);
+  EXPECT_NE(eval.err.find("for eval localization"), std::string::npos) << eval.err;
+  // --target-cpu and --compute-time name their choices.
+  const auto cpu = run({sim_bin(), "mission", "--target-cpu", "pi4", "--out", tmp("typo")});
+  EXPECT_EQ(cpu.exit_code, 2);
+  EXPECT_NE(cpu.err.find("nuc, ryzen, xavier-nx"), std::string::npos) << cpu.err;
+  EXPECT_EQ(run({sim_bin(), "run", "--compute-time", "fast", "--out", tmp("typo")}).exit_code, 2);
+  EXPECT_EQ(run({sim_bin(), "study", "--target-cpu", "pi4", "--out", tmp("typo")}).exit_code, 2);
+  EXPECT_NE(run({sim_bin(), "mission", "--help"}).out.find("--target-cpu"), std::string::npos);
+}
+
 TEST(SimCli, GenerateShowRenderScanOnASmallWorld) {
   const std::string w = tmp("world");
   fs::remove_all(w);

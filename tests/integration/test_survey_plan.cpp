@@ -245,5 +245,26 @@ TEST(SurveyPlan, StudySlurmScriptHasOneTaskPerMission) {
   EXPECT_FALSE(fs::exists(out + "/runs/u1_r150_s1")) << "writing the script runs nothing";
 }
 
+// --worlds: the grid on each world, each mission with its own --world and a folder tagged by world.
+TEST(SurveyPlan, StudyOnSeveralWorldsRunsTheGridOnEach) {
+  const std::string out = tmp("study-worlds"), sdir = tmp("slurm-worlds");
+  fs::remove_all(out);
+  fs::remove_all(sdir);
+  const auto r = run({sim_bin(), "study", "--worlds", "default," + world_dir(), "--ugvs", "1", "--comm-range", "150", "--seeds", "2", "--out", out,
+                      "--slurm", sdir});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  std::ifstream f(sdir + "/study.sbatch");
+  std::string s;
+  std::getline(f, s, '\0');
+  EXPECT_NE(s.find("#SBATCH --array=0-3"), std::string::npos) << s;
+  const std::string tag = fs::path(world_dir()).filename().string();
+  for (const std::string& run_name : {std::string("default_u1_r150_s1"), std::string("default_u1_r150_s2"), tag + "_u1_r150_s1", tag + "_u1_r150_s2"})
+    EXPECT_NE(s.find("/runs/" + run_name + " --threads"), std::string::npos) << run_name << "\n" << s;
+  EXPECT_NE(s.find("--world default "), std::string::npos) << s;
+  EXPECT_NE(s.find("--world " + fs::absolute(world_dir()).lexically_normal().string() + " "), std::string::npos) << s;
+  EXPECT_EQ(run({sim_bin(), "study", "--worlds", "default,/no/such/world", "--out", out, "--slurm", sdir}).exit_code, 2);
+  EXPECT_EQ(run({sim_bin(), "study", "--world", "default", "--worlds", "default", "--out", out, "--slurm", sdir}).exit_code, 2);
+}
+
 }  // namespace
 }  // namespace ag::test

@@ -160,6 +160,16 @@ TEST(TeamMission, RegionInvestigationWithTheBaseStationAndOneRobotPoweredOff) {
     EXPECT_GE(m.regions_found, 3U);
   }
   {
+    SCOPED_TRACE("EveryRobotStageKeepsItsBudgetOnItsTargetCpu");
+    // Compute time in lockstep (docs/simulator.md): each stage's modelled time on the paper's computers.
+    EXPECT_EQ(m.compute_time, "model");
+    EXPECT_GT(m.stages.size(), 20U) << "the stages of the quadrotor, the ground robots and the base station";
+    for (const auto& c : m.stages) {
+      EXPECT_EQ(c.overruns, 0U) << c.name << ": p99 " << c.exec_p99_ms << " ms against " << c.budget_ms << " ms";
+      EXPECT_EQ(c.slips, 0U) << c.name;
+    }
+  }
+  {
     SCOPED_TRACE("WithTheBaseStationOffAndRobot2OffRobot1TakesOverItsRegion");
     EXPECT_EQ(m.robots.size(), 2U);
     if (m.robots.size() == 2) {
@@ -195,7 +205,8 @@ TEST(TeamMission, RegionInvestigationWithTheBaseStationAndOneRobotPoweredOff) {
     ss << j.rdbuf();
     for (const char* k : {"targets_total", "targets_visited", "mission_time_s", "loc_error_mean_m", "loc_error_p95_m", "odom_only_error_mean_m",
                           "collisions", "failed_goals", "false_visits", "map_class_accuracy", "bytes_on_air", "realtime_factor",
-                          "non_target_visits", "loc_error_max_m", "loc_error_tracking_mean_m", "tracking_fraction", "within_3m_fraction"})
+                          "non_target_visits", "loc_error_max_m", "loc_error_tracking_mean_m", "tracking_fraction", "within_3m_fraction",
+                          "compute_time", "stage_overruns", "stage_slips", "stages", "world"})
       EXPECT_NE(ss.str().find(std::string("\"") + k + "\""), std::string::npos) << k;
   }
 }

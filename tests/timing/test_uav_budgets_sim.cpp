@@ -56,6 +56,7 @@ void check_uav_budgets(const std::string& name, double duration_s, std::vector<s
   o.uav_speed_mps = 5;
   o.uav_config = config;
   o.record = RecordLevel::kNone;
+  o.compute_time = ComputeTimeMode::kOff;  // the stages' measured step times, not the simulator's model of them
   o.progress = false;
   std::vector<Measured> measured;
   std::uint64_t keyframes = 0, pairs = 0, segmented = 0;

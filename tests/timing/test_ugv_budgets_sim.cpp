@@ -53,6 +53,7 @@ void check_ugv_budgets(const std::string& name, double duration_s, std::vector<s
   o.duration_s = duration_s;
   o.ugv_config = config;
   o.record = RecordLevel::kNone;
+  o.compute_time = ComputeTimeMode::kOff;  // the stages' measured step times, not the simulator's model of them
   o.progress = false;
   o.ugv_map = UgvMapSource::kGroundTruth;
   o.init_error_m = 16;

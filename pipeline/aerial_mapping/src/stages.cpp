@@ -168,6 +168,7 @@ void PoseGraphStage::step(TimeNs now) noexcept {
     vo_.pop();
   }
   const bool solved = graph_->update();
+  if (solved) add_work(1.0);  // one graph solve (compute-time model)
 
   while (const CameraImageMsg* img = camera_.front()) {
     if (img->stamp <= last_image_stamp_) {
@@ -433,6 +434,7 @@ void OrthoMapStage::step(TimeNs now) noexcept {
       if (r) {
         const TimeNs t1 = thread_cpu_now();
         map_->add_keyframe(kf->id, cur, points_, partner->id, (cur.translation() - partner_pose.translation()).norm());
+        add_work(1.0);  // one keyframe fused (compute-time model)
         c_.last_bin_ms = cpu_ms_since(t1);
         ++c_.pairs_matched;
         c_.last_baseline_m = (cur.translation() - partner_pose.translation()).norm();

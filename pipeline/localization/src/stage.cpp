@@ -147,6 +147,7 @@ void LocalizationStage::take_scan(LidarScanMsg& scan) noexcept {
   const std::span<ScanPoint> pts(scan.points.data(), scan.count);
   labeller_->label(pts, scan.rings, scan.columns);
   const UpdateReport r = loc_->on_scan(pts, *fields_, scan.stamp);
+  add_work(1.0);  // one scan update (compute-time model)
   if (r.updated) ++c_.scans_matched;
   if (r.recovered) {
     ++c_.recoveries;

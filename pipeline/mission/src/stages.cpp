@@ -90,6 +90,7 @@ void RegionsStage::step(TimeNs now) noexcept {
     last_extract_ = now;
     ex_->extract();
     ++c_.extractions;
+    add_work(1.0);  // one regions update (compute-time model)
     if (ex_->version() != published_version_) {
       published_version_ = ex_->version();
       RegionsMsg& m = *msg_;

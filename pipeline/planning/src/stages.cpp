@@ -52,6 +52,7 @@ void PlannerStage::plan_now(TimeNs now) noexcept {
     snap = std::min(initialising_snap_, std::max(snap_, 2.0 * sigma));
   }
   map_->plan(Point2{pose_.pose.x, pose_.pose.y}, Point2{goal_.goal.x, goal_.goal.y}, *path_, snap);
+  add_work(1.0);  // one route planned (compute-time model)
   PlannedPathMsg& m = *msg_;
   m.stamp = pose_.stamp;
   m.published = now;
@@ -272,6 +273,7 @@ void TrackerStage::step(TimeNs now) noexcept {
     return;
   }
   if (pose_.status == LocalizationStatus::kTracking || pose_.status == LocalizationStatus::kInitialising) {
+    add_work(1.0);  // one scan tracked (compute-time model)
     (void)tracker_->update(std::span<const ScanReturn>(newest->points.data(), newest->count), newest->sensor_in_body, pose_.pose, cmd_.v_mps);
     const LocalGoal g = tracker_->local_goal(pose_.pose, now);
     msg_.valid = g.valid;

@@ -73,6 +73,7 @@ void SegmentationStage::step(TimeNs /*now*/) noexcept {
   m.labels = LabelSource::kSegmentation;
   m.published = clock_->now();
   ++c_.segmented;
+  add_work(1.0);  // one ErfNet forward pass (compute-time model)
   if (out_.push(m) != 0) ++c_.dropped_busy;
 }
 

@@ -83,6 +83,7 @@ void VoStage::step(TimeNs now) noexcept {
     ++(have ? c_.frames_with_attitude : c_.frames_without_attitude);
     const VoFrame f = vo_->process(img->stamp, img->rgb.data(), have ? std::optional<Eigen::Matrix3d>(R) : std::nullopt);
     ++c_.frames;
+    add_work(1.0);  // one frame tracked (compute-time model)
     VoMsg m;
     m.stamp = img->stamp;
     m.segment = f.segment;

@@ -105,5 +105,31 @@ TEST(Study, TablesListTheOraclesOfEveryMission) {
   EXPECT_NE(md.find("- oracles none: 1 mission (u1_r150_s1)"), std::string::npos) << md;
 }
 
+TEST(Study, SeveralWorldsGetATableByWorld) {
+  const fs::path dir = fs::path(::testing::TempDir()) / "study-worlds";
+  fs::remove_all(dir);
+  auto in = [](std::string m, const std::string& world, int visited) {
+    m.insert(1, "\"world\": \"" + world + "\", ");
+    const std::string key = "\"targets_visited\": 3";
+    return m.replace(m.find(key), key.size(), "\"targets_visited\": " + std::to_string(visited));
+  };
+  write(dir / "runs/default_u1_r150_s1/metrics.json", in(metrics(1, 150, 1, 1000, 3, {3}), "default", 3));
+  write(dir / "runs/default_u1_r150_s2/metrics.json", in(metrics(1, 150, 2, 1200, 3, {3}), "default", 3));
+  write(dir / "runs/w2_u1_r150_s1/metrics.json", in(metrics(1, 150, 1, 1400, 2, {2}), "/data/worlds/w2", 2));
+  ASSERT_TRUE(summarise_study(dir.string()).ok());
+  const std::string csv = read(dir / "study.csv"), md = read(dir / "study.md");
+  EXPECT_NE(csv.find("w2_u1_r150_s1,1,150,1,?,/data/worlds/w2,3,2,"), std::string::npos) << csv;
+  EXPECT_NE(md.find("By world:"), std::string::npos) << md;
+  EXPECT_NE(md.find("| default | 2 | 2 | 6 / 6 | 2 |"), std::string::npos) << md;
+  EXPECT_NE(md.find("| /data/worlds/w2 | 1 | 0 | 2 / 3 | 1 |"), std::string::npos) << md;
+  EXPECT_TRUE(fs::exists(dir / "targets_by_world.png"));
+  // One world: no table by world.
+  fs::remove_all(dir / "runs/w2_u1_r150_s1");
+  fs::remove(dir / "targets_by_world.png");
+  ASSERT_TRUE(summarise_study(dir.string()).ok());
+  EXPECT_EQ(read(dir / "study.md").find("By world:"), std::string::npos);
+  EXPECT_FALSE(fs::exists(dir / "targets_by_world.png"));
+}
+
 }  // namespace
 }  // namespace ag::sim

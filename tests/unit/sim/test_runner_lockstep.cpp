@@ -115,7 +115,10 @@ TEST(TeamRunner, SensorsRunAtTheirRatesAndRobotsMove) {
   EXPECT_LE(s.gps_fixes, 31u);
   // Field mode: the quadrotor's own vo stage publishes one odometry per camera frame (the 10 Hz VO model
   // is the --oracle vo ablation).
-  EXPECT_EQ(s.vo_samples, s.camera_frames) << "one VO message per frame";
+  // The frame at 6 s is still being tracked when the run ends (its VO message shows after the stage's
+  // compute time, docs/simulator.md): one message per frame, the last one possibly not yet out.
+  EXPECT_LE(s.vo_samples, s.camera_frames) << "one VO message per frame";
+  EXPECT_GE(s.vo_samples + 1, s.camera_frames) << "one VO message per frame";
   ASSERT_EQ(s.ugvs.size(), 2u);
   for (const auto& u : s.ugvs) {
     EXPECT_EQ(u.scans, 61u) << u.name;

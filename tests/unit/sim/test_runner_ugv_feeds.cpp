@@ -5,6 +5,8 @@
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <optional>
+#include <string>
 #include <set>
 #include <vector>
 
@@ -373,6 +375,50 @@ TEST_F(UgvFeeds, OnlineTilesFollowTheQuadrotorsMapAndTheRobotWaitsForIt) {
     }
   }
   EXPECT_GT(s.distance_m, 0.5);
+}
+
+// Compute time: the localizer's modelled step time scales with the target CPU, two runs of a seed give
+// the same counters, and the report names the mode.
+TEST_F(UgvFeeds, ComputeTimeIsModelledPerTargetCpuAndRepeatsExactly) {
+  const auto run = [&](const std::string& name, ComputeTimeMode mode, std::optional<TargetCpu> cpu) {
+    RunOptions o = options(name);
+    o.duration_s = 4;
+    o.ugv_map = UgvMapSource::kGroundTruth;
+    o.compute_time = mode;
+    o.target_cpu = cpu;
+    auto r = run_team(o);
+    EXPECT_TRUE(r.ok()) << r.error().message;
+    return r.ok() ? r.value() : RunSummary{};
+  };
+  const auto stage = [](const RunSummary& s, const std::string& name) {
+    for (const auto& c : s.stages)
+      if (c.name == name) return c;
+    ADD_FAILURE() << "no stage " << name;
+    return RunSummary::StageCounters{};
+  };
+  const RunSummary ryzen = run("ct_ryzen", ComputeTimeMode::kModel, std::nullopt);  // a ground robot's default
+  const RunSummary again = run("ct_again", ComputeTimeMode::kModel, std::nullopt);
+  const RunSummary nx = run("ct_nx", ComputeTimeMode::kModel, TargetCpu::kXavierNx);
+  EXPECT_EQ(ryzen.compute_time, "model");
+  const auto loc = stage(ryzen, "ugv1/localization"), loc_nx = stage(nx, "ugv1/localization");
+  ASSERT_GT(loc.runs, 30u);
+  const StageCost* row = find_stage_cost("localization");
+  ASSERT_NE(row, nullptr);
+  // The p99 is a step with one scan update (or two, when two scans wait) on the target CPU (histogram
+  // buckets are ~3 % wide).
+  const double f = target_cpu_info(TargetCpu::kRyzen).factor;
+  EXPECT_GE(loc.exec_p99_ms, 0.96 * (row->idle_us + row->per_unit_us) * 1e-3 * f);
+  EXPECT_LE(loc.exec_p99_ms, 1.04 * (row->idle_us + 2 * row->per_unit_us) * 1e-3 * f);
+  EXPECT_NEAR(loc_nx.exec_p99_ms / loc.exec_p99_ms, target_cpu_info(TargetCpu::kXavierNx).factor / target_cpu_info(TargetCpu::kRyzen).factor, 0.1);
+  ASSERT_EQ(ryzen.stages.size(), again.stages.size());
+  for (std::size_t i = 0; i < ryzen.stages.size(); ++i) {
+    EXPECT_EQ(ryzen.stages[i].runs, again.stages[i].runs) << ryzen.stages[i].name;
+    EXPECT_EQ(ryzen.stages[i].slips, again.stages[i].slips) << ryzen.stages[i].name;
+    EXPECT_EQ(ryzen.stages[i].exec_p99_ms, again.stages[i].exec_p99_ms) << ryzen.stages[i].name;
+  }
+  ASSERT_EQ(ryzen.ugvs.size(), 1u);
+  EXPECT_EQ(ryzen.ugvs[0].loc_error_mean_m, again.ugvs[0].loc_error_mean_m) << "what reaches the robot does not depend on this machine";
+  EXPECT_EQ(ryzen.ugvs[0].distance_m, again.ugvs[0].distance_m);
 }
 
 }  // namespace

@@ -29,18 +29,35 @@ constexpr const void* type_tag() noexcept {
 
 struct ChannelBase {
   virtual ~ChannelBase() = default;
+  // Writer side, lockstep compute time only: what the writer publishes stays invisible until release().
+  virtual void hold() noexcept = 0;
+  virtual void release() noexcept = 0;
   std::string name;
   const void* tag{nullptr};
   bool has_writer{false};
+  std::size_t writer_stage{kNoStage};  // index of the stage whose init() took the writer, if a stage did
+  static constexpr std::size_t kNoStage = static_cast<std::size_t>(-1);
 };
 
 template <typename T>
 struct LatestChannel final : ChannelBase {
+  void hold() noexcept override {
+    for (auto& r : readers) r->hold();
+  }
+  void release() noexcept override {
+    for (auto& r : readers) r->release();
+  }
   std::vector<std::unique_ptr<LatestValue<T>>> readers;
 };
 
 template <typename T, std::size_t N>
 struct RingChannel final : ChannelBase {
+  void hold() noexcept override {
+    for (auto& r : readers) r->hold();
+  }
+  void release() noexcept override {
+    for (auto& r : readers) r->release();
+  }
   std::vector<std::unique_ptr<SpscRing<T, N>>> readers;
   // Per reader: pushes refused because its ring was full (written by the producer only, read by anyone).
   std::vector<std::unique_ptr<std::atomic<std::uint64_t>>> drops;
@@ -99,7 +116,7 @@ class RingWriter {
   [[nodiscard]] std::size_t free_slots() const noexcept {
     std::size_t f = N;
     for (std::size_t i = 0; i < ch_->readers.size(); ++i)
-      if (ch_->tap[i] == 0) f = std::min(f, N - std::min(N, ch_->readers[i]->size()));
+      if (ch_->tap[i] == 0) f = std::min(f, N - std::min(N, ch_->readers[i]->unread_from_producer()));
     return f;
   }
 
@@ -133,6 +150,7 @@ class ChannelRegistry {
     if (!ch) return ch.error();
     if (ch.value()->has_writer) return dup_writer(name);
     ch.value()->has_writer = true;
+    ch.value()->writer_stage = initialising_;
     return LatestWriter<T>(ch.value());
   }
   template <typename T>
@@ -149,6 +167,7 @@ class ChannelRegistry {
     if (!ch) return ch.error();
     if (ch.value()->has_writer) return dup_writer(name);
     ch.value()->has_writer = true;
+    ch.value()->writer_stage = initialising_;
     return RingWriter<T, N>(ch.value());
   }
   template <typename T, std::size_t N>
@@ -161,8 +180,30 @@ class ChannelRegistry {
   Result<RingReader<T, N>> ring_tap(std::string_view name) {
     return add_ring_reader<T, N>(name, true);
   }
-  // After every stage's init(): no more readers may be added (the fan-out lists are final).
-  void seal() noexcept { sealed_ = true; }
+  // Start-up: writers taken from now on belong to stage `index` of the role table (kNoStage: to none).
+  void set_initialising(std::size_t index) noexcept { initialising_ = index; }
+  // After every stage's init(): no more readers may be added (the fan-out lists are final). Builds each
+  // stage's list of output channels.
+  void seal() {
+    sealed_ = true;
+    initialising_ = detail::ChannelBase::kNoStage;
+    outputs_.clear();
+    for (auto& c : channels_) {
+      if (c->writer_stage == detail::ChannelBase::kNoStage) continue;
+      if (outputs_.size() <= c->writer_stage) outputs_.resize(c->writer_stage + 1);
+      outputs_[c->writer_stage].push_back(c.get());
+    }
+  }
+  // Lockstep compute time (sealed registries only): everything stage `index` publishes from now on stays
+  // invisible to its readers until release_outputs(index). Never used on a robot.
+  void hold_outputs(std::size_t index) noexcept {
+    if (index < outputs_.size())
+      for (auto* c : outputs_[index]) c->hold();
+  }
+  void release_outputs(std::size_t index) noexcept {
+    if (index < outputs_.size())
+      for (auto* c : outputs_[index]) c->release();
+  }
   [[nodiscard]] std::size_t size() const noexcept { return channels_.size(); }
 
  private:
@@ -201,6 +242,8 @@ class ChannelRegistry {
   }
 
   std::vector<std::unique_ptr<detail::ChannelBase>> channels_;
+  std::vector<std::vector<detail::ChannelBase*>> outputs_;  // per stage index, built by seal()
+  std::size_t initialising_{detail::ChannelBase::kNoStage};
   bool sealed_{false};
 };
 

@@ -4,6 +4,7 @@
 #include <atomic>
 #include <barrier>
 #include <cstddef>
+#include <limits>
 #include <memory>
 #include <string>
 #include <thread>
@@ -28,6 +29,13 @@ struct Runnable {
   int priority;
   int cpu;
   TimeNs next_release{0};
+  // Lockstep compute time: the robot's channels and this stage's index in its table (null channels: a
+  // simulator stage, which costs nothing), when its thread is free again and when its held outputs show.
+  ChannelRegistry* channels{nullptr};
+  std::size_t stage_index{0};
+  TimeNs busy_until{0};
+  TimeNs finish{kNever};
+  static constexpr TimeNs kNever = std::numeric_limits<TimeNs>::max();
 };
 
 // Measures one step and updates its counters; shared by both executors.
@@ -65,10 +73,27 @@ class LockstepExecutor {
     after_ = after;
     parallel_user_ = user;
   }
+  // Compute time (the simulator's model of the robot CPU): a robot stage's step takes
+  // cost(user, runnable, work, measured) ns on the target CPU, where `work` is what the stage reported
+  // (Stage::take_work) and `measured` its thread CPU time here. Its outputs stay invisible until that
+  // time has passed, and its thread is busy until then: a later release starts late, and one a whole
+  // period late is skipped (a slip), as the real-time executor does. The exec histogram and overruns
+  // count the modelled time; exec_total stays this machine's CPU time. Every robot stage is its own
+  // thread (the role tables give each its own priority), each on a core of its own. Call before start().
+  using CostFn = TimeNs (*)(void* user, std::size_t runnable, double work, TimeNs measured) noexcept;
+  void set_compute_time(CostFn cost, void* user) noexcept {
+    cost_ = cost;
+    cost_user_ = user;
+  }
   [[nodiscard]] const std::vector<Runnable>& runnables() const noexcept { return runs_; }
 
  private:
   void run_lane(std::size_t lane, TimeNs t) noexcept;
+  [[nodiscard]] TimeNs next_event() const noexcept;
+  void release_finished(TimeNs t) noexcept;
+  void run_lane_timed(std::size_t lane, TimeNs t) noexcept;
+  void step_timed(std::size_t i, TimeNs t) noexcept;
+  void run_until_timed(TimeNs t_end) noexcept;
 
   SimClock& clock_;
   ExecTimer timer_;
@@ -83,6 +108,8 @@ class LockstepExecutor {
   ParallelFn parallel_{nullptr};
   AfterFn after_{nullptr};
   void* parallel_user_{nullptr};
+  CostFn cost_{nullptr};
+  void* cost_user_{nullptr};
 };
 
 struct RealtimeOptions {

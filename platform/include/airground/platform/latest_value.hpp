@@ -23,9 +23,21 @@ class LatestValue {
   // Writer: fill this slot in place, then publish().
   [[nodiscard]] T& write_slot() noexcept { return slots_[write_idx_].value; }
   void publish() noexcept {
-    const std::uint8_t prev = handover_.exchange(static_cast<std::uint8_t>(write_idx_ | kFresh), std::memory_order_acq_rel);
-    write_idx_ = prev & kIndexMask;
     ++published_;
+    if (held_) {  // lockstep compute time: handed over at release()
+      pending_ = true;
+      return;
+    }
+    hand_over();
+  }
+  // Writer, lockstep simulator only: publications from now on are handed over at release() (the newest).
+  void hold() noexcept { held_ = true; }
+  void release() noexcept {
+    held_ = false;
+    if (pending_) {
+      pending_ = false;
+      hand_over();
+    }
   }
   void write(const T& v) noexcept {
     write_slot() = v;
@@ -46,6 +58,11 @@ class LatestValue {
   [[nodiscard]] std::uint64_t published() const noexcept { return published_; }
 
  private:
+  void hand_over() noexcept {
+    const std::uint8_t prev = handover_.exchange(static_cast<std::uint8_t>(write_idx_ | kFresh), std::memory_order_acq_rel);
+    write_idx_ = prev & kIndexMask;
+  }
+
   static constexpr std::uint8_t kFresh = 0x4;
   static constexpr std::uint8_t kIndexMask = 0x3;
   struct alignas(kCacheLine) Slot {
@@ -55,6 +72,7 @@ class LatestValue {
   alignas(kFalseSharingRange) std::atomic<std::uint8_t> handover_{1};
   alignas(kFalseSharingRange) std::uint8_t write_idx_{0};
   std::uint64_t published_{0};
+  bool held_{false}, pending_{false};  // writer-private
   alignas(kFalseSharingRange) std::uint8_t read_idx_{2};
 };
 

@@ -40,6 +40,22 @@ class Stage {
   virtual void step(TimeNs now) noexcept = 0;
   // Shutdown, after the last step(): flush what must survive a restart.
   virtual void stop() noexcept {}
+
+  // The work reported since the last call, in the stage's own unit (a frame segmented, a particle
+  // update, a keyframe fused): what the simulator's compute-time model charges for a step
+  // (docs/simulator.md, "Compute time"). The executor takes it after every step.
+  [[nodiscard]] double take_work() noexcept {
+    const double w = work_;
+    work_ = 0;
+    return w;
+  }
+
+ protected:
+  // step(): this step did `units` of the work its compute-time row counts.
+  void add_work(double units) noexcept { work_ += units; }
+
+ private:
+  double work_{0};
 };
 
 }  // namespace ag

@@ -7,11 +7,13 @@
 #include <Eigen/Core>
 
 #include <cstdint>
+#include <optional>
 #include <functional>
 #include <string>
 #include <vector>
 
 #include "airground/platform/result.hpp"
+#include "airground/sim/compute_time.hpp"
 #include "airground/sim/eval_scoring.hpp"
 #include "airground/sim/runner.hpp"
 #include "airground/sim/world.hpp"
@@ -31,6 +33,8 @@ struct EvalLocalizationOptions {
   std::string labels{};             // "gt" or "geometric": the ground robot's localization.labels (empty: the shipped
                                     // geometric, or gt with the labels oracle); gt needs the labels oracle
   std::vector<std::string> oracles{};  // ground truth for the robot by name (RunOptions::oracles), an ablation
+  ComputeTimeMode compute_time{ComputeTimeMode::kModel};  // RunOptions::compute_time
+  std::optional<TargetCpu> target_cpu{};                 // RunOptions::target_cpu (unset: the paper's computers)
   std::vector<std::string> set{};   // "section.key=value" on the ground robot's role config
   double stand_still_s{0};          // > 0: the robot stands this long ...
   double stand_still_at_s{120};     // [s] ... from this simulated time

@@ -3,10 +3,12 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "airground/platform/result.hpp"
+#include "airground/sim/compute_time.hpp"
 #include "airground/sim/runner.hpp"
 
 namespace ag::sim {
@@ -29,6 +31,8 @@ struct EvalMappingOptions {
   bool quiet{false};
   std::vector<std::string> set{};  // "section.key=value" on the quadrotor's role config (e.g. segmentation.labels=erfnet)
   std::vector<std::string> oracles{};  // ground truth for the quadrotor by name (RunOptions::oracles): "vo"
+  ComputeTimeMode compute_time{ComputeTimeMode::kModel};  // RunOptions::compute_time
+  std::optional<TargetCpu> target_cpu{};                 // RunOptions::target_cpu (unset: the paper's computers)
 };
 
 struct MappingMetrics {
@@ -50,7 +54,7 @@ struct MappingMetrics {
   std::uint64_t tiles{0}, tiles_rebuilt{0};
   std::uint64_t gps_rejected{0}, vo_segments{0}, stage_overruns{0};
   double sim_s{0}, wall_s{0};
-  double pose_graph_p99_ms{0}, ortho_map_p99_ms{0};  // stage step times, thread CPU
+  double pose_graph_p99_ms{0}, ortho_map_p99_ms{0};  // stage step times: modelled on the target CPU (compute_time model), else thread CPU
   double resident_mb{0};            // process resident set at the end (simulator world, sensors and the UAV stages)
   double resident_growth_mb{0};     // resident set at the end minus after the first 2 s of flight: what the UAV stages grew by
   double map_memory_mb{0};          // the ortho-map's tiles and keyframe window, counted by the map

@@ -5,11 +5,13 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <functional>
 #include <string>
 #include <vector>
 
 #include "airground/platform/result.hpp"
+#include "airground/sim/compute_time.hpp"
 #include "airground/sim/eval_scoring.hpp"
 #include "airground/sim/runner.hpp"
 
@@ -40,9 +42,12 @@ struct MissionOptions {
   std::vector<RunOptions::Kill> kills{};   // ugv -1 = the base station
   std::vector<std::string> ugv_config{}, uav_config{};
   std::vector<std::string> oracles{};  // ground truth for the robots by name (RunOptions::oracles), an ablation
+  ComputeTimeMode compute_time{ComputeTimeMode::kModel};  // RunOptions::compute_time
+  std::optional<TargetCpu> target_cpu{};                 // RunOptions::target_cpu (unset: the paper's computers)
   int web_port{0};                 // > 0: the base station serves its page on this port during the run
   double web_pace{0};              // > 0: hold the simulation to this many times real time (to watch it)
   std::function<void(double t_s)> during{};  // called at 5 Hz of simulated time while the mission runs (tests)
+  std::function<void(const StepSample&)> step_sampler{};  // RunOptions::step_sampler (benchmarks)
 };
 
 struct MissionRobot {
@@ -81,6 +86,10 @@ struct MissionMetrics {
   double time_cap_s{0};       // [s] the run's cap (--max-duration, or 4x the survey's estimated flying time)
   double survey_estimate_s{0};  // [s] the quadrotor's route with its return, estimated before take-off
   std::vector<MissionRobot> robots;
+  // The robots' scheduler counters on their target CPUs (RunSummary::stages), and the compute-time mode.
+  std::string compute_time{"model"};
+  std::uint64_t stage_overruns{0}, stage_slips{0};
+  std::vector<RunSummary::StageCounters> stages;
 };
 
 Result<MissionMetrics> run_mission(const MissionOptions& options, const ProgressFn& progress = {});

@@ -6,11 +6,13 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <functional>
 #include <string>
 #include <vector>
 
 #include "airground/platform/result.hpp"
+#include "airground/sim/compute_time.hpp"
 
 namespace ag::sim {
 
@@ -28,6 +30,8 @@ struct EvalPlanningOptions {
   double speed_mps{1.2};
   std::vector<std::string> set{};   // "planner.key=value" / "drive.key=value" overrides of the ugv role config
   std::vector<std::string> oracles{};  // with localizer_pose: ground truth for the robot by name (RunOptions::oracles)
+  ComputeTimeMode compute_time{ComputeTimeMode::kModel};  // RunOptions::compute_time
+  std::optional<TargetCpu> target_cpu{};                 // RunOptions::target_cpu (unset: the paper's computers)
   bool quiet{false};
 };
 

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -14,6 +15,7 @@
 #include "airground/core/geometry.hpp"
 #include "airground/platform/result.hpp"
 #include "airground/platform/time.hpp"
+#include "airground/sim/compute_time.hpp"
 #include "airground/sim/world.hpp"
 
 namespace ag {
@@ -178,6 +180,18 @@ struct RunOptions {
       if (o == name) return true;
     return false;
   }
+  // Compute time (docs/simulator.md, "Compute time"): a robot stage's outputs show when its step's compute
+  // time on the robot's CPU has passed, and a stage still busy at its next release starts late or slips.
+  // model: from the cost table (deterministic, the default); measured: this machine's CPU time, scaled
+  // (profiling); off: outputs at the release instant (the old simulator).
+  ComputeTimeMode compute_time{ComputeTimeMode::kModel};
+  // The robots' CPU; unset: the paper's computers (quadrotor and base station NUC, ground robots Ryzen).
+  std::optional<TargetCpu> target_cpu{};
+  std::function<void(const StepSample&)> step_sampler{};  // benchmarks: every robot step, on executor threads
+  [[nodiscard]] TargetCpu target_of(std::string_view robot) const noexcept {
+    if (target_cpu) return *target_cpu;
+    return robot.starts_with("ugv") ? TargetCpu::kRyzen : TargetCpu::kNuc;
+  }
   // Per ground robot (0-based) with its true start pose: more "section.key=value" (its priority, its start).
   std::function<std::vector<std::string>(int ugv, const Pose2& start)> ugv_config_for{};
   std::vector<std::string> base_config{};  // "section.key=value" set on the base station's role config
@@ -294,6 +308,15 @@ struct RunSummary {
   std::uint64_t radio_sent{0}, radio_delivered{0}, radio_dropped_range{0}, radio_dropped_loss{0}, radio_dropped_queue{0};
   std::uint64_t radio_bytes_sent{0}, radio_bytes_delivered{0};  // payload bytes put on the air / received
   std::uint64_t stage_overruns{0};
+  std::uint64_t stage_slips{0};
+  // Every robot stage's scheduler counters (runs, overruns, slips, modelled exec p99 on its target CPU).
+  struct StageCounters {
+    std::string name;  // "<robot>/<stage>"
+    std::uint64_t runs{0}, overruns{0}, slips{0};
+    double exec_p99_ms{0}, budget_ms{0};
+  };
+  std::vector<StageCounters> stages;
+  std::string compute_time{"model"};
   std::uint64_t recording_messages{0}, recording_bytes{0};  // recording.mcap (0 without one)
   std::vector<RobotSummary> ugvs;
 };
