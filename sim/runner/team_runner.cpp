@@ -1293,6 +1293,21 @@ Status write_reports(const Team& t, const RunSummary& s) {
 
 }  // namespace
 
+namespace {
+// "<section>.area_x0_m=..." .. "area_y1_m": the world's extent, the mission area the simulator gives a robot.
+std::vector<std::string> world_area_keys(const GridGeometry& g, const char* section) {
+  const double v[4] = {g.origin_x, g.origin_y - g.size_y(), g.origin_x + g.size_x(), g.origin_y};
+  const char* keys[4] = {"area_x0_m", "area_y0_m", "area_x1_m", "area_y1_m"};
+  std::vector<std::string> out;
+  for (int k = 0; k < 4; ++k) {
+    char buf[160];
+    std::snprintf(buf, sizeof buf, "%s.%s=%.3f", section, keys[k], v[k]);
+    out.emplace_back(buf);
+  }
+  return out;
+}
+}  // namespace
+
 Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   if (opt.ugvs < 0 || opt.ugvs > 32) return Error::make(ErrorCode::kInvalidArgument, "--ugvs must be 0..32");
   if (!(opt.duration_s > 0)) return Error::make(ErrorCode::kInvalidArgument, "--duration must be positive");
@@ -1491,6 +1506,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
     }
     std::vector<std::string> uav_extra = comms_common;
     if (opt.gossip) uav_extra.emplace_back("comms.send_map_tiles=true");
+    for (const std::string& kv : world_area_keys(w.grid(), "regions")) uav_extra.push_back(kv);  // before uav_config: a caller's area wins
     uav_extra.insert(uav_extra.end(), opt.uav_config.begin(), opt.uav_config.end());
     // The simulator is the quadrotor's camera (and its VO) and its GNSS receiver: it writes their channels.
     RoleDescription uav_desc = uav_role();
@@ -1557,18 +1573,10 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   }
   // The runner is then the robots' map link and writes their map_tiles itself.
   if (!opt.gossip || opt.ugv_map != UgvMapSource::kNone) ugv_extra.emplace_back("comms.deliver_map_tiles=false");
-  if (opt.drive_by_stages || opt.gossip) {  // the planner's roadmap covers the world
-    const GridGeometry& g = w.grid();
-    char buf[160];
-    std::snprintf(buf, sizeof buf, "%.3f", g.origin_x);
-    ugv_extra.emplace_back(std::string("planner.area_x0_m=") + buf);
-    std::snprintf(buf, sizeof buf, "%.3f", g.origin_y - g.size_y());
-    ugv_extra.emplace_back(std::string("planner.area_y0_m=") + buf);
-    std::snprintf(buf, sizeof buf, "%.3f", g.origin_x + g.size_x());
-    ugv_extra.emplace_back(std::string("planner.area_x1_m=") + buf);
-    std::snprintf(buf, sizeof buf, "%.3f", g.origin_y);
-    ugv_extra.emplace_back(std::string("planner.area_y1_m=") + buf);
-  }
+  // The mission area is the world's: the planner's roadmap and the localizer's distance fields cover it
+  // (the shipped +-500 m would drop an imported 1.9 km map's tiles outside it and never localize there).
+  for (const char* section : {"planner", "localization"})
+    for (const std::string& kv : world_area_keys(w.grid(), section)) ugv_extra.push_back(kv);
   if (opt.ugv_survey_end && opt.uav) {
     char buf[96];
     std::snprintf(buf, sizeof buf, "mission.survey_end_s=%.1f", survey_time_s);

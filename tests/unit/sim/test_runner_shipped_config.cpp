@@ -174,6 +174,15 @@ TEST_F(ShippedConfig, EveryRobotRunsTheShippedFileExceptTheKeysTheSimulatorMustS
     }
     EXPECT_EQ(got[1].get_int("robot.id"), 1);
     EXPECT_EQ(got[2].get_text("robot.name"), "ugv2");
+    // The mission area is the world's, for the localizer's fields, the planner and the regions alike
+    // (not the shipped +-500 m, which would drop a bigger map's tiles).
+    const GridGeometry& g = saved_->world()->grid();
+    for (const auto& [cfg, section] : {std::pair{&got[1], "localization"}, std::pair{&got[1], "planner"}, std::pair{&got[0], "regions"}}) {
+      EXPECT_NEAR(cfg->get_real(std::string(section) + ".area_x0_m"), g.origin_x, 1e-3) << section;
+      EXPECT_NEAR(cfg->get_real(std::string(section) + ".area_x1_m"), g.origin_x + g.size_x(), 1e-3) << section;
+      EXPECT_NEAR(cfg->get_real(std::string(section) + ".area_y0_m"), g.origin_y - g.size_y(), 1e-3) << section;
+      EXPECT_NEAR(cfg->get_real(std::string(section) + ".area_y1_m"), g.origin_y, 1e-3) << section;
+    }
   }
 }
 
