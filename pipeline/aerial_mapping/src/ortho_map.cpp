@@ -181,13 +181,33 @@ void OrthoMap::add_keyframe(std::uint32_t id, const Eigen::Isometry3d& map_from_
       }
   }
   const auto ground_tol = static_cast<float>(p_.ground_check_m), raised_min = static_cast<float>(p_.raised_min_height_m);
+  // Where no flat-class point lies within the window (inside a paved square or a big roof), the ground of
+  // the whole keyframe: the median of its flat-class points.
+  float patch_ground = std::numeric_limits<float>::quiet_NaN();
+  if (check) {
+    heights_.clear();
+    for (const MapPoint& m : points)
+      if (flat(m.cls)) heights_.push_back(m.z);
+    if (!heights_.empty()) {
+      auto mid = heights_.begin() + static_cast<std::ptrdiff_t>(heights_.size() / 2);
+      std::nth_element(heights_.begin(), mid, heights_.end());
+      patch_ground = *mid;
+    }
+  }
   for (std::size_t cidx = 0; cidx < w * h; ++cidx) {
     const std::uint32_t b = start_[cidx], e = start_[cidx + 1];
     if (e - b < static_cast<std::uint32_t>(std::max(1, p_.min_keyframe_points))) continue;  // too few to trust
-    const float ground = check ? local_ground_[cidx] : std::numeric_limits<float>::quiet_NaN();
+    const float local = check ? local_ground_[cidx] : std::numeric_limits<float>::quiet_NaN();
+    const float ground = std::isnan(local) ? patch_ground : local;
+    // A "building" at ground height is paved ground (a flat grey square looks like a roof from above).
+    auto cls_of = [&](const MapPoint& m) -> std::uint8_t {
+      if (m.cls == raw(ClassId::kBuilding) && !std::isnan(ground) && std::fabs(m.z - ground) <= ground_tol) return raw(ClassId::kRoad);
+      return m.cls;
+    };
     auto plausible = [&](const MapPoint& m) {
-      if (std::isnan(ground) || m.cls == 255) return true;
-      return raised(m.cls) ? m.z >= ground + raised_min : std::fabs(m.z - ground) <= ground_tol;
+      const std::uint8_t c = cls_of(m);
+      if (std::isnan(ground) || c == 255) return true;
+      return raised(c) ? m.z >= ground + raised_min : std::fabs(m.z - ground) <= ground_tol;
     };
     // The cell's class: the labelled point nearest the image centre.
     std::uint8_t central = 255;
@@ -196,7 +216,7 @@ void OrthoMap::add_keyframe(std::uint32_t id, const Eigen::Isometry3d& map_from_
       const MapPoint& m = points[order_[k]];
       if (m.cls != 255 && m.cos_axis > central_cos && plausible(m)) {
         central_cos = m.cos_axis;
-        central = m.cls;
+        central = cls_of(m);
       }
     }
     // Class-consistent height: when enough points carry a class of the same kind (raised: tree,
@@ -208,11 +228,11 @@ void OrthoMap::add_keyframe(std::uint32_t id, const Eigen::Isometry3d& map_from_
       const MapPoint& m = points[order_[k]];
       if (!plausible(m)) continue;
       ++kept;
-      same += group && same_kind(m.cls, central) ? 1U : 0U;
+      same += group && same_kind(cls_of(m), central) ? 1U : 0U;
     }
     if (kept < static_cast<std::uint32_t>(std::max(1, p_.min_keyframe_points))) continue;
     const bool use_group = group && same >= static_cast<std::uint32_t>(std::max(1, p_.min_keyframe_points));
-    auto counts = [&](const MapPoint& m) { return plausible(m) && (!use_group || same_kind(m.cls, central)); };
+    auto counts = [&](const MapPoint& m) { return plausible(m) && (!use_group || same_kind(cls_of(m), central)); };
     // Robust height: the median, then the mean of the points within the gate of it (a wrong stereo
     // match lands metres away and must not drag the cell).
     heights_.clear();
@@ -237,7 +257,7 @@ void OrthoMap::add_keyframe(std::uint32_t id, const Eigen::Isometry3d& map_from_
       }
       if (m.cls != 255 && m.cos_axis > a.cls_cos) {
         a.cls_cos = m.cos_axis;
-        a.cls = m.cls;
+        a.cls = cls_of(m);
       }
     }
   }

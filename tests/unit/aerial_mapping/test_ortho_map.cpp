@@ -140,6 +140,29 @@ TEST(OrthoMap, GroundCheckDropsFlatPointsAboveTheGroundAndRaisedPointsOnIt) {
   EXPECT_NEAR(plain.cell_at(3.25, 0.25)->elevation(), 1.0, 1e-4);
 }
 
+TEST(OrthoMap, ABuildingAtGroundHeightIsPavedGroundEvenFarFromAnyFlatPoint) {
+  // A 24 m paved square that ErfNet calls building (a flat grey square looks like a roof from 40 m), in
+  // grass, beside a 6 m roof that is one. The square's middle is 10 m from the nearest flat point,
+  // beyond the 3.5 m window: the keyframe's ground (the median of its flat points) decides there.
+  auto pts = square(0, 0, 20, 0.0, raw(ClassId::kGrass));
+  std::erase_if(pts, [](const MapPoint& m) { return (std::fabs(m.x) < 12 && std::fabs(m.y) < 12) || (m.x > 14 && m.x < 19 && std::fabs(m.y) < 3); });
+  for (const MapPoint& m : square(0, 0, 12, 0.0, raw(ClassId::kBuilding))) pts.push_back(m);
+  auto roof = square(16.5, 0, 2.5, 6.0, raw(ClassId::kBuilding));
+  pts.insert(pts.end(), roof.begin(), roof.end());
+  OrthoMap map;
+  map.add_keyframe(0, nadir_at(0, 0, 40), pts);
+  for (const auto& [x, y] : {std::pair{0.25, 0.25}, std::pair{10.25, -10.25}, std::pair{-11.75, 5.25}}) {
+    const Cell* c = map.cell_at(x, y);
+    ASSERT_NE(c, nullptr) << x << ", " << y;
+    EXPECT_EQ(c->cls, raw(ClassId::kRoad)) << "paved, at " << x << ", " << y;
+    EXPECT_NEAR(c->elevation(), 0.0, 1e-4);
+  }
+  const Cell* r = map.cell_at(16.25, 0.25);
+  ASSERT_NE(r, nullptr);
+  EXPECT_EQ(r->cls, raw(ClassId::kBuilding)) << "a roof above the ground stays a building";
+  EXPECT_NEAR(r->elevation(), 6.0, 1e-4);
+}
+
 TEST(OrthoMap, GroundCheckFollowsASlope) {
   // Grass on a 20 % slope: 1 m rise per 5 m, 0.7 m across the 3.5 m window. Nothing is dropped.
   auto pts = square(0, 0, 4, 0.0, raw(ClassId::kGrass));
