@@ -168,6 +168,241 @@ cv::Mat error_image(const std::vector<Sample>& s, double radius, double conv_t, 
   return img;
 }
 
+// The run: one robot driving the route on the chosen map, with the evaluation's holds and labeller;
+// m.labels says which labeller.
+Result<RunOptions> drive_run_options(const EvalLocalizationOptions& o, const std::string& models, const std::vector<Eigen::Vector2d>& route,
+                                     LocalizationMetrics& m) {
+  RunOptions r;
+  r.world = o.world;
+  r.out_dir = o.out_dir;
+  r.ugvs = 1;
+  r.uav = o.map == UgvMapSource::kOnline;
+  r.seed = o.seed;
+  r.lidar_columns = o.lidar_columns;
+  r.ugv_speed_mps = o.speed_mps;
+  r.survey_overlap = 0.3;  // as eval mapping
+  r.config_dir = models;
+  r.record = o.record ? RecordLevel::kMcap : RecordLevel::kNone;  // recording.mcap, no CSV streams
+  r.threads = o.threads;
+  r.progress = !o.quiet;
+  r.ugv_map = o.map;
+  r.init_error_m = o.init_error_m;
+  r.init_yaw_error_deg = o.init_yaw_error_deg;
+  r.ugv_routes = {route};
+  r.stop_when_routes_done = true;
+  if (o.map == UgvMapSource::kOnline) {
+    r.ugv_wait_map_radius_m = o.wait_map_radius_m;
+    r.ugv_wait_map_fraction = o.wait_map_fraction;
+    r.ugv_wait_map_route_fraction = o.wait_map_route;
+  }
+  if (o.stand_still_s > 0) r.ugv_holds.push_back(UgvHold{0, o.stand_still_at_s, o.stand_still_s});
+  // Turning in place and slowing for corners: about 1.4 x the straight-line time; waiting for the
+  // online map at most a survey's worth.
+  r.duration_s = o.max_duration_s > 0 ? o.max_duration_s
+                                      : 1.5 * m.route_length_m / o.speed_mps + 60.0 + std::max(0.0, o.stand_still_s) +
+                                            (o.map == UgvMapSource::kOnline ? 3600.0 : 0.0);
+  r.ugv_config = o.set;
+  r.oracles = o.oracles;
+  r.compute_time = o.compute_time;
+  r.target_cpu = o.target_cpu;
+  // The shipped labeller (geometric), or the true classes in the labels ablation.
+  m.labels = r.oracle("labels") ? "gt" : "geometric";
+  if (!o.labels.empty()) {
+    if (o.labels != "gt" && o.labels != "geometric") return Error::make(ErrorCode::kInvalidArgument, "--labels must be gt or geometric");
+    if (o.labels == "gt" && !r.oracle("labels"))
+      return Error::make(ErrorCode::kInvalidArgument, "--labels gt needs the scans' true classes, which a LiDAR does not give: name the ablation --oracle labels");
+    r.ugv_config.push_back("localization.labels=" + o.labels);
+    m.labels = o.labels;
+  }
+  r.sample_hz = 10;
+  return r;
+}
+
+// One 10 Hz sample: the truth, the odometry and the published estimate against the truth at its stamp.
+Sample to_sample(const UgvSample& u, double stale_after_s, double radius) {
+  Sample s;
+  s.t_s = to_seconds(u.now);
+  s.released = u.released;
+  s.held = u.held;
+  s.received = u.localization_received;
+  s.truth = u.truth;
+  s.odom = u.odometry_in_map;
+  s.odom_err_m = std::hypot(u.odometry_in_map.x - u.truth.x, u.odometry_in_map.y - u.truth.y);
+  s.distance_m = u.distance_m;
+  if (u.localization_received) {
+    const LocalizationMsg& l = *u.localization;
+    s.status = l.status;
+    s.est = l.pose;
+    s.truth_at_est = u.truth_at_localization;
+    s.est_age_s = to_seconds(u.now - l.stamp);
+    s.err_m = std::hypot(l.pose.x - u.truth_at_localization.x, l.pose.y - u.truth_at_localization.y);
+    s.yaw_err_deg = std::abs(wrap_angle(l.pose.yaw - u.truth_at_localization.yaw)) * 180.0 / kPi;
+    s.spread_m = l.spread_m;
+    s.particles = l.particles;
+    s.good = l.status == LocalizationStatus::kTracking && s.est_age_s <= stale_after_s && s.err_m <= radius;
+  }
+  return s;
+}
+
+struct DriveScore {
+  bool scored_any{false};    // some sample was good: the errors are scored from the first of them
+  double converged_t{-1};    // [s] simulated time of convergence; -1: not converged
+};
+
+// Scoring over the samples after the start of driving, into m.
+DriveScore score_drive(const std::vector<Sample>& samples, const EvalLocalizationOptions& o, LocalizationMetrics& m) {
+  std::vector<const Sample*> drive;
+  for (const auto& s : samples)
+    if (s.released) drive.push_back(&s);
+  m.samples = drive.size();
+  for (const auto& s : samples) m.localization_published = m.localization_published || s.received;
+  std::size_t conv = drive.size();
+  while (conv > 0 && drive[conv - 1]->good) --conv;
+  std::uint64_t good = 0;
+  bool seen_good = false, prev_good = false;
+  for (const Sample* s : drive) {
+    if (s->good) {
+      ++good;
+      if (!seen_good) m.first_tracking_s = s->t_s - m.released_s;
+      seen_good = true;
+    } else if (prev_good) {
+      ++m.divergences;
+    }
+    prev_good = s->good;
+  }
+  m.good_fraction = drive.empty() ? 0.0 : static_cast<double>(good) / static_cast<double>(drive.size());
+  m.converged = conv < drive.size();
+  // Errors over every sample from the first good one on (a stale estimate counts as not tracking).
+  std::vector<LocErrorSample> loc;
+  for (const Sample* s : drive)
+    loc.push_back(LocErrorSample{s->received, s->received && s->status == LocalizationStatus::kTracking && s->est_age_s <= o.stale_after_s, s->err_m});
+  LocErrorScore score(o.convergence_radius_m);
+  const std::size_t first = score.add_robot(loc);
+  m.loc = score.stats();
+  m.tracking_fraction = m.loc.tracking_fraction;
+  m.within_fraction = m.loc.within_fraction;
+  const bool scored_any = first < drive.size();
+  double yaw_sum = 0, odom_sum = 0, conv_sum = 0;
+  std::size_t yaw_n = 0;
+  const std::size_t from = scored_any ? first : 0;
+  for (std::size_t i = from; i < drive.size(); ++i) {
+    odom_sum += drive[i]->odom_err_m;
+    if (scored_any && drive[i]->received) {
+      yaw_sum += drive[i]->yaw_err_deg;
+      ++yaw_n;
+    }
+    if (m.converged && i >= conv) conv_sum += drive[i]->err_m;
+  }
+  const std::size_t scored = drive.size() - from;
+  m.samples_scored = scored_any ? scored : 0;
+  m.odom_only_error_mean_m = scored ? odom_sum / static_cast<double>(scored) : 0.0;
+  m.odom_only_error_final_m = drive.empty() ? 0.0 : drive.back()->odom_err_m;
+  if (scored_any) {
+    m.loc_error_mean_m = m.loc.mean_m;
+    m.loc_error_p95_m = m.loc.p95_m;
+    m.loc_error_max_m = m.loc.max_m;
+    m.yaw_error_mean_deg = yaw_n ? yaw_sum / static_cast<double>(yaw_n) : -1;
+  }
+  if (m.converged) {
+    m.convergence_time_s = drive[conv]->t_s - m.released_s;
+    m.convergence_distance_m = drive[conv]->distance_m;
+    m.converged_error_mean_m = conv_sum / static_cast<double>(drive.size() - conv);
+  }
+  return DriveScore{scored_any, m.converged ? drive[conv]->t_s : -1};
+}
+
+Status write_samples_csv(const fs::path& out, const std::vector<Sample>& samples) {
+  std::ofstream c(out / "samples.csv");
+  c << "t_s,released,held,received,status,good,truth_x_m,truth_y_m,truth_yaw_rad,est_x_m,est_y_m,est_yaw_rad,est_age_s,"
+       "err_m,yaw_err_deg,odom_x_m,odom_y_m,odom_yaw_rad,odom_err_m,spread_m,particles,distance_m\n";
+  char line[512];
+  for (const auto& s : samples) {
+    std::snprintf(line, sizeof line, "%.2f,%d,%d,%d,%s,%d,%.3f,%.3f,%.4f,%.3f,%.3f,%.4f,%.3f,%.3f,%.3f,%.3f,%.3f,%.4f,%.3f,%.3f,%u,%.2f\n",
+                  s.t_s, s.released ? 1 : 0, s.held ? 1 : 0, s.received ? 1 : 0, s.received ? status_name(s.status) : "none",
+                  s.good ? 1 : 0, s.truth.x, s.truth.y, s.truth.yaw, s.est.x, s.est.y, s.est.yaw, s.est_age_s, s.err_m,
+                  s.yaw_err_deg, s.odom.x, s.odom.y, s.odom.yaw, s.odom_err_m, s.spread_m, s.particles, s.distance_m);
+    c << line;
+  }
+  if (!c) return Error::make(ErrorCode::kIo, "cannot write " + (out / "samples.csv").string());
+  return ok_status();
+}
+
+const char* map_name(UgvMapSource map) noexcept {
+  return map == UgvMapSource::kOnline ? "online" : (map == UgvMapSource::kGroundTruth ? "gt" : "none");
+}
+
+// metrics.json; false when it could not be written.
+bool write_localization_metrics(const fs::path& out, const EvalLocalizationOptions& o, const RunOptions& r, const LocalizationMetrics& m,
+                                bool scored_any) {
+  std::ofstream j(out / "metrics.json");
+  j << "{\n  \"converged\": " << (m.converged ? "true" : "false")
+    << ",\n  \"convergence_time_s\": " << (m.converged ? num(m.convergence_time_s) : "null")
+    << ",\n  \"convergence_distance_m\": " << (m.converged ? num(m.convergence_distance_m) : "null")
+    << ",\n  \"loc_error_mean_m\": " << (scored_any ? num(m.loc_error_mean_m) : "null")
+    << ",\n  \"loc_error_p95_m\": " << (scored_any ? num(m.loc_error_p95_m) : "null")
+    << ",\n  \"loc_error_max_m\": " << (scored_any ? num(m.loc_error_max_m) : "null")
+    << ",\n  \"loc_error_tracking_mean_m\": " << (m.loc.tracking_mean_m >= 0 ? num(m.loc.tracking_mean_m) : "null")
+    << ",\n  \"loc_error_tracking_p95_m\": " << (m.loc.tracking_p95_m >= 0 ? num(m.loc.tracking_p95_m) : "null")
+    << ",\n  \"loc_error_tracking_max_m\": " << (m.loc.tracking_max_m >= 0 ? num(m.loc.tracking_max_m) : "null")
+    << ",\n  \"within_3m_fraction\": " << num(m.within_fraction)
+    << ",\n  \"converged_error_mean_m\": " << (m.converged ? num(m.converged_error_mean_m) : "null")
+    << ",\n  \"yaw_error_mean_deg\": " << (scored_any && m.yaw_error_mean_deg >= 0 ? num(m.yaw_error_mean_deg) : "null")
+    << ",\n  \"odom_only_error_mean_m\": " << num(m.odom_only_error_mean_m)
+    << ",\n  \"odom_only_error_final_m\": " << num(m.odom_only_error_final_m)
+    << ",\n  \"localization_published\": " << (m.localization_published ? "true" : "false")
+    << ",\n  \"first_tracking_s\": " << (m.first_tracking_s >= 0 ? num(m.first_tracking_s) : "null")
+    << ",\n  \"divergences\": " << m.divergences << ",\n  \"tracking_fraction\": " << num(m.tracking_fraction)
+    << ",\n  \"good_fraction\": " << num(m.good_fraction) << ",\n  \"scoring\": \"strict\""
+    << ",\n  \"samples\": " << m.samples << ",\n  \"samples_scored\": " << m.samples_scored
+    << ",\n  \"route_length_m\": " << num(m.route_length_m) << ",\n  \"distance_m\": " << num(m.distance_m)
+    << ",\n  \"released_s\": " << num(m.released_s) << ",\n  \"tiles_published\": " << m.tiles_published
+    << ",\n  \"scans_published\": " << m.scans_published << ",\n  \"sim_s\": " << num(m.sim_s) << ",\n  \"wall_s\": " << num(m.wall_s)
+    << ",\n  \"oracles\": " << r.oracles_json() << ",\n  \"config\": {\"world\": \"" << o.world << "\", \"seed\": " << o.seed << ", \"map\": \"" << map_name(o.map)
+    << "\", \"init_error_m\": " << num(o.init_error_m) << ", \"init_yaw_error_deg\": " << num(o.init_yaw_error_deg)
+    << ", \"route_km\": " << num(o.route_km) << ", \"labels\": \"" << m.labels << "\", \"convergence_radius_m\": " << num(o.convergence_radius_m)
+    << ", \"stand_still_s\": " << num(o.stand_still_s) << ", \"stand_still_at_s\": " << num(o.stand_still_at_s)
+    << ", \"yaw_drift_at_rest_rad_per_s\": " << num(o.yaw_drift_at_rest_set ? o.yaw_drift_at_rest : 0.0) << "}\n}\n";
+  return static_cast<bool>(j);
+}
+
+// report.md: the runner wrote its own; the evaluation's replaces it. False when it could not be written.
+bool write_localization_report(const fs::path& out, const EvalLocalizationOptions& o, const RunOptions& r, const LocalizationMetrics& m,
+                               bool scored_any) {
+  const double radius = o.convergence_radius_m;
+  std::ofstream md(out / "report.md");
+  md << "# Localization evaluation\n\n" << r.oracles_line() << "\n\nWorld `" << o.world << "`, seed " << o.seed << ", map `" << map_name(o.map) << "`, labels `" << m.labels
+     << "`, initial guess off by " << o.init_error_m << " m and " << o.init_yaw_error_deg << " deg. Route " << num(m.route_length_m)
+     << " m over the roads (driven " << num(m.distance_m) << " m); " << num(m.sim_s) << " s simulated in " << num(m.wall_s) << " s.\n\n";
+  if (!m.localization_published)
+    md << "**The robot never published on its `localization` channel** (no localization stage in its role table): not converged.\n\n";
+  md << "| metric | value | goal |\n|---|---|---|\n"
+     << "| converged | " << (m.converged ? "yes" : "no") << " | yes |\n"
+     << "| convergence_time_s (driving) | " << (m.converged ? num(m.convergence_time_s) : "-") << " | <= 60 |\n"
+     << "| loc_error_mean_m | " << (scored_any ? num(m.loc_error_mean_m) : "-") << " | <= 1.5 |\n"
+     << "| loc_error_p95_m | " << (scored_any ? num(m.loc_error_p95_m) : "-") << " | <= 3.0 |\n"
+     << "| loc_error_max_m | " << (scored_any ? num(m.loc_error_max_m) : "-") << " | |\n"
+     << "| tracking only: mean / p95 / max [m] | " << (m.loc.tracking_mean_m >= 0 ? num(m.loc.tracking_mean_m) + " / " + num(m.loc.tracking_p95_m) + " / " + num(m.loc.tracking_max_m) : "-") << " | |\n"
+     << "| within_3m_fraction (within " << num(radius) << " m) | " << num(m.within_fraction) << " | |\n"
+     << "| error mean from convergence on (old figure) | " << (m.converged ? num(m.converged_error_mean_m) : "-") << " | |\n"
+     << "| yaw_error_mean_deg | " << (scored_any && m.yaw_error_mean_deg >= 0 ? num(m.yaw_error_mean_deg) : "-") << " | <= 2 |\n"
+     << "| odom_only_error_mean_m | " << num(m.odom_only_error_mean_m) << " | (reference) |\n"
+     << "| divergences after the first good sample | " << m.divergences << " | 0 |\n"
+     << "| tracking_fraction | " << num(m.tracking_fraction) << " | |\n"
+     << "| good_fraction (of all samples while driving) | " << num(m.good_fraction) << " | |\n\n"
+     << "![trajectory](trajectory.png)\n\n![error](error.png)\n\n"
+     << "Definitions. Samples at 10 Hz after the robot began to drive";
+  if (o.map == UgvMapSource::kOnline) md << " (it waited at its start until the quadrotor's map knew " << o.wait_map_fraction * 100 << " % of the cells within " << o.wait_map_radius_m << " m; released at " << num(m.released_s) << " s)";
+  md << ". A sample is *good* when the `localization` channel was published, its status is tracking, its stamp is at most "
+     << o.stale_after_s << " s old and its position is within " << num(radius) << " m of the true pose at that stamp. "
+     << "*Converged*: some sample is good and every later one is too; convergence_time_s is the driving time to the first of them. "
+     << "The errors are over every sample from the first good one on, good or not (an excursion counts; it does not restart "
+     << "them): position error mean, 95th percentile (nearest rank) and max, mean absolute yaw error; the tracking-only figures "
+     << "over the tracking, fresh samples among them; tracking_fraction and within_3m_fraction are shares of the same samples. "
+     << "odom_only_error_mean_m: the wheel odometry put into the map frame with the true start pose, over "
+     << "the same samples (all samples after the start when none is good). Per-sample values: `samples.csv`.\n";
+  return static_cast<bool>(md);
+}
+
 }  // namespace
 
 double polyline_length(const std::vector<Eigen::Vector2d>& path) noexcept {
@@ -242,78 +477,16 @@ Result<LocalizationMetrics> eval_localization(const EvalLocalizationOptions& o, 
   if (!route) return route.error();
   LocalizationMetrics m;
   m.route_length_m = polyline_length(route.value());
-
-  RunOptions r;
-  r.world = o.world;
-  r.out_dir = o.out_dir;
-  r.ugvs = 1;
-  r.uav = o.map == UgvMapSource::kOnline;
-  r.seed = o.seed;
-  r.lidar_columns = o.lidar_columns;
-  r.ugv_speed_mps = o.speed_mps;
-  r.survey_overlap = 0.3;  // as eval mapping
-  r.config_dir = models.value();
-  r.record = o.record ? RecordLevel::kMcap : RecordLevel::kNone;  // recording.mcap, no CSV streams
-  r.threads = o.threads;
-  r.progress = !o.quiet;
-  r.ugv_map = o.map;
-  r.init_error_m = o.init_error_m;
-  r.init_yaw_error_deg = o.init_yaw_error_deg;
-  r.ugv_routes = {route.value()};
-  r.stop_when_routes_done = true;
-  if (o.map == UgvMapSource::kOnline) {
-    r.ugv_wait_map_radius_m = o.wait_map_radius_m;
-    r.ugv_wait_map_fraction = o.wait_map_fraction;
-    r.ugv_wait_map_route_fraction = o.wait_map_route;
-  }
-  if (o.stand_still_s > 0) r.ugv_holds.push_back(UgvHold{0, o.stand_still_at_s, o.stand_still_s});
-  // Turning in place and slowing for corners: about 1.4 x the straight-line time; waiting for the
-  // online map at most a survey's worth.
-  r.duration_s = o.max_duration_s > 0 ? o.max_duration_s
-                                      : 1.5 * m.route_length_m / o.speed_mps + 60.0 + std::max(0.0, o.stand_still_s) +
-                                            (o.map == UgvMapSource::kOnline ? 3600.0 : 0.0);
-  r.ugv_config = o.set;
-  r.oracles = o.oracles;
-  r.compute_time = o.compute_time;
-  r.target_cpu = o.target_cpu;
-  // The shipped labeller (geometric), or the true classes in the labels ablation.
-  m.labels = r.oracle("labels") ? "gt" : "geometric";
-  if (!o.labels.empty()) {
-    if (o.labels != "gt" && o.labels != "geometric") return Error::make(ErrorCode::kInvalidArgument, "--labels must be gt or geometric");
-    if (o.labels == "gt" && !r.oracle("labels"))
-      return Error::make(ErrorCode::kInvalidArgument, "--labels gt needs the scans' true classes, which a LiDAR does not give: name the ablation --oracle labels");
-    r.ugv_config.push_back("localization.labels=" + o.labels);
-    m.labels = o.labels;
-  }
+  auto run_options = drive_run_options(o, models.value(), route.value(), m);
+  if (!run_options) return run_options.error();
+  RunOptions& r = run_options.value();
 
   std::vector<Sample> samples;
   samples.reserve(static_cast<std::size_t>(r.duration_s * 10.0) + 16);
-  const double radius = o.convergence_radius_m;
   Sample last;
   Pose2 guess;
-  r.sample_hz = 10;
   r.sample = [&](const UgvSample& u) {
-    Sample s;
-    s.t_s = to_seconds(u.now);
-    s.released = u.released;
-    s.held = u.held;
-    s.received = u.localization_received;
-    s.truth = u.truth;
-    s.odom = u.odometry_in_map;
-    s.odom_err_m = std::hypot(u.odometry_in_map.x - u.truth.x, u.odometry_in_map.y - u.truth.y);
-    s.distance_m = u.distance_m;
-    if (u.localization_received) {
-      const LocalizationMsg& l = *u.localization;
-      s.status = l.status;
-      s.est = l.pose;
-      s.truth_at_est = u.truth_at_localization;
-      s.est_age_s = to_seconds(u.now - l.stamp);
-      s.err_m = std::hypot(l.pose.x - u.truth_at_localization.x, l.pose.y - u.truth_at_localization.y);
-      s.yaw_err_deg = std::abs(wrap_angle(l.pose.yaw - u.truth_at_localization.yaw)) * 180.0 / kPi;
-      s.spread_m = l.spread_m;
-      s.particles = l.particles;
-      s.good = l.status == LocalizationStatus::kTracking && s.est_age_s <= o.stale_after_s && s.err_m <= radius;
-    }
+    const Sample s = to_sample(u, o.stale_after_s, o.convergence_radius_m);
     if (samples.empty()) guess = u.initial_guess;
     samples.push_back(s);
     last = s;
@@ -342,149 +515,17 @@ Result<LocalizationMetrics> eval_localization(const EvalLocalizationOptions& o, 
     m.scans_published = sum.ugvs.front().scans_published;
     m.released_s = sum.ugvs.front().released_s;
   }
-
-  // Scoring over the samples after the start of driving.
-  std::vector<const Sample*> drive;
-  for (const auto& s : samples)
-    if (s.released) drive.push_back(&s);
-  m.samples = drive.size();
-  for (const auto& s : samples) m.localization_published = m.localization_published || s.received;
-  std::size_t conv = drive.size();
-  while (conv > 0 && drive[conv - 1]->good) --conv;
-  std::uint64_t good = 0;
-  bool seen_good = false, prev_good = false;
-  for (const Sample* s : drive) {
-    if (s->good) {
-      ++good;
-      if (!seen_good) m.first_tracking_s = s->t_s - m.released_s;
-      seen_good = true;
-    } else if (prev_good) {
-      ++m.divergences;
-    }
-    prev_good = s->good;
-  }
-  m.good_fraction = drive.empty() ? 0.0 : static_cast<double>(good) / static_cast<double>(drive.size());
-  m.converged = conv < drive.size();
-  // Errors over every sample from the first good one on (a stale estimate counts as not tracking).
-  std::vector<LocErrorSample> loc;
-  for (const Sample* s : drive)
-    loc.push_back(LocErrorSample{s->received, s->received && s->status == LocalizationStatus::kTracking && s->est_age_s <= o.stale_after_s, s->err_m});
-  LocErrorScore score(radius);
-  const std::size_t first = score.add_robot(loc);
-  m.loc = score.stats();
-  m.tracking_fraction = m.loc.tracking_fraction;
-  m.within_fraction = m.loc.within_fraction;
-  const bool scored_any = first < drive.size();
-  double yaw_sum = 0, odom_sum = 0, conv_sum = 0;
-  std::size_t yaw_n = 0;
-  const std::size_t from = scored_any ? first : 0;
-  for (std::size_t i = from; i < drive.size(); ++i) {
-    odom_sum += drive[i]->odom_err_m;
-    if (scored_any && drive[i]->received) {
-      yaw_sum += drive[i]->yaw_err_deg;
-      ++yaw_n;
-    }
-    if (m.converged && i >= conv) conv_sum += drive[i]->err_m;
-  }
-  const std::size_t scored = drive.size() - from;
-  m.samples_scored = scored_any ? scored : 0;
-  m.odom_only_error_mean_m = scored ? odom_sum / static_cast<double>(scored) : 0.0;
-  m.odom_only_error_final_m = drive.empty() ? 0.0 : drive.back()->odom_err_m;
-  if (scored_any) {
-    m.loc_error_mean_m = m.loc.mean_m;
-    m.loc_error_p95_m = m.loc.p95_m;
-    m.loc_error_max_m = m.loc.max_m;
-    m.yaw_error_mean_deg = yaw_n ? yaw_sum / static_cast<double>(yaw_n) : -1;
-  }
-  if (m.converged) {
-    m.convergence_time_s = drive[conv]->t_s - m.released_s;
-    m.convergence_distance_m = drive[conv]->distance_m;
-    m.converged_error_mean_m = conv_sum / static_cast<double>(drive.size() - conv);
-  }
+  const DriveScore score = score_drive(samples, o, m);
 
   // Files.
   const fs::path out(o.out_dir);
-  {
-    std::ofstream c(out / "samples.csv");
-    c << "t_s,released,held,received,status,good,truth_x_m,truth_y_m,truth_yaw_rad,est_x_m,est_y_m,est_yaw_rad,est_age_s,"
-         "err_m,yaw_err_deg,odom_x_m,odom_y_m,odom_yaw_rad,odom_err_m,spread_m,particles,distance_m\n";
-    char line[512];
-    for (const auto& s : samples) {
-      std::snprintf(line, sizeof line, "%.2f,%d,%d,%d,%s,%d,%.3f,%.3f,%.4f,%.3f,%.3f,%.4f,%.3f,%.3f,%.3f,%.3f,%.3f,%.4f,%.3f,%.3f,%u,%.2f\n",
-                    s.t_s, s.released ? 1 : 0, s.held ? 1 : 0, s.received ? 1 : 0, s.received ? status_name(s.status) : "none",
-                    s.good ? 1 : 0, s.truth.x, s.truth.y, s.truth.yaw, s.est.x, s.est.y, s.est.yaw, s.est_age_s, s.err_m,
-                    s.yaw_err_deg, s.odom.x, s.odom.y, s.odom.yaw, s.odom_err_m, s.spread_m, s.particles, s.distance_m);
-      c << line;
-    }
-    if (!c) return Error::make(ErrorCode::kIo, "cannot write " + (out / "samples.csv").string());
-  }
-  const double conv_t = m.converged ? drive[conv]->t_s : -1;
+  if (auto st = write_samples_csv(out, samples); !st) return st.error();
   const bool img_ok = cv::imwrite((out / "trajectory.png").string(), trajectory_image(w, samples, route.value(), samples.empty() ? nullptr : &guess)) &&
-                      cv::imwrite((out / "error.png").string(), error_image(samples, radius, conv_t, m.released_s));
+                      cv::imwrite((out / "error.png").string(), error_image(samples, o.convergence_radius_m, score.converged_t, m.released_s));
   if (!img_ok) return Error::make(ErrorCode::kIo, "cannot write the plots in " + o.out_dir);
-
-  const char* map_name = o.map == UgvMapSource::kOnline ? "online" : (o.map == UgvMapSource::kGroundTruth ? "gt" : "none");
-  std::ofstream j(out / "metrics.json");
-  j << "{\n  \"converged\": " << (m.converged ? "true" : "false")
-    << ",\n  \"convergence_time_s\": " << (m.converged ? num(m.convergence_time_s) : "null")
-    << ",\n  \"convergence_distance_m\": " << (m.converged ? num(m.convergence_distance_m) : "null")
-    << ",\n  \"loc_error_mean_m\": " << (scored_any ? num(m.loc_error_mean_m) : "null")
-    << ",\n  \"loc_error_p95_m\": " << (scored_any ? num(m.loc_error_p95_m) : "null")
-    << ",\n  \"loc_error_max_m\": " << (scored_any ? num(m.loc_error_max_m) : "null")
-    << ",\n  \"loc_error_tracking_mean_m\": " << (m.loc.tracking_mean_m >= 0 ? num(m.loc.tracking_mean_m) : "null")
-    << ",\n  \"loc_error_tracking_p95_m\": " << (m.loc.tracking_p95_m >= 0 ? num(m.loc.tracking_p95_m) : "null")
-    << ",\n  \"loc_error_tracking_max_m\": " << (m.loc.tracking_max_m >= 0 ? num(m.loc.tracking_max_m) : "null")
-    << ",\n  \"within_3m_fraction\": " << num(m.within_fraction)
-    << ",\n  \"converged_error_mean_m\": " << (m.converged ? num(m.converged_error_mean_m) : "null")
-    << ",\n  \"yaw_error_mean_deg\": " << (scored_any && m.yaw_error_mean_deg >= 0 ? num(m.yaw_error_mean_deg) : "null")
-    << ",\n  \"odom_only_error_mean_m\": " << num(m.odom_only_error_mean_m)
-    << ",\n  \"odom_only_error_final_m\": " << num(m.odom_only_error_final_m)
-    << ",\n  \"localization_published\": " << (m.localization_published ? "true" : "false")
-    << ",\n  \"first_tracking_s\": " << (m.first_tracking_s >= 0 ? num(m.first_tracking_s) : "null")
-    << ",\n  \"divergences\": " << m.divergences << ",\n  \"tracking_fraction\": " << num(m.tracking_fraction)
-    << ",\n  \"good_fraction\": " << num(m.good_fraction) << ",\n  \"scoring\": \"strict\""
-    << ",\n  \"samples\": " << m.samples << ",\n  \"samples_scored\": " << m.samples_scored
-    << ",\n  \"route_length_m\": " << num(m.route_length_m) << ",\n  \"distance_m\": " << num(m.distance_m)
-    << ",\n  \"released_s\": " << num(m.released_s) << ",\n  \"tiles_published\": " << m.tiles_published
-    << ",\n  \"scans_published\": " << m.scans_published << ",\n  \"sim_s\": " << num(m.sim_s) << ",\n  \"wall_s\": " << num(m.wall_s)
-    << ",\n  \"oracles\": " << r.oracles_json() << ",\n  \"config\": {\"world\": \"" << o.world << "\", \"seed\": " << o.seed << ", \"map\": \"" << map_name
-    << "\", \"init_error_m\": " << num(o.init_error_m) << ", \"init_yaw_error_deg\": " << num(o.init_yaw_error_deg)
-    << ", \"route_km\": " << num(o.route_km) << ", \"labels\": \"" << m.labels << "\", \"convergence_radius_m\": " << num(radius)
-    << ", \"stand_still_s\": " << num(o.stand_still_s) << ", \"stand_still_at_s\": " << num(o.stand_still_at_s)
-    << ", \"yaw_drift_at_rest_rad_per_s\": " << num(o.yaw_drift_at_rest_set ? o.yaw_drift_at_rest : 0.0) << "}\n}\n";
-  // report.md: the runner wrote its own; the evaluation's replaces it.
-  std::ofstream md(out / "report.md");
-  md << "# Localization evaluation\n\n" << r.oracles_line() << "\n\nWorld `" << o.world << "`, seed " << o.seed << ", map `" << map_name << "`, labels `" << m.labels
-     << "`, initial guess off by " << o.init_error_m << " m and " << o.init_yaw_error_deg << " deg. Route " << num(m.route_length_m)
-     << " m over the roads (driven " << num(m.distance_m) << " m); " << num(m.sim_s) << " s simulated in " << num(m.wall_s) << " s.\n\n";
-  if (!m.localization_published)
-    md << "**The robot never published on its `localization` channel** (no localization stage in its role table): not converged.\n\n";
-  md << "| metric | value | goal |\n|---|---|---|\n"
-     << "| converged | " << (m.converged ? "yes" : "no") << " | yes |\n"
-     << "| convergence_time_s (driving) | " << (m.converged ? num(m.convergence_time_s) : "-") << " | <= 60 |\n"
-     << "| loc_error_mean_m | " << (scored_any ? num(m.loc_error_mean_m) : "-") << " | <= 1.5 |\n"
-     << "| loc_error_p95_m | " << (scored_any ? num(m.loc_error_p95_m) : "-") << " | <= 3.0 |\n"
-     << "| loc_error_max_m | " << (scored_any ? num(m.loc_error_max_m) : "-") << " | |\n"
-     << "| tracking only: mean / p95 / max [m] | " << (m.loc.tracking_mean_m >= 0 ? num(m.loc.tracking_mean_m) + " / " + num(m.loc.tracking_p95_m) + " / " + num(m.loc.tracking_max_m) : "-") << " | |\n"
-     << "| within_3m_fraction (within " << num(radius) << " m) | " << num(m.within_fraction) << " | |\n"
-     << "| error mean from convergence on (old figure) | " << (m.converged ? num(m.converged_error_mean_m) : "-") << " | |\n"
-     << "| yaw_error_mean_deg | " << (scored_any && m.yaw_error_mean_deg >= 0 ? num(m.yaw_error_mean_deg) : "-") << " | <= 2 |\n"
-     << "| odom_only_error_mean_m | " << num(m.odom_only_error_mean_m) << " | (reference) |\n"
-     << "| divergences after the first good sample | " << m.divergences << " | 0 |\n"
-     << "| tracking_fraction | " << num(m.tracking_fraction) << " | |\n"
-     << "| good_fraction (of all samples while driving) | " << num(m.good_fraction) << " | |\n\n"
-     << "![trajectory](trajectory.png)\n\n![error](error.png)\n\n"
-     << "Definitions. Samples at 10 Hz after the robot began to drive";
-  if (o.map == UgvMapSource::kOnline) md << " (it waited at its start until the quadrotor's map knew " << o.wait_map_fraction * 100 << " % of the cells within " << o.wait_map_radius_m << " m; released at " << num(m.released_s) << " s)";
-  md << ". A sample is *good* when the `localization` channel was published, its status is tracking, its stamp is at most "
-     << o.stale_after_s << " s old and its position is within " << num(radius) << " m of the true pose at that stamp. "
-     << "*Converged*: some sample is good and every later one is too; convergence_time_s is the driving time to the first of them. "
-     << "The errors are over every sample from the first good one on, good or not (an excursion counts; it does not restart "
-     << "them): position error mean, 95th percentile (nearest rank) and max, mean absolute yaw error; the tracking-only figures "
-     << "over the tracking, fresh samples among them; tracking_fraction and within_3m_fraction are shares of the same samples. "
-     << "odom_only_error_mean_m: the wheel odometry put into the map frame with the true start pose, over "
-     << "the same samples (all samples after the start when none is good). Per-sample values: `samples.csv`.\n";
-  if (!j || !md) return Error::make(ErrorCode::kIo, "cannot write metrics.json / report.md in " + o.out_dir);
+  const bool metrics_ok = write_localization_metrics(out, o, r, m, score.scored_any);
+  const bool report_ok = write_localization_report(out, o, r, m, score.scored_any);
+  if (!metrics_ok || !report_ok) return Error::make(ErrorCode::kIo, "cannot write metrics.json / report.md in " + o.out_dir);
   return m;
 }
 

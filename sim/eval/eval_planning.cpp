@@ -8,6 +8,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <memory>
+#include <span>
 
 #include "airground/core/messages.hpp"
 #include "airground/planning/drive_control.hpp"
@@ -72,31 +74,27 @@ std::string json_escape(const std::string& s) {
   return o;
 }
 
-}  // namespace
+// The planner's and the drive controller's parameters: the ugv role's sections with the overrides, the
+// drive's held to the simulated robot.
+struct PlannerParams {
+  plan::RoadmapParams rp;
+  plan::DriveParams dp;
+};
 
-Result<PlanningMetrics> eval_planning(const EvalPlanningOptions& o, const std::function<void(const PlanningProgress&)>& progress) {
-  auto world_r = resolve_world(o.world);
-  if (!world_r) return world_r.error();
-  const World& world = *world_r.value();
-  std::error_code ec;
-  fs::create_directories(o.out_dir, ec);
-  if (ec) return Error::make(ErrorCode::kIo, "cannot create " + o.out_dir + ": " + ec.message());
-
-  // The planner's and the drive controller's parameters: the ugv role's sections with the overrides.
+Result<PlannerParams> planner_params(const EvalPlanningOptions& o, const DiffDriveConfig& dd) {
   static constexpr ParamSection kSections[] = {{"planner", plan::PlannerStage::kParams, ""}, {"drive", plan::DriveStage::kParams, ""}};
   Config cfg = Config::defaults(kSections);
   for (const std::string& s : o.set)
     if (Status st = cfg.set(s, "--set"); !st) return st.error();
-  const plan::RoadmapParams rp = plan::load_roadmap_params(SectionView(cfg, "planner"), kMapResolutionM, kTileCells);
-  plan::DriveParams dp = plan::load_drive_params(SectionView(cfg, "drive"));
-  const DiffDriveConfig dd;  // the simulated robot (Jackal class)
-  dp.track_m = dd.track_width_m;
-  dp.max_speed_mps = std::min(dp.max_speed_mps, o.speed_mps);
-  dp.max_wheel_speed_mps = std::min(dp.max_wheel_speed_mps, dd.max_wheel_speed_rad_s * dd.wheel_radius_m);
+  PlannerParams p{plan::load_roadmap_params(SectionView(cfg, "planner"), kMapResolutionM, kTileCells), plan::load_drive_params(SectionView(cfg, "drive"))};
+  p.dp.track_m = dd.track_width_m;
+  p.dp.max_speed_mps = std::min(p.dp.max_speed_mps, o.speed_mps);
+  p.dp.max_wheel_speed_mps = std::min(p.dp.max_wheel_speed_mps, dd.max_wheel_speed_rad_s * dd.wheel_radius_m);
+  return p;
+}
 
-  if (progress) progress({0, o.pairs, "building the roadmap"});
-  const MapRaster m = resample(world);
-  plan::Roadmap rm(rp, ClassTable::builtin(), plan::MapExtent{m.tx0, m.ty0, m.tiles_x, m.tiles_y});
+// Every tile of the resampled class map into the roadmap.
+void set_tiles(plan::Roadmap& rm, const MapRaster& m) {
   std::vector<std::uint8_t> tile(kTileCellCount);
   for (std::int32_t ty = 0; ty < m.tiles_y; ++ty)
     for (std::int32_t tx = 0; tx < m.tiles_x; ++tx) {
@@ -106,19 +104,16 @@ Result<PlanningMetrics> eval_planning(const EvalPlanningOptions& o, const std::f
               m.cls[static_cast<std::size_t>(ty * kTileCells + r) * static_cast<std::size_t>(m.w) + static_cast<std::size_t>(tx * kTileCells + c)];
       (void)rm.set_tile(m.tx0 + tx, m.ty0 + ty, 1, tile);
     }
-  double t0 = cpu_ms();
-  rm.rebuild();
-  PlanningMetrics out;
-  out.build_ms = cpu_ms() - t0;
-  out.nodes = rm.stats().nodes;
-  out.edges = rm.stats().edges;
-  out.min_clearance_m = rp.min_clearance_m;
-  const plan::GridReference ref(m.cls, m.w, m.h, kMapResolutionM, m.ox, m.oy, ClassTable::builtin(), rp.max_level, rp.min_clearance_m);
-  const auto& comp = ref.components();
+}
 
-  // Random reachable pairs (seeded): cells that keep the clearance, in the same grid component, apart.
+using PointPair = std::pair<plan::Point2, plan::Point2>;
+
+// Random reachable pairs (seeded): cells that keep the clearance, in the same grid component, apart.
+Result<std::vector<PointPair>> draw_pairs(const EvalPlanningOptions& o, const World& world, const MapRaster& m, const plan::GridReference& ref,
+                                          const DiffDriveConfig& dd) {
+  const auto& comp = ref.components();
   Rng rng(o.seed * 0x9E3779B97F4A7C15ULL + 17);
-  std::vector<std::pair<plan::Point2, plan::Point2>> pairs;
+  std::vector<PointPair> pairs;
   for (int guard = 0; static_cast<int>(pairs.size()) < o.pairs && guard < 200000; ++guard) {
     const auto ac = static_cast<std::int32_t>(rng.uniform() * m.w), ar = static_cast<std::int32_t>(rng.uniform() * m.h);
     const auto bc = static_cast<std::int32_t>(rng.uniform() * m.w), br = static_cast<std::int32_t>(rng.uniform() * m.h);
@@ -138,134 +133,137 @@ Result<PlanningMetrics> eval_planning(const EvalPlanningOptions& o, const std::f
   if (static_cast<int>(pairs.size()) < o.pairs)
     return Error::make(ErrorCode::kInvalidArgument, "world '" + o.world + "' has only " + std::to_string(pairs.size()) + " reachable pairs " +
                                                         std::to_string(static_cast<int>(o.min_pair_distance_m)) + " m apart");
+  return pairs;
+}
 
-  auto path = std::make_unique<plan::PlannedPath>();
-  double ratio_sum = 0, clear_sum = 0, q_sum = 0;
-  out.min_clearance_ratio_min = 1e9;
-  for (std::size_t k = 0; k < pairs.size(); ++k) {
-    if (progress) progress({static_cast<int>(k + 1), o.pairs, "planning and driving"});
-    const auto [a, b] = pairs[k];
-    PlanningPairResult res;
-    res.sx = a.x;
-    res.sy = a.y;
-    res.gx = b.x;
-    res.gy = b.y;
-    t0 = cpu_ms();
-    rm.plan(a, b, *path);
-    res.query_ms = cpu_ms() - t0;
-    q_sum += res.query_ms;
-    out.query_ms_max = std::max(out.query_ms_max, res.query_ms);
-    res.status = plan::to_string(path->status);
-    res.grid_length_m = ref.shortest_m(a, b);
-    res.planned = path->status == plan::PlanStatus::kOk;
-    if (res.planned) {
-      const plan::PathCheck pc = ref.check(std::span<const plan::Point2>(path->points.data(), path->count));
-      res.length_m = path->length_m;
-      res.ratio = res.grid_length_m > 0 ? path->length_m / res.grid_length_m : 0;
-      res.min_clearance_m = pc.min_clearance_m;
-      res.through_blocked = !pc.traversable;
-      res.too_close = !pc.clearance;
-      ratio_sum += res.ratio;
-      out.path_length_ratio_max = std::max(out.path_length_ratio_max, res.ratio);
-      const double cr = pc.min_clearance_m / std::max(rp.min_clearance_m, 1e-6);
-      clear_sum += cr;
-      out.min_clearance_ratio_min = std::min(out.min_clearance_ratio_min, cr);
-      out.through_blocked += res.through_blocked ? 1 : 0;
-      out.too_close += res.too_close ? 1 : 0;
-    }
-    if (res.planned && o.drive && o.localizer_pose) {
-      // Drive it with the robot's own stages: the lockstep runner, its localizer's pose, the planner
-      // re-planning from it, the tracker and the drive stage commanding the simulated wheels.
-      const plan::Point2 p1 = path->points[1];
-      RunOptions r;
-      r.world = o.world;
-      r.out_dir = (fs::path(o.out_dir) / ("drive_" + std::to_string(out.results.size()))).string();
-      r.ugvs = 1;
-      r.uav = false;
-      r.seed = o.seed * 1000 + out.results.size();
-      r.ugv_map = UgvMapSource::kGroundTruth;
-      r.drive_by_stages = true;
-      r.lidar_columns = 512;
-      r.record = o.record ? RecordLevel::kMcap : RecordLevel::kNone;  // the drive's recording.mcap
-      r.progress = false;
-      RunOptions::UgvStart st;
-      st.has_start = true;
-      st.start = Pose2{a.x, a.y, std::atan2(p1.y - a.y, p1.x - a.x)};
-      st.has_guess = true;
-      st.guess = st.start;
-      st.guess_sigma_m = 1.0;
-      r.ugv_starts = {st};
-      r.ugv_goals = {Eigen::Vector2d(b.x, b.y)};
-      r.ugv_config = o.set;
-      r.oracles = o.oracles;
-      r.compute_time = o.compute_time;
-      r.target_cpu = o.target_cpu;
-      r.duration_s = 60.0 + 3.0 * path->length_m / std::max(0.1, dp.max_speed_mps);
-      r.sample_hz = 5;
-      double closest = 1e18, err_sum = 0;
-      std::uint64_t err_n = 0;
-      TimeNs reached_at = -1;
-      r.sample = [&](const UgvSample& s) {
-        const double d = std::hypot(s.truth.x - b.x, s.truth.y - b.y);
-        closest = std::min(closest, d);
-        if (d <= 1.0 && reached_at < 0) reached_at = s.now;
-        if (s.localization_received && s.localization->status == LocalizationStatus::kTracking) {
-          err_sum += std::hypot(s.localization->pose.x - s.truth_at_localization.x, s.localization->pose.y - s.truth_at_localization.y);
-          ++err_n;
-        }
-      };
-      r.stop_when = [&](TimeNs, bool) { return reached_at >= 0; };
-      auto run = run_team(r);
-      if (!run) return run.error();
-      // keep the drive's recording (recording.mcap, recording.json), nothing else of its folder
-      std::vector<fs::path> rest;
-      for (const auto& e : fs::directory_iterator(r.out_dir, ec))
-        if (!o.record || e.path().filename().string().rfind("recording.", 0) != 0) rest.push_back(e.path());
-      for (const fs::path& p : rest) fs::remove_all(p, ec);
-      if (!o.record) fs::remove_all(r.out_dir, ec);
-      res.drive_time_s = reached_at >= 0 ? to_seconds(reached_at) : run.value().sim_s;
-      res.final_error_m = closest;
-      res.collisions = run.value().ugvs.at(0).collisions;
-      res.reached = reached_at >= 0;
-      res.loc_error_mean_m = err_n ? err_sum / static_cast<double>(err_n) : -1;
-      out.collisions += res.collisions;
-      out.reached += res.reached ? 1 : 0;
-    } else if (res.planned && o.drive) {
-      // Drive it: ground-truth pose, the drive controller at 20 Hz, the vehicle model at 100 Hz.
-      const plan::Point2 p1 = path->points[1];
-      DiffDriveRobot robot(dd, Pose2{a.x, a.y, std::atan2(p1.y - a.y, p1.x - a.x)});
-      (void)robot.step(1e-9, world);
-      plan::PathFollower f(dp);
-      f.set_path(path->points.data(), path->count);
-      const double limit_s = 60.0 + 3.0 * path->length_m / std::max(0.1, dp.max_speed_mps);
-      double t = 0;
-      while (t < limit_s && f.state() != plan::FollowState::kArrived) {
-        const plan::TwistCommand tw = f.step(robot.pose(), 0.05);
-        const plan::WheelSpeeds ws = plan::wheels_from_twist(tw.v_mps, tw.w_radps, dp.track_m, dp.max_wheel_speed_mps);
-        robot.command_wheels(ws.left_mps / dd.wheel_radius_m, ws.right_mps / dd.wheel_radius_m);
-        for (int s = 0; s < 5; ++s) (void)robot.step(0.01, world);
-        t += 0.05;
-      }
-      res.drive_time_s = t;
-      res.final_error_m = std::hypot(robot.pose().x - b.x, robot.pose().y - b.y);
-      res.collisions = robot.collisions();
-      res.reached = f.state() == plan::FollowState::kArrived && res.final_error_m <= 1.0;
-      out.collisions += res.collisions;
-      out.reached += res.reached ? 1 : 0;
-    }
-    const bool failed = !res.planned || res.through_blocked || res.too_close || (o.drive && !res.reached);
-    out.failures += failed ? 1 : 0;
-    out.results.push_back(res);
+// The sums over the planned pairs the means are made of.
+struct PlanSums {
+  double ratio{0}, clearance{0}, query_ms{0};
+};
+
+// Plans a pair on the roadmap into `path` and checks it on the grid reference.
+PlanningPairResult plan_pair(plan::Roadmap& rm, const plan::GridReference& ref, double min_clearance_m, const PointPair& pair,
+                             plan::PlannedPath& path, PlanningMetrics& out, PlanSums& sums) {
+  const auto [a, b] = pair;
+  PlanningPairResult res;
+  res.sx = a.x;
+  res.sy = a.y;
+  res.gx = b.x;
+  res.gy = b.y;
+  const double t0 = cpu_ms();
+  rm.plan(a, b, path);
+  res.query_ms = cpu_ms() - t0;
+  sums.query_ms += res.query_ms;
+  out.query_ms_max = std::max(out.query_ms_max, res.query_ms);
+  res.status = plan::to_string(path.status);
+  res.grid_length_m = ref.shortest_m(a, b);
+  res.planned = path.status == plan::PlanStatus::kOk;
+  if (res.planned) {
+    const plan::PathCheck pc = ref.check(std::span<const plan::Point2>(path.points.data(), path.count));
+    res.length_m = path.length_m;
+    res.ratio = res.grid_length_m > 0 ? path.length_m / res.grid_length_m : 0;
+    res.min_clearance_m = pc.min_clearance_m;
+    res.through_blocked = !pc.traversable;
+    res.too_close = !pc.clearance;
+    sums.ratio += res.ratio;
+    out.path_length_ratio_max = std::max(out.path_length_ratio_max, res.ratio);
+    const double cr = pc.min_clearance_m / std::max(min_clearance_m, 1e-6);
+    sums.clearance += cr;
+    out.min_clearance_ratio_min = std::min(out.min_clearance_ratio_min, cr);
+    out.through_blocked += res.through_blocked ? 1 : 0;
+    out.too_close += res.too_close ? 1 : 0;
   }
-  const int n = static_cast<int>(pairs.size());
-  const int planned = static_cast<int>(std::count_if(out.results.begin(), out.results.end(), [](const auto& r) { return r.planned; }));
-  out.pairs = n;
-  out.path_length_ratio_mean = planned > 0 ? ratio_sum / planned : 0;
-  out.min_clearance_ratio_mean = planned > 0 ? clear_sum / planned : 0;
-  if (planned == 0) out.min_clearance_ratio_min = 0;
-  out.query_ms_mean = n > 0 ? q_sum / n : 0;
+  return res;
+}
 
-  // metrics.json
+// Drives the route with the robot's own stages: the lockstep runner, its localizer's pose, the planner
+// re-planning from it, the tracker and the drive stage commanding the simulated wheels. `index` numbers
+// the drive's folder and seed.
+Status drive_with_stages(const EvalPlanningOptions& o, std::size_t index, const PointPair& pair, const plan::PlannedPath& path,
+                         const plan::DriveParams& dp, PlanningPairResult& res) {
+  const auto [a, b] = pair;
+  const plan::Point2 p1 = path.points[1];
+  RunOptions r;
+  r.world = o.world;
+  r.out_dir = (fs::path(o.out_dir) / ("drive_" + std::to_string(index))).string();
+  r.ugvs = 1;
+  r.uav = false;
+  r.seed = o.seed * 1000 + index;
+  r.ugv_map = UgvMapSource::kGroundTruth;
+  r.drive_by_stages = true;
+  r.lidar_columns = 512;
+  r.record = o.record ? RecordLevel::kMcap : RecordLevel::kNone;  // the drive's recording.mcap
+  r.progress = false;
+  RunOptions::UgvStart st;
+  st.has_start = true;
+  st.start = Pose2{a.x, a.y, std::atan2(p1.y - a.y, p1.x - a.x)};
+  st.has_guess = true;
+  st.guess = st.start;
+  st.guess_sigma_m = 1.0;
+  r.ugv_starts = {st};
+  r.ugv_goals = {Eigen::Vector2d(b.x, b.y)};
+  r.ugv_config = o.set;
+  r.oracles = o.oracles;
+  r.compute_time = o.compute_time;
+  r.target_cpu = o.target_cpu;
+  r.duration_s = 60.0 + 3.0 * path.length_m / std::max(0.1, dp.max_speed_mps);
+  r.sample_hz = 5;
+  double closest = 1e18, err_sum = 0;
+  std::uint64_t err_n = 0;
+  TimeNs reached_at = -1;
+  r.sample = [&](const UgvSample& s) {
+    const double d = std::hypot(s.truth.x - b.x, s.truth.y - b.y);
+    closest = std::min(closest, d);
+    if (d <= 1.0 && reached_at < 0) reached_at = s.now;
+    if (s.localization_received && s.localization->status == LocalizationStatus::kTracking) {
+      err_sum += std::hypot(s.localization->pose.x - s.truth_at_localization.x, s.localization->pose.y - s.truth_at_localization.y);
+      ++err_n;
+    }
+  };
+  r.stop_when = [&](TimeNs, bool) { return reached_at >= 0; };
+  auto run = run_team(r);
+  if (!run) return run.error();
+  // keep the drive's recording (recording.mcap, recording.json), nothing else of its folder
+  std::error_code ec;
+  std::vector<fs::path> rest;
+  for (const auto& e : fs::directory_iterator(r.out_dir, ec))
+    if (!o.record || e.path().filename().string().rfind("recording.", 0) != 0) rest.push_back(e.path());
+  for (const fs::path& p : rest) fs::remove_all(p, ec);
+  if (!o.record) fs::remove_all(r.out_dir, ec);
+  res.drive_time_s = reached_at >= 0 ? to_seconds(reached_at) : run.value().sim_s;
+  res.final_error_m = closest;
+  res.collisions = run.value().ugvs.at(0).collisions;
+  res.reached = reached_at >= 0;
+  res.loc_error_mean_m = err_n ? err_sum / static_cast<double>(err_n) : -1;
+  return ok_status();
+}
+
+// Drives the route with the ground-truth pose: the drive controller at 20 Hz, the vehicle model at 100 Hz.
+void drive_with_truth(const World& world, const DiffDriveConfig& dd, const plan::DriveParams& dp, const PointPair& pair,
+                      const plan::PlannedPath& path, PlanningPairResult& res) {
+  const auto [a, b] = pair;
+  const plan::Point2 p1 = path.points[1];
+  DiffDriveRobot robot(dd, Pose2{a.x, a.y, std::atan2(p1.y - a.y, p1.x - a.x)});
+  (void)robot.step(1e-9, world);
+  plan::PathFollower f(dp);
+  f.set_path(path.points.data(), path.count);
+  const double limit_s = 60.0 + 3.0 * path.length_m / std::max(0.1, dp.max_speed_mps);
+  double t = 0;
+  while (t < limit_s && f.state() != plan::FollowState::kArrived) {
+    const plan::TwistCommand tw = f.step(robot.pose(), 0.05);
+    const plan::WheelSpeeds ws = plan::wheels_from_twist(tw.v_mps, tw.w_radps, dp.track_m, dp.max_wheel_speed_mps);
+    robot.command_wheels(ws.left_mps / dd.wheel_radius_m, ws.right_mps / dd.wheel_radius_m);
+    for (int s = 0; s < 5; ++s) (void)robot.step(0.01, world);
+    t += 0.05;
+  }
+  res.drive_time_s = t;
+  res.final_error_m = std::hypot(robot.pose().x - b.x, robot.pose().y - b.y);
+  res.collisions = robot.collisions();
+  res.reached = f.state() == plan::FollowState::kArrived && res.final_error_m <= 1.0;
+}
+
+// metrics.json; false when it could not be written.
+bool write_planning_metrics(const EvalPlanningOptions& o, double min_clearance_m, const PlanningMetrics& out) {
   std::ofstream js(fs::path(o.out_dir) / "metrics.json");
   char buf[512];
   js << "{\n";
@@ -275,9 +273,9 @@ Result<PlanningMetrics> eval_planning(const EvalPlanningOptions& o, const std::f
                 "  \"failures\": %d,\n  \"through_blocked\": %d,\n  \"too_close\": %d,\n  \"min_clearance_m\": %.3f,\n"
                 "  \"build_ms\": %.1f,\n  \"query_ms_mean\": %.3f,\n  \"query_ms_max\": %.3f,\n  \"nodes\": %u,\n  \"edges\": %u,\n"
                 "  \"driven\": %s,\n  \"pose\": \"%s\",\n",
-                json_escape(o.world).c_str(), static_cast<unsigned long long>(o.seed), n, out.path_length_ratio_mean, out.path_length_ratio_max,
+                json_escape(o.world).c_str(), static_cast<unsigned long long>(o.seed), out.pairs, out.path_length_ratio_mean, out.path_length_ratio_max,
                 out.min_clearance_ratio_mean, out.min_clearance_ratio_min, out.reached, static_cast<unsigned long long>(out.collisions),
-                out.failures, out.through_blocked, out.too_close, rp.min_clearance_m, out.build_ms, out.query_ms_mean, out.query_ms_max, out.nodes,
+                out.failures, out.through_blocked, out.too_close, min_clearance_m, out.build_ms, out.query_ms_mean, out.query_ms_max, out.nodes,
                 out.edges, o.drive ? "true" : "false", o.localizer_pose ? "localizer" : "ground truth");
   RunOptions oracle_list;
   oracle_list.oracles = o.oracles;
@@ -294,7 +292,68 @@ Result<PlanningMetrics> eval_planning(const EvalPlanningOptions& o, const std::f
     js << buf;
   }
   js << "  ]\n}\n";
-  if (!js) return Error::make(ErrorCode::kIo, "cannot write " + (fs::path(o.out_dir) / "metrics.json").string());
+  return static_cast<bool>(js);
+}
+
+}  // namespace
+
+Result<PlanningMetrics> eval_planning(const EvalPlanningOptions& o, const std::function<void(const PlanningProgress&)>& progress) {
+  auto world_r = resolve_world(o.world);
+  if (!world_r) return world_r.error();
+  const World& world = *world_r.value();
+  std::error_code ec;
+  fs::create_directories(o.out_dir, ec);
+  if (ec) return Error::make(ErrorCode::kIo, "cannot create " + o.out_dir + ": " + ec.message());
+  const DiffDriveConfig dd;  // the simulated robot (Jackal class)
+  auto params = planner_params(o, dd);
+  if (!params) return params.error();
+  const plan::RoadmapParams& rp = params.value().rp;
+  const plan::DriveParams& dp = params.value().dp;
+
+  if (progress) progress({0, o.pairs, "building the roadmap"});
+  const MapRaster m = resample(world);
+  plan::Roadmap rm(rp, ClassTable::builtin(), plan::MapExtent{m.tx0, m.ty0, m.tiles_x, m.tiles_y});
+  set_tiles(rm, m);
+  const double t0 = cpu_ms();
+  rm.rebuild();
+  PlanningMetrics out;
+  out.build_ms = cpu_ms() - t0;
+  out.nodes = rm.stats().nodes;
+  out.edges = rm.stats().edges;
+  out.min_clearance_m = rp.min_clearance_m;
+  const plan::GridReference ref(m.cls, m.w, m.h, kMapResolutionM, m.ox, m.oy, ClassTable::builtin(), rp.max_level, rp.min_clearance_m);
+  auto drawn = draw_pairs(o, world, m, ref, dd);
+  if (!drawn) return drawn.error();
+  const std::vector<PointPair>& pairs = drawn.value();
+
+  auto path = std::make_unique<plan::PlannedPath>();
+  PlanSums sums;
+  out.min_clearance_ratio_min = 1e9;
+  for (std::size_t k = 0; k < pairs.size(); ++k) {
+    if (progress) progress({static_cast<int>(k + 1), o.pairs, "planning and driving"});
+    PlanningPairResult res = plan_pair(rm, ref, rp.min_clearance_m, pairs[k], *path, out, sums);
+    if (res.planned && o.drive) {
+      if (o.localizer_pose) {
+        if (auto st = drive_with_stages(o, out.results.size(), pairs[k], *path, dp, res); !st) return st.error();
+      } else {
+        drive_with_truth(world, dd, dp, pairs[k], *path, res);
+      }
+      out.collisions += res.collisions;
+      out.reached += res.reached ? 1 : 0;
+    }
+    const bool failed = !res.planned || res.through_blocked || res.too_close || (o.drive && !res.reached);
+    out.failures += failed ? 1 : 0;
+    out.results.push_back(res);
+  }
+  const int n = static_cast<int>(pairs.size());
+  const int planned = static_cast<int>(std::count_if(out.results.begin(), out.results.end(), [](const auto& r) { return r.planned; }));
+  out.pairs = n;
+  out.path_length_ratio_mean = planned > 0 ? sums.ratio / planned : 0;
+  out.min_clearance_ratio_mean = planned > 0 ? sums.clearance / planned : 0;
+  if (planned == 0) out.min_clearance_ratio_min = 0;
+  out.query_ms_mean = n > 0 ? sums.query_ms / n : 0;
+  if (!write_planning_metrics(o, rp.min_clearance_m, out))
+    return Error::make(ErrorCode::kIo, "cannot write " + (fs::path(o.out_dir) / "metrics.json").string());
   return out;
 }
 

@@ -77,86 +77,92 @@ Result<vo::VoParams> vo_params(const EvalVoOptions& o, const PinholeCamera& cam)
   return p;
 }
 
-}  // namespace
-
-Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress) {
-  auto world = resolve_world(o.world);
-  if (!world) return world.error();
-  const World& w = *world.value();
-  CameraModel model = CameraModel{}.scaled(0.5);
+// The survey camera: the field camera at 640 px unless a file says otherwise.
+struct SurveyCamera {
+  CameraModel model{CameraModel{}.scaled(0.5)};
   CameraShading shading;
   // The goals hold with a real camera's noise, exposure, blur and vignetting: on unless a file says otherwise.
-  CameraSensor sensor = CameraSensor::field();
-  if (!o.camera_config.empty()) {
-    auto cs = CameraSensor::load_file(o.camera_config);
-    if (!cs) return cs.error();
-    sensor = cs.value();
-    auto m = CameraModel::load_file(o.camera_config);
-    if (!m) return m.error();
-    model = m.value().width == 640 ? m.value() : m.value().scaled(640.0 / m.value().width);
-    auto s = CameraShading::load_file(o.camera_config);
-    if (!s) return s.error();
-    shading = s.value();
-  }
-  AttitudeConfig att_cfg;
-  if (!o.attitude_config.empty()) {
-    std::ifstream f(o.attitude_config);
-    if (!f) return Error::make(ErrorCode::kConfig, "cannot read the attitude model file " + o.attitude_config);
-    std::string text;
-    std::getline(f, text, '\0');
-    auto a = load_attitude_config(std::string_view(text), o.attitude_config);
-    if (!a) return a.error();
-    att_cfg = a.value();
-  }
-  const PinholeCamera cam = model.pinhole();
-  auto params = vo_params(o, cam);
-  if (!params) return params.error();
+  CameraSensor sensor{CameraSensor::field()};
+};
 
-  const GridGeometry& g = w.grid();
-  const double margin = 20.0;
-  const double hfov = 2.0 * std::atan(0.5 * model.width / model.fx);
-  SurveyOptions so;
-  so.speed_mps = o.speed_mps;
-  auto route = survey_lawnmower(g.origin_x + margin, g.origin_y - g.size_y() + margin, g.origin_x + g.size_x() - margin,
-                                g.origin_y - margin, o.altitude_m, o.overlap, hfov, so);
-  if (!route) return route.error();
-  std::vector<Waypoint> wps = std::move(route).value();
+Result<SurveyCamera> load_camera(const EvalVoOptions& o) {
+  SurveyCamera c;
+  if (o.camera_config.empty()) return c;
+  auto cs = CameraSensor::load_file(o.camera_config);
+  if (!cs) return cs.error();
+  c.sensor = cs.value();
+  auto m = CameraModel::load_file(o.camera_config);
+  if (!m) return m.error();
+  c.model = m.value().width == 640 ? m.value() : m.value().scaled(640.0 / m.value().width);
+  auto s = CameraShading::load_file(o.camera_config);
+  if (!s) return s.error();
+  c.shading = s.value();
+  return c;
+}
+
+Result<AttitudeConfig> load_attitude(const EvalVoOptions& o) {
+  AttitudeConfig att_cfg;
+  if (o.attitude_config.empty()) return att_cfg;
+  std::ifstream f(o.attitude_config);
+  if (!f) return Error::make(ErrorCode::kConfig, "cannot read the attitude model file " + o.attitude_config);
+  std::string text;
+  std::getline(f, text, '\0');
+  auto a = load_attitude_config(std::string_view(text), o.attitude_config);
+  if (!a) return a.error();
+  return a.value();
+}
+
+// recording.mcap: the true flight (10 Hz) and every 5th camera frame, as a team run records the quadrotor;
+// none without o.record.
+Result<std::unique_ptr<TeamRecording>> open_recording(const EvalVoOptions& o, const World& w) {
+  if (!o.record) return std::unique_ptr<TeamRecording>{};
+  std::error_code mk;
+  fs::create_directories(o.out_dir, mk);
+  TeamRecordingOptions ro;
+  ro.scheduler_period_s = 0;
+  ro.mission = false;
+  auto r = TeamRecording::open((fs::path(o.out_dir) / "recording.mcap").string(), w, true, 0, o.seed, ro);
+  if (!r) return r.error();
+  return std::move(r).value();
+}
+
+// What the flight gave: a sample per camera frame, the VO's counters and what the frames cost.
+struct Flight {
+  std::vector<Sample> samples;
+  std::vector<double> vo_ms;  // thread CPU of the VO per frame
+  double render_s{0};         // thread CPU of the renderer, all frames
+  double distance_m{0}, duration_s{0};
+  vo::VoStats stats;
+};
+
+// Flies the survey, renders every camera frame and runs the VO on it (with the autopilot's attitude
+// when o.attitude).
+Result<Flight> fly_survey(const World& w, const SurveyCamera& camera, const AttitudeConfig& att_cfg, const vo::VoParams& params,
+                          const std::vector<Waypoint>& wps, const EvalVoOptions& o, const EvalVoProgress& progress) {
   QuadrotorConfig qc;
   const Pose3 start{wps.front().x, wps.front().y, wps.front().z, 0, 0, 0};
   Quadrotor quad(qc, start);
   const double est = estimate_route_time_s(qc, start, wps);
   quad.set_waypoints(wps);
 
-  CameraRenderer renderer(w, model, shading, sensor);
-  CameraAutoExposure ae(sensor);
+  CameraRenderer renderer(w, camera.model, camera.shading, camera.sensor);
+  CameraAutoExposure ae(camera.sensor);
   std::uint64_t frame_no = 0;
   double last_yaw = quad.pose().yaw;
   AttitudeSimulator attitude(att_cfg, o.seed ^ 0x617474ULL);
-  vo::VisualOdometry odo(params.value());
+  vo::VisualOdometry odo(params);
   CameraFrame frame;
-  std::vector<Sample> samples;
-  std::vector<double> vo_ms;
-  double render_s = 0, dist = 0;
+  Flight fl;
   const double dt = 0.02, frame_dt = 1.0 / o.camera_hz;
   double t = 0, next_frame = 0;
   Pose3 last = quad.pose();
   const double t_end = std::min(o.max_duration_s, est * 1.05 + 10.0);
   std::optional<Eigen::Matrix3d> att_R;
-  VoMetrics m;
   int last_pct = -1;
   double yaw_rate = 0;
-  // recording.mcap: the true flight (10 Hz) and every 5th camera frame, as a team run records the quadrotor
-  std::unique_ptr<TeamRecording> rec;
-  if (o.record) {
-    std::error_code mk;
-    fs::create_directories(o.out_dir, mk);
-    TeamRecordingOptions ro;
-    ro.scheduler_period_s = 0;
-    ro.mission = false;
-    auto r = TeamRecording::open((fs::path(o.out_dir) / "recording.mcap").string(), w, true, 0, o.seed, ro);
-    if (!r) return r.error();
-    rec = std::move(r).value();
-  }
+  auto opened = open_recording(o, w);
+  if (!opened) return opened.error();
+  std::unique_ptr<TeamRecording> rec = std::move(opened).value();
   std::uint64_t steps = 0;
   while (t < t_end && !quad.finished()) {
     last_yaw = quad.pose().yaw;
@@ -164,7 +170,7 @@ Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress
     yaw_rate = std::remainder(quad.pose().yaw - last_yaw, 2 * M_PI) / dt;
     t += dt;
     const Pose3& p = quad.pose();
-    dist += std::hypot(std::hypot(p.x - last.x, p.y - last.y), p.z - last.z);
+    fl.distance_m += std::hypot(std::hypot(p.x - last.x, p.y - last.y), p.z - last.z);
     last = p;
     const TimeNs stamp = static_cast<TimeNs>(std::llround(t * 1e9));
     AttitudeSample as;
@@ -184,19 +190,19 @@ Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress
     shot.yaw_rate = yaw_rate;
     renderer.render(p, frame, stamp, shot);
     ae.observe(frame);
-    render_s += to_seconds(thread_cpu_now() - r0);
+    fl.render_s += to_seconds(thread_cpu_now() - r0);
     if (rec) rec->camera_frame(stamp, frame_no, frame.rgb);
     const TimeNs v0 = thread_cpu_now();
     const vo::VoFrame f = odo.process(stamp, frame.rgb.ptr<std::uint8_t>(0), o.attitude ? att_R : std::nullopt);
-    vo_ms.push_back(to_seconds(thread_cpu_now() - v0) * 1e3);
+    fl.vo_ms.push_back(to_seconds(thread_cpu_now() - v0) * 1e3);
     Sample s;
     s.t = t;
     s.tracking = f.tracking;
     s.segment = f.segment;
     s.vo = f.body_in_segment;
     s.truth = to_isometry(p);
-    s.dist = dist;
-    samples.push_back(s);
+    s.dist = fl.distance_m;
+    fl.samples.push_back(s);
     const int pct = static_cast<int>(100.0 * t / t_end);
     if (progress && pct != last_pct) {
       last_pct = pct;
@@ -205,24 +211,45 @@ Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress
   }
   if (rec)
     if (Status st = rec->close(t); !st) return st.error();
-  m.frames = samples.size();
-  m.distance_m = dist;
-  m.duration_s = t;
-  m.segments = odo.stats().segments;
-  m.keyframes = odo.stats().keyframes;
-  for (const Sample& s : samples) m.tracked_frames += s.tracking ? 1U : 0U;
-  m.tracked_fraction = m.frames ? static_cast<double>(m.tracked_frames) / static_cast<double>(m.frames) : 0.0;
-  m.ms_per_frame_p50 = quantile(vo_ms, 0.5);
-  m.ms_per_frame_p99 = quantile(vo_ms, 0.99);
-  m.render_ms_per_frame = m.frames ? render_s * 1e3 / static_cast<double>(m.frames) : 0.0;
+  fl.duration_s = t;
+  fl.stats = odo.stats();
+  return fl;
+}
 
-  // Relative errors over consecutive pairs about pair_distance_m apart (true distance), same segment.
-  std::vector<double> rot, dir, tilt, pair_t, pair_rot, pair_dir;
+struct ScalePoint {
+  double d, log_s;
+};
+
+// Scale drift: slope of log(scale) against distance per segment, as % per 100 m, length-weighted.
+double scale_drift_percent_per_100m(const std::vector<std::vector<ScalePoint>>& scale_by_segment) {
+  double wsum = 0, dsum = 0;
+  for (const auto& pts : scale_by_segment) {
+    if (pts.size() < 10) continue;
+    double sd = 0, sl = 0;
+    for (const auto& q : pts) sd += q.d, sl += q.log_s;
+    const double md = sd / static_cast<double>(pts.size()), ml = sl / static_cast<double>(pts.size());
+    double num = 0, den = 0;
+    for (const auto& q : pts) num += (q.d - md) * (q.log_s - ml), den += (q.d - md) * (q.d - md);
+    if (den <= 0) continue;
+    const double len = pts.back().d - pts.front().d;
+    dsum += len * std::fabs(std::expm1(100.0 * num / den)) * 100.0;
+    wsum += len;
+  }
+  return wsum > 0 ? dsum / wsum : 0.0;
+}
+
+// The pairs' errors over time, for the plots.
+struct PairSeries {
+  std::vector<double> t, rot, dir;
+};
+
+// Relative errors over consecutive pairs about pair_distance_m apart (true distance), same segment; the
+// tilt of every tracked frame.
+PairSeries score_pairs(const std::vector<Sample>& samples, double pair_distance_m, VoMetrics& m) {
+  std::vector<double> rot, dir, tilt;
+  PairSeries pairs;
   Eigen::Vector3d signed_err_sum = Eigen::Vector3d::Zero();
   std::size_t signed_n = 0;
-  struct ScalePoint {
-    double d, log_s;
-  };
   std::vector<std::vector<ScalePoint>> scale_by_segment(m.segments + 1);
   for (std::size_t i = 0; i < samples.size();) {
     if (!samples[i].tracking) {
@@ -231,7 +258,7 @@ Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress
     }
     std::size_t j = i + 1;
     while (j < samples.size() && samples[j].tracking && samples[j].segment == samples[i].segment &&
-           samples[j].dist - samples[i].dist < o.pair_distance_m)
+           samples[j].dist - samples[i].dist < pair_distance_m)
       ++j;
     if (j >= samples.size() || !samples[j].tracking || samples[j].segment != samples[i].segment) {
       i = j;
@@ -255,9 +282,9 @@ Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress
       const std::size_t seg = std::min<std::size_t>(a.segment, scale_by_segment.size() - 1);
       scale_by_segment[seg].push_back(ScalePoint{a.dist, std::log(tv.norm() / tt.norm())});
     }
-    pair_t.push_back(a.t);
-    pair_rot.push_back(rot.back());
-    pair_dir.push_back(dir.empty() ? 0.0 : dir.back());
+    pairs.t.push_back(a.t);
+    pairs.rot.push_back(rot.back());
+    pairs.dir.push_back(dir.empty() ? 0.0 : dir.back());
     i = j;
   }
   for (const Sample& s : samples)
@@ -270,23 +297,12 @@ Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress
   m.rpe_translation_direction_deg_p50 = quantile(dir, 0.5);
   m.rpe_translation_direction_deg_p95 = quantile(dir, 0.95);
   m.tilt_error_deg_p95 = quantile(tilt, 0.95);
-  // Scale drift: slope of log(scale) against distance per segment, as % per 100 m, length-weighted.
-  double wsum = 0, dsum = 0;
-  for (const auto& pts : scale_by_segment) {
-    if (pts.size() < 10) continue;
-    double sd = 0, sl = 0;
-    for (const auto& q : pts) sd += q.d, sl += q.log_s;
-    const double md = sd / static_cast<double>(pts.size()), ml = sl / static_cast<double>(pts.size());
-    double num = 0, den = 0;
-    for (const auto& q : pts) num += (q.d - md) * (q.log_s - ml), den += (q.d - md) * (q.d - md);
-    if (den <= 0) continue;
-    const double len = pts.back().d - pts.front().d;
-    dsum += len * std::fabs(std::expm1(100.0 * num / den)) * 100.0;
-    wsum += len;
-  }
-  m.scale_drift_percent_per_100m = wsum > 0 ? dsum / wsum : 0.0;
+  m.scale_drift_percent_per_100m = scale_drift_percent_per_100m(scale_by_segment);
+  return pairs;
+}
 
-  // Outputs.
+// metrics.json, trajectory.csv, the pair plots and report.md.
+Status write_vo_files(const EvalVoOptions& o, const VoMetrics& m, const std::vector<Sample>& samples, const PairSeries& pairs) {
   std::error_code ec;
   fs::create_directories(o.out_dir, ec);
   if (ec) return Error::make(ErrorCode::kIo, "cannot create " + o.out_dir + ": " + ec.message());
@@ -317,10 +333,10 @@ Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress
   po.x_label = "time [s]";
   po.y_label = "deg";
   po.h_lines = {0.2};
-  cv::imwrite((fs::path(o.out_dir) / "rpe_rotation.png").string(), line_plot({PlotSeries{"rotation", pair_t, pair_rot, series_colour(0), true}}, po));
+  cv::imwrite((fs::path(o.out_dir) / "rpe_rotation.png").string(), line_plot({PlotSeries{"rotation", pairs.t, pairs.rot, series_colour(0), true}}, po));
   po.title = "translation direction error per pair";
   po.h_lines = {2.0};
-  cv::imwrite((fs::path(o.out_dir) / "rpe_direction.png").string(), line_plot({PlotSeries{"direction", pair_t, pair_dir, series_colour(1), true}}, po));
+  cv::imwrite((fs::path(o.out_dir) / "rpe_direction.png").string(), line_plot({PlotSeries{"direction", pairs.t, pairs.dir, series_colour(1), true}}, po));
   std::ofstream md(fs::path(o.out_dir) / "report.md");
   md << "# Visual odometry on the survey (world " << o.world << ", seed " << o.seed << ")\n\nOracles: none. "
      << (o.attitude ? "Gravity from the autopilot's attitude (simulated PX4 EKF2 errors)." : "Vision only (no attitude).") << "\n\n"
@@ -329,6 +345,48 @@ Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress
      << " | <= 0.2 |\n| RPE translation direction p95 [deg] | " << m.rpe_translation_direction_deg_p95 << " | <= 2 |\n| scale drift [%/100 m] | "
      << m.scale_drift_percent_per_100m << " | |\n| tilt error p95 [deg] | " << m.tilt_error_deg_p95 << " | |\n| VO ms/frame p50 / p99 (thread CPU) | "
      << m.ms_per_frame_p50 << " / " << m.ms_per_frame_p99 << " | <= 40 (p50) |\n\n![rotation](rpe_rotation.png)\n\n![direction](rpe_direction.png)\n";
+  return ok_status();
+}
+
+}  // namespace
+
+Result<VoMetrics> eval_vo(const EvalVoOptions& o, const EvalVoProgress& progress) {
+  auto world = resolve_world(o.world);
+  if (!world) return world.error();
+  const World& w = *world.value();
+  auto camera = load_camera(o);
+  if (!camera) return camera.error();
+  auto att_cfg = load_attitude(o);
+  if (!att_cfg) return att_cfg.error();
+  const CameraModel& model = camera.value().model;
+  auto params = vo_params(o, model.pinhole());
+  if (!params) return params.error();
+
+  const GridGeometry& g = w.grid();
+  const double margin = 20.0;
+  const double hfov = 2.0 * std::atan(0.5 * model.width / model.fx);
+  SurveyOptions so;
+  so.speed_mps = o.speed_mps;
+  auto route = survey_lawnmower(g.origin_x + margin, g.origin_y - g.size_y() + margin, g.origin_x + g.size_x() - margin,
+                                g.origin_y - margin, o.altitude_m, o.overlap, hfov, so);
+  if (!route) return route.error();
+  auto flight = fly_survey(w, camera.value(), att_cfg.value(), params.value(), route.value(), o, progress);
+  if (!flight) return flight.error();
+  const Flight& fl = flight.value();
+
+  VoMetrics m;
+  m.frames = fl.samples.size();
+  m.distance_m = fl.distance_m;
+  m.duration_s = fl.duration_s;
+  m.segments = fl.stats.segments;
+  m.keyframes = fl.stats.keyframes;
+  for (const Sample& s : fl.samples) m.tracked_frames += s.tracking ? 1U : 0U;
+  m.tracked_fraction = m.frames ? static_cast<double>(m.tracked_frames) / static_cast<double>(m.frames) : 0.0;
+  m.ms_per_frame_p50 = quantile(fl.vo_ms, 0.5);
+  m.ms_per_frame_p99 = quantile(fl.vo_ms, 0.99);
+  m.render_ms_per_frame = m.frames ? fl.render_s * 1e3 / static_cast<double>(m.frames) : 0.0;
+  const PairSeries pairs = score_pairs(fl.samples, o.pair_distance_m, m);
+  if (auto st = write_vo_files(o, m, fl.samples, pairs); !st) return st.error();
   return m;
 }
 

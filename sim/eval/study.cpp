@@ -65,9 +65,45 @@ double mean_of(const std::vector<Row>& rows, int ugvs, double range, F field) {
     }
   return n > 0 ? sum / n : std::nan("");
 }
-}  // namespace
+// One run's row from its metrics.json (and visits.csv).
+Row read_row(const fs::path& run, const nlohmann::json& j) {
+  Row r;
+  r.name = run.filename().string();
+  auto num = [&](const char* k, double def) { return j.contains(k) && j[k].is_number() ? j[k].get<double>() : def; };
+  r.ugvs = static_cast<int>(num("ugvs", 0));
+  r.range = num("comm_range_m", 0);
+  r.seed = static_cast<int>(num("seed", 0));
+  r.targets_total = num("targets_total", 0);
+  r.targets_visited = num("targets_visited", 0);
+  r.mission_time_s = num("mission_time_s", 0);
+  r.loc_mean = num("loc_error_mean_m", -1);
+  r.loc_p95 = num("loc_error_p95_m", -1);
+  r.odom_mean = num("odom_only_error_mean_m", 0);
+  r.false_visits = num("false_visits", 0);
+  r.failed_goals = num("failed_goals", 0);
+  r.collisions = num("collisions", 0);
+  r.bytes = num("bytes_on_air", 0);
+  r.rtf = num("realtime_factor", 0);
+  r.completed = j.contains("completed") && j["completed"].is_boolean() && j["completed"].get<bool>();
+  if (j.contains("robots") && j["robots"].is_array() && j.contains("regions_visited") && j["regions_visited"].is_number()) {
+    double visits = 0;
+    for (const auto& robot : j["robots"])
+      if (robot.is_object() && robot.contains("visited") && robot["visited"].is_number()) visits += robot["visited"].get<double>();
+    r.repeat_visits = std::max(0.0, visits - j["regions_visited"].get<double>());
+  }
+  if (j.contains("oracles") && j["oracles"].is_array()) {
+    r.oracles.clear();
+    for (const auto& o : j["oracles"])
+      if (o.is_string()) r.oracles += (r.oracles.empty() ? "" : "+") + o.get<std::string>();
+    if (r.oracles.empty()) r.oracles = "none";
+  }
+  if (j.contains("world") && j["world"].is_string()) r.world = j["world"].get<std::string>();
+  read_visit_times(run / "visits.csv", r);
+  return r;
+}
 
-Result<std::string> summarise_study(const std::string& dir) {
+// Every run of DIR/runs with a metrics.json, by range, team size and seed.
+Result<std::vector<Row>> read_rows(const std::string& dir) {
   std::vector<Row> rows;
   std::error_code ec;
   for (const auto& e : fs::directory_iterator(fs::path(dir) / "runs", ec)) {
@@ -79,45 +115,17 @@ Result<std::string> summarise_study(const std::string& dir) {
       std::fprintf(stderr, "study: %s: not valid JSON, skipped\n", mj.c_str());
       continue;
     }
-    Row r;
-    r.name = e.path().filename().string();
-    auto num = [&](const char* k, double def) { return j.contains(k) && j[k].is_number() ? j[k].get<double>() : def; };
-    r.ugvs = static_cast<int>(num("ugvs", 0));
-    r.range = num("comm_range_m", 0);
-    r.seed = static_cast<int>(num("seed", 0));
-    r.targets_total = num("targets_total", 0);
-    r.targets_visited = num("targets_visited", 0);
-    r.mission_time_s = num("mission_time_s", 0);
-    r.loc_mean = num("loc_error_mean_m", -1);
-    r.loc_p95 = num("loc_error_p95_m", -1);
-    r.odom_mean = num("odom_only_error_mean_m", 0);
-    r.false_visits = num("false_visits", 0);
-    r.failed_goals = num("failed_goals", 0);
-    r.collisions = num("collisions", 0);
-    r.bytes = num("bytes_on_air", 0);
-    r.rtf = num("realtime_factor", 0);
-    r.completed = j.contains("completed") && j["completed"].is_boolean() && j["completed"].get<bool>();
-    if (j.contains("robots") && j["robots"].is_array() && j.contains("regions_visited") && j["regions_visited"].is_number()) {
-      double visits = 0;
-      for (const auto& robot : j["robots"])
-        if (robot.is_object() && robot.contains("visited") && robot["visited"].is_number()) visits += robot["visited"].get<double>();
-      r.repeat_visits = std::max(0.0, visits - j["regions_visited"].get<double>());
-    }
-    if (j.contains("oracles") && j["oracles"].is_array()) {
-      r.oracles.clear();
-      for (const auto& o : j["oracles"])
-        if (o.is_string()) r.oracles += (r.oracles.empty() ? "" : "+") + o.get<std::string>();
-      if (r.oracles.empty()) r.oracles = "none";
-    }
-    if (j.contains("world") && j["world"].is_string()) r.world = j["world"].get<std::string>();
-    read_visit_times(e.path() / "visits.csv", r);
-    rows.push_back(r);
+    rows.push_back(read_row(e.path(), j));
   }
   if (ec) return Error::make(ErrorCode::kIo, "cannot list " + (fs::path(dir) / "runs").string() + ": " + ec.message());
   std::sort(rows.begin(), rows.end(), [](const Row& a, const Row& b) {
     return std::tie(a.range, a.ugvs, a.seed) < std::tie(b.range, b.ugvs, b.seed);
   });
-  const fs::path out(dir);
+  return rows;
+}
+
+// study.csv; false when it could not be written.
+bool write_study_csv(const fs::path& out, const std::vector<Row>& rows) {
   std::ofstream csv(out / "study.csv");
   csv << "run,ugvs,comm_range_m,seed,oracles,world,targets_total,targets_visited,completed,mission_time_s,loc_error_mean_m,loc_error_p95_m,"
          "odom_only_error_mean_m,false_visits,failed_goals,collisions,bytes_on_air,realtime_factor,repeat_visits,first_visit_s,"
@@ -127,27 +135,24 @@ Result<std::string> summarise_study(const std::string& dir) {
         << (r.completed ? 1 : 0) << "," << r.mission_time_s << "," << r.loc_mean << "," << r.loc_p95 << "," << r.odom_mean << ","
         << r.false_visits << "," << r.failed_goals << "," << r.collisions << "," << r.bytes << "," << r.rtf << "," << r.repeat_visits
         << "," << r.first_visit_s << "," << r.last_visit_s << "\n";
-  // Summary figures.
-  std::size_t all_reached = 0, zero_false = 0;
-  double loc_sum = 0, loc_max = 0, odom_sum = 0;
-  std::size_t loc_n = 0;
-  for (const Row& r : rows) {
-    if (r.targets_total > 0 && r.targets_visited >= r.targets_total) ++all_reached;
-    if (r.false_visits == 0) ++zero_false;
-    if (r.loc_mean >= 0) {
-      loc_sum += r.loc_mean;
-      loc_max = std::max(loc_max, r.loc_mean);
-      ++loc_n;
-    }
-    odom_sum += r.odom_mean;
-  }
-  // Mission time by team size, one series per range (mean over seeds).
-  std::map<double, std::map<int, std::pair<double, int>>> by_range;
+  return static_cast<bool>(csv);
+}
+
+// Mission time by team size, one series per range: the sum over the seeds and the runs.
+using ByRange = std::map<double, std::map<int, std::pair<double, int>>>;
+
+ByRange mission_time_by_range(const std::vector<Row>& rows) {
+  ByRange by_range;
   for (const Row& r : rows) {
     auto& cell = by_range[r.range][r.ugvs];
     cell.first += r.mission_time_s;
     cell.second += 1;
   }
+  return by_range;
+}
+
+// mission_time.png, pose_error.png and targets.png: one series per range.
+void write_study_plots(const fs::path& out, const std::vector<Row>& rows, const ByRange& by_range) {
   std::vector<PlotSeries> time_series, err_series, tgt_series;
   std::size_t k = 0;
   for (const auto& [range, m] : by_range) {
@@ -183,72 +188,74 @@ Result<std::string> summarise_study(const std::string& dir) {
   po.y_label = "targets";
   po.h_lines = {rows.empty() ? 0.0 : rows.front().targets_total};
   cv::imwrite((out / "targets.png").string(), line_plot(tgt_series, po));
+}
 
-  std::ostringstream md;
-  char line[512];
-  // The first lines say whether any ground truth reached the robots (field mode) and in which runs.
+// The first lines say whether any ground truth reached the robots (field mode) and in which runs.
+void write_oracles(std::ostringstream& md, const std::vector<Row>& rows) {
   std::map<std::string, std::vector<std::string>> by_oracles;
   for (const Row& r : rows) by_oracles[r.oracles].push_back(r.name);
-  md << "# airground study\n\n";
   if (by_oracles.empty() || (by_oracles.size() == 1 && by_oracles.begin()->first == "none")) {
     md << "Field mode: no ground truth reached a robot in any mission (oracles: none).\n\n";
-  } else {
-    md << "ABLATION in some or all missions: ground truth handed to the robots by name; those figures are not field-mode figures.\n\n";
-    for (const auto& [names, runs] : by_oracles) {
-      md << "- oracles " << (names == "?" ? "not recorded (a metrics.json from before field mode)" : names) << ": " << runs.size() << " mission"
-         << (runs.size() == 1 ? "" : "s") << " (";
-      for (std::size_t i = 0; i < runs.size(); ++i) md << (i ? ", " : "") << runs[i];
-      md << ")\n";
-    }
-    md << "\n";
+    return;
   }
-  md << rows.size() << " missions. All targets reached in " << all_reached << " of " << rows.size()
-     << "; no false visit in " << zero_false << " of " << rows.size() << ".";
-  if (loc_n > 0) {
-    std::snprintf(line, sizeof line, " Localization error after convergence: mean %.2f m over the missions (worst mission %.2f m); wheel odometry alone %.1f m.",
-                  loc_sum / static_cast<double>(loc_n), loc_max, odom_sum / static_cast<double>(rows.size()));
-    md << line;
+  md << "ABLATION in some or all missions: ground truth handed to the robots by name; those figures are not field-mode figures.\n\n";
+  for (const auto& [names, runs] : by_oracles) {
+    md << "- oracles " << (names == "?" ? "not recorded (a metrics.json from before field mode)" : names) << ": " << runs.size() << " mission"
+       << (runs.size() == 1 ? "" : "s") << " (";
+    for (std::size_t i = 0; i < runs.size(); ++i) md << (i ? ", " : "") << runs[i];
+    md << ")\n";
   }
-  // By world, when the study ran on several: the goals per world (every target in 25 of 26, no false visit).
+  md << "\n";
+}
+
+// By world, when the study ran on several: the goals per world (every target in 25 of 26, no false
+// visit), with targets_by_world.png.
+void write_by_world(std::ostringstream& md, const fs::path& out, const std::vector<Row>& rows) {
   std::map<std::string, std::vector<const Row*>> by_world;
   for (const Row& r : rows) by_world[r.world].push_back(&r);
-  if (by_world.size() > 1) {
-    md << "\n\nBy world:\n\n| world | missions | all targets reached | targets reached / total | no false visit | loc error mean (mean over missions) [m] | mission time mean [s] |\n"
-       << "|---|---|---|---|---|---|---|\n";
-    std::vector<PlotSeries> world_series;
-    std::size_t wk = 0;
-    for (const auto& [world, wr] : by_world) {
-      std::size_t all = 0, clean = 0, ln = 0;
-      double reached = 0, total = 0, loc = 0, time = 0;
-      PlotSeries ws{fs::path(world).filename().string(), {}, {}, series_colour(wk), true};
-      for (const Row* r : wr) {
-        all += r->targets_total > 0 && r->targets_visited >= r->targets_total ? 1 : 0;
-        clean += r->false_visits == 0 ? 1 : 0;
-        reached += r->targets_visited;
-        total += r->targets_total;
-        time += r->mission_time_s;
-        if (r->loc_mean >= 0) {
-          loc += r->loc_mean;
-          ++ln;
-        }
-        ws.x.push_back(r->ugvs + 0.08 * static_cast<double>(wk));
-        ws.y.push_back(r->targets_total > 0 ? r->targets_visited / r->targets_total : 0.0);
+  if (by_world.size() <= 1) return;
+  char line[512];
+  md << "\n\nBy world:\n\n| world | missions | all targets reached | targets reached / total | no false visit | loc error mean (mean over missions) [m] | mission time mean [s] |\n"
+     << "|---|---|---|---|---|---|---|\n";
+  std::vector<PlotSeries> world_series;
+  std::size_t wk = 0;
+  for (const auto& [world, wr] : by_world) {
+    std::size_t all = 0, clean = 0, ln = 0;
+    double reached = 0, total = 0, loc = 0, time = 0;
+    PlotSeries ws{fs::path(world).filename().string(), {}, {}, series_colour(wk), true};
+    for (const Row* r : wr) {
+      all += r->targets_total > 0 && r->targets_visited >= r->targets_total ? 1 : 0;
+      clean += r->false_visits == 0 ? 1 : 0;
+      reached += r->targets_visited;
+      total += r->targets_total;
+      time += r->mission_time_s;
+      if (r->loc_mean >= 0) {
+        loc += r->loc_mean;
+        ++ln;
       }
-      world_series.push_back(ws);
-      ++wk;
-      std::snprintf(line, sizeof line, "| %s | %zu | %zu | %.0f / %.0f | %zu | %s | %.0f |\n", world.c_str(), wr.size(), all, reached, total, clean,
-                    ln > 0 ? std::to_string(loc / static_cast<double>(ln)).substr(0, 4).c_str() : "–", time / static_cast<double>(wr.size()));
-      md << line;
+      ws.x.push_back(r->ugvs + 0.08 * static_cast<double>(wk));
+      ws.y.push_back(r->targets_total > 0 ? r->targets_visited / r->targets_total : 0.0);
     }
-    PlotOptions wpo;
-    wpo.title = "Share of targets reached per mission, by world";
-    wpo.x_label = "ground robots";
-    wpo.y_label = "targets reached / total";
-    wpo.h_lines = {1.0};
-    cv::imwrite((out / "targets_by_world.png").string(), line_plot(world_series, wpo));
-    md << "\n![targets by world](targets_by_world.png)\n";
+    world_series.push_back(ws);
+    ++wk;
+    std::snprintf(line, sizeof line, "| %s | %zu | %zu | %.0f / %.0f | %zu | %s | %.0f |\n", world.c_str(), wr.size(), all, reached, total, clean,
+                  ln > 0 ? std::to_string(loc / static_cast<double>(ln)).substr(0, 4).c_str() : "–", time / static_cast<double>(wr.size()));
+    md << line;
   }
-  // Mission time by team size and range (mean over the seeds done), the paper's main figure as a table.
+  PlotOptions wpo;
+  wpo.title = "Share of targets reached per mission, by world";
+  wpo.x_label = "ground robots";
+  wpo.y_label = "targets reached / total";
+  wpo.h_lines = {1.0};
+  cv::imwrite((out / "targets_by_world.png").string(), line_plot(world_series, wpo));
+  md << "\n![targets by world](targets_by_world.png)\n";
+}
+
+// Mission time by team size and range (mean over the seeds done), the paper's main figure as a table, and
+// the same grid for the visits: when the first region was reached, and how many visits went to a region
+// someone had reached already (their news had not reached the robot).
+void write_grids(std::ostringstream& md, const std::vector<Row>& rows, const ByRange& by_range) {
+  char line[512];
   std::set<int> sizes;
   for (const Row& r : rows) sizes.insert(r.ugvs);
   // A grid's title and header: one column per range.
@@ -276,8 +283,6 @@ Result<std::string> summarise_study(const std::string& dir) {
     }
     md << "\n";
   }
-  // The same grid for the visits: when the first region was reached, and how many visits went to a region
-  // someone had reached already (their news had not reached the robot).
   const auto grid = [&](const char* title, auto field, int decimals) {
     grid_header(title);
     for (const int u : sizes) {
@@ -296,6 +301,11 @@ Result<std::string> summarise_study(const std::string& dir) {
   grid("First visit [s] by team size (mean over seeds, from each run's visits.csv):", [](const Row& r) { return r.first_visit_s; }, 0);
   grid("Repeat visits by team size (visits to a region another robot had visited already; mean over seeds):",
        [](const Row& r) { return r.repeat_visits; }, 1);
+}
+
+// The table of every run.
+void write_run_table(std::ostringstream& md, const std::vector<Row>& rows) {
+  char line[512];
   md << "\n![mission time](mission_time.png)\n\n![pose error](pose_error.png)\n\n![targets](targets.png)\n\n"
      << "| run | robots | range [m] | seed | targets | done | mission time [s] | loc error mean / p95 [m] | odometry only [m] | false visits | repeat visits | first / last visit [s] | failed goals | collisions | MB on air | RTF |\n"
      << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
@@ -308,9 +318,50 @@ Result<std::string> summarise_study(const std::string& dir) {
                   r.loc_mean, r.loc_p95, r.odom_mean, r.false_visits, repeat, visits, r.failed_goals, r.collisions, r.bytes / 1e6, r.rtf);
     md << line;
   }
+}
+
+}  // namespace
+
+Result<std::string> summarise_study(const std::string& dir) {
+  auto read = read_rows(dir);
+  if (!read) return read.error();
+  const std::vector<Row>& rows = read.value();
+  const fs::path out(dir);
+  const bool csv_ok = write_study_csv(out, rows);
+  // Summary figures.
+  std::size_t all_reached = 0, zero_false = 0;
+  double loc_sum = 0, loc_max = 0, odom_sum = 0;
+  std::size_t loc_n = 0;
+  for (const Row& r : rows) {
+    if (r.targets_total > 0 && r.targets_visited >= r.targets_total) ++all_reached;
+    if (r.false_visits == 0) ++zero_false;
+    if (r.loc_mean >= 0) {
+      loc_sum += r.loc_mean;
+      loc_max = std::max(loc_max, r.loc_mean);
+      ++loc_n;
+    }
+    odom_sum += r.odom_mean;
+  }
+  const ByRange by_range = mission_time_by_range(rows);
+  write_study_plots(out, rows, by_range);
+
+  std::ostringstream md;
+  char line[512];
+  md << "# airground study\n\n";
+  write_oracles(md, rows);
+  md << rows.size() << " missions. All targets reached in " << all_reached << " of " << rows.size()
+     << "; no false visit in " << zero_false << " of " << rows.size() << ".";
+  if (loc_n > 0) {
+    std::snprintf(line, sizeof line, " Localization error after convergence: mean %.2f m over the missions (worst mission %.2f m); wheel odometry alone %.1f m.",
+                  loc_sum / static_cast<double>(loc_n), loc_max, odom_sum / static_cast<double>(rows.size()));
+    md << line;
+  }
+  write_by_world(md, out, rows);
+  write_grids(md, rows, by_range);
+  write_run_table(md, rows);
   std::ofstream f(out / "study.md");
   f << md.str();
-  if (!f || !csv) return Error::make(ErrorCode::kIo, "cannot write the study files in " + dir);
+  if (!f || !csv_ok) return Error::make(ErrorCode::kIo, "cannot write the study files in " + dir);
   std::snprintf(line, sizeof line, "study: %zu missions, all targets in %zu, no false visit in %zu; table %s/study.md\n", rows.size(), all_reached, zero_false, dir.c_str());
   return std::string(line);
 }
