@@ -29,6 +29,58 @@ double rotation_angle(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) noexce
   return Eigen::AngleAxisd(a.transpose() * b).angle();
 }
 
+// The local ground under each cell of the w x h scratch grid (see OrthoMapParams::ground_check_m): the
+// median height of each cell's flat-class points (ground), then the median of those over the window
+// around it (local_ground); NaN where there is none. start and order: the points sorted by cell.
+void local_ground_heights(std::span<const MapPoint> points, const std::vector<std::uint32_t>& start,
+                          const std::vector<std::uint32_t>& order, std::size_t w, std::size_t h, const OrthoMapParams& p,
+                          std::vector<float>& heights, std::vector<float>& ground, std::vector<float>& local_ground) {
+  constexpr float kNone = std::numeric_limits<float>::quiet_NaN();
+  ground.assign(w * h, kNone);
+  for (std::size_t cidx = 0; cidx < w * h; ++cidx) {
+    heights.clear();
+    for (std::uint32_t k = start[cidx]; k < start[cidx + 1]; ++k)
+      if (flat(points[order[k]].cls)) heights.push_back(points[order[k]].z);
+    if (heights.size() < static_cast<std::size_t>(std::max(1, p.min_keyframe_points))) continue;
+    auto mid = heights.begin() + static_cast<std::ptrdiff_t>(heights.size() / 2);
+    std::nth_element(heights.begin(), mid, heights.end());
+    ground[cidx] = *mid;
+  }
+  local_ground.assign(w * h, kNone);
+  const auto r = static_cast<std::ptrdiff_t>(std::max(0, p.ground_window_cells));
+  const auto sw = static_cast<std::ptrdiff_t>(w), sh = static_cast<std::ptrdiff_t>(h);
+  for (std::ptrdiff_t y = 0; y < sh; ++y)
+    for (std::ptrdiff_t x = 0; x < sw; ++x) {
+      const auto cidx = static_cast<std::size_t>(y * sw + x);
+      if (start[cidx] == start[cidx + 1]) continue;
+      heights.clear();
+      for (std::ptrdiff_t yy = std::max<std::ptrdiff_t>(0, y - r); yy <= std::min(sh - 1, y + r); ++yy)
+        for (std::ptrdiff_t xx = std::max<std::ptrdiff_t>(0, x - r); xx <= std::min(sw - 1, x + r); ++xx) {
+          const float g = ground[static_cast<std::size_t>(yy * sw + xx)];
+          if (!std::isnan(g)) heights.push_back(g);
+        }
+      if (heights.empty()) continue;
+      auto mid = heights.begin() + static_cast<std::ptrdiff_t>(heights.size() / 2);
+      std::nth_element(heights.begin(), mid, heights.end());
+      local_ground[cidx] = *mid;
+    }
+}
+
+// The ground of a whole keyframe: the median of its flat-class points (NaN without any).
+float keyframe_ground(std::span<const MapPoint> points, std::vector<float>& heights) {
+  float patch_ground = std::numeric_limits<float>::quiet_NaN();
+  heights.clear();
+  for (const MapPoint& m : points)
+    if (flat(m.cls)) heights.push_back(m.z);
+  if (!heights.empty()) {
+    auto mid = heights.begin() + static_cast<std::ptrdiff_t>(heights.size() / 2);
+    std::nth_element(heights.begin(), mid, heights.end());
+    patch_ground = *mid;
+  }
+  return patch_ground;
+}
+
+
 }  // namespace
 
 OrthoMap::OrthoMap(const OrthoMapParams& params) : p_(params), inv_res_(1.0 / params.resolution_m) {}
@@ -149,51 +201,11 @@ void OrthoMap::add_keyframe(std::uint32_t id, const Eigen::Isometry3d& map_from_
   const double gate = p_.elevation_gate_m;
   // The local ground under each cell (see OrthoMapParams::ground_check_m).
   const bool check = p_.ground_check_m > 0;
-  if (check) {
-    constexpr float kNone = std::numeric_limits<float>::quiet_NaN();
-    ground_.assign(w * h, kNone);
-    for (std::size_t cidx = 0; cidx < w * h; ++cidx) {
-      heights_.clear();
-      for (std::uint32_t k = start_[cidx]; k < start_[cidx + 1]; ++k)
-        if (flat(points[order_[k]].cls)) heights_.push_back(points[order_[k]].z);
-      if (heights_.size() < static_cast<std::size_t>(std::max(1, p_.min_keyframe_points))) continue;
-      auto mid = heights_.begin() + static_cast<std::ptrdiff_t>(heights_.size() / 2);
-      std::nth_element(heights_.begin(), mid, heights_.end());
-      ground_[cidx] = *mid;
-    }
-    local_ground_.assign(w * h, kNone);
-    const auto r = static_cast<std::ptrdiff_t>(std::max(0, p_.ground_window_cells));
-    const auto sw = static_cast<std::ptrdiff_t>(w), sh = static_cast<std::ptrdiff_t>(h);
-    for (std::ptrdiff_t y = 0; y < sh; ++y)
-      for (std::ptrdiff_t x = 0; x < sw; ++x) {
-        const auto cidx = static_cast<std::size_t>(y * sw + x);
-        if (start_[cidx] == start_[cidx + 1]) continue;
-        heights_.clear();
-        for (std::ptrdiff_t yy = std::max<std::ptrdiff_t>(0, y - r); yy <= std::min(sh - 1, y + r); ++yy)
-          for (std::ptrdiff_t xx = std::max<std::ptrdiff_t>(0, x - r); xx <= std::min(sw - 1, x + r); ++xx) {
-            const float g = ground_[static_cast<std::size_t>(yy * sw + xx)];
-            if (!std::isnan(g)) heights_.push_back(g);
-          }
-        if (heights_.empty()) continue;
-        auto mid = heights_.begin() + static_cast<std::ptrdiff_t>(heights_.size() / 2);
-        std::nth_element(heights_.begin(), mid, heights_.end());
-        local_ground_[cidx] = *mid;
-      }
-  }
+  if (check) local_ground_heights(points, start_, order_, w, h, p_, heights_, ground_, local_ground_);
   const auto ground_tol = static_cast<float>(p_.ground_check_m), raised_min = static_cast<float>(p_.raised_min_height_m);
   // Where no flat-class point lies within the window (inside a paved square or a big roof), the ground of
   // the whole keyframe: the median of its flat-class points.
-  float patch_ground = std::numeric_limits<float>::quiet_NaN();
-  if (check) {
-    heights_.clear();
-    for (const MapPoint& m : points)
-      if (flat(m.cls)) heights_.push_back(m.z);
-    if (!heights_.empty()) {
-      auto mid = heights_.begin() + static_cast<std::ptrdiff_t>(heights_.size() / 2);
-      std::nth_element(heights_.begin(), mid, heights_.end());
-      patch_ground = *mid;
-    }
-  }
+  const float patch_ground = check ? keyframe_ground(points, heights_) : std::numeric_limits<float>::quiet_NaN();
   for (std::size_t cidx = 0; cidx < w * h; ++cidx) {
     const std::uint32_t b = start_[cidx], e = start_[cidx + 1];
     if (e - b < static_cast<std::uint32_t>(std::max(1, p_.min_keyframe_points))) continue;  // too few to trust

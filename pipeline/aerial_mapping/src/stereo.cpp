@@ -142,11 +142,153 @@ struct DenseStereo::Impl {
   std::vector<std::int16_t> wa, wb, wt, pad16;  // edge guard: window minima and scratch
   std::vector<std::uint8_t> pad;
   std::vector<float> scratch;
+
+  // The steps of compute() on the pair's rectified geometry.
+  void rectify(const StereoImage& prev, const StereoImage& cur);
+  std::uint64_t match_inside_borders();  // valid disparities
+  std::uint64_t drop_edge_fattening();   // disparities dropped
+  void project(const StereoImage& cur, std::vector<MapPoint>& out) const;
 };
 
 DenseStereo::DenseStereo(const PinholeCamera& camera, const StereoParams& params)
     : impl_(std::make_unique<Impl>(camera, params)) {}
 DenseStereo::~DenseStereo() = default;
+
+// 1. Grey, rectified images of the pair, and where their content is valid (black borders dilated).
+void DenseStereo::Impl::rectify(const StereoImage& prev, const StereoImage& cur) {
+  const RectifiedGeometry& g = geometry;
+  const int w = g.width, h = g.height;
+  const std::size_t n = sz(w) * sz(h);
+  const std::size_t src = sz(camera.width) * sz(camera.height);
+  to_grey(cur.rgb, src, grey_ref.data());
+  to_grey(prev.rgb, src, grey_other.data());
+  for (auto* v : {&rect_ref, &rect_other, &invalid_ref, &invalid_other, &valid_ref, &valid_other, &tmp}) v->resize(n);
+  map_ref.resize(2 * n);
+  map_other.resize(2 * n);
+  raw.resize(n);
+  disp.resize(n);
+  detail::build_rectified(camera, g, g.rect_from_reference, max_r2, grey_ref.data(), map_ref.data(),
+                          map_ref.data() + n, rect_ref.data(), invalid_ref.data(), scratch.data());
+  detail::build_rectified(camera, g, g.rect_from_other, max_r2, grey_other.data(), map_other.data(),
+                          map_other.data() + n, rect_other.data(), invalid_other.data(), scratch.data());
+  detail::dilate_invalid(invalid_ref.data(), w, h, params.border_dilate_px, valid_ref.data(), tmp.data(), pad.data());
+  detail::dilate_invalid(invalid_other.data(), w, h, params.border_dilate_px, valid_other.data(), tmp.data(), pad.data());
+}
+
+// 2. Match, then drop disparities on or near the black border of either image (the other image is checked
+// at the matched column).
+std::uint64_t DenseStereo::Impl::match_inside_borders() {
+  const int w = geometry.width, h = geometry.height;
+  matcher.compute(rect_ref.data(), rect_other.data(), w, h, raw.data());
+  const std::int16_t filtered = matcher.filtered_value();
+  std::uint64_t valid = 0;
+  for (int y = 0; y < h; ++y) {
+    const std::size_t row = sz(y) * sz(w);
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = row + sz(x);
+      const std::int16_t d = raw[i];
+      bool ok = d != filtered && d > 0 && valid_ref[i] != 0;
+      if (ok) {
+        const int xo = x - (d + 8) / 16;
+        ok = xo >= 0 && valid_other[row + sz(xo)] != 0;
+      }
+      disp[i] = ok ? d : std::int16_t{-1};
+      valid += ok ? 1u : 0u;
+    }
+  }
+  return valid;
+}
+
+// 2b. Foreground fattening: near a depth edge the block straddles both surfaces and the one with more
+// texture wins, so the foreground's disparity spreads up to half a block over the background (in the
+// reference image where the background is visible in both views, in the other image's columns where the
+// background beside the foreground is occluded in the other view and the spread pixels border the
+// unmatched occlusion). Drop every disparity more than edge_jump_px above the smallest one within
+// edge_margin_px, in both images' columns.
+std::uint64_t DenseStereo::Impl::drop_edge_fattening() {
+  const int w = geometry.width, h = geometry.height;
+  const std::size_t n = sz(w) * sz(h);
+  const int r = params.edge_margin_px, jump = 16 * params.edge_jump_px;
+  wa.resize(n);
+  wb.resize(n);
+  wt.resize(n);
+  // wb: window minimum in the reference's columns; wa: the same in the other image's columns.
+  window_min(disp.data(), w, h, r, wt.data(), wb.data(), pad16.data());
+  std::fill(wa.begin(), wa.end(), kNoDisparity);
+  for (int y = 0; y < h; ++y) {
+    const std::size_t row = sz(y) * sz(w);
+    for (int x = 0; x < w; ++x) {
+      const std::int16_t d = disp[row + sz(x)];
+      if (d <= 0) continue;
+      std::int16_t& o = wa[row + sz(x - (d + 8) / 16)];  // the border mask keeps the column >= 0
+      o = std::min(o, d);
+    }
+  }
+  window_min(wa.data(), w, h, r, wt.data(), wa.data(), pad16.data());
+  std::uint64_t dropped = 0;
+  for (int y = 0; y < h; ++y) {
+    const std::size_t row = sz(y) * sz(w);
+    for (int x = 0; x < w; ++x) {
+      std::int16_t& d = disp[row + sz(x)];
+      if (d <= 0) continue;
+      if (d - wb[row + sz(x)] > jump || d - wa[row + sz(x - (d + 8) / 16)] > jump) {
+        d = -1;
+        ++dropped;
+      }
+    }
+  }
+  return dropped;
+}
+
+// 3. The disparities as coloured, classified map points.
+void DenseStereo::Impl::project(const StereoImage& cur, std::vector<MapPoint>& out) const {
+  const StereoParams& p = params;
+  const RectifiedGeometry& g = geometry;
+  const int w = g.width, h = g.height;
+  const std::size_t n = sz(w) * sz(h);
+  const Eigen::Matrix3d map_r = g.map_from_rect.linear();
+  const Eigen::Vector3d map_t = g.map_from_rect.translation();
+  const Eigen::Matrix3d cam_from_rect = g.rect_from_reference.transpose();
+  const double fb16 = g.f * g.baseline_m * 16.0;
+  const int cw = camera.width, ch = camera.height;
+  const std::size_t sw = sz(cw);
+  for (int y = 0; y < h; ++y) {
+    const std::size_t row = sz(y) * sz(w);
+    const double yn = (y - g.cy) / g.f;
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = row + sz(x);
+      const std::int16_t d = disp[i];
+      if (d <= 0) continue;
+      const double z = fb16 / d;
+      if (z < p.min_depth_m || z > p.max_depth_m) continue;
+      const Eigen::Vector3d xr((x - g.cx) / g.f * z, yn * z, z);
+      const Eigen::Vector3d xm = map_r * xr + map_t;
+      const Eigen::Vector3d xc = cam_from_rect * xr;
+      const float sx = map_ref[i], sy = map_ref[n + i];
+      const int x0 = std::min(static_cast<int>(sx), cw - 2), y0 = std::min(static_cast<int>(sy), ch - 2);
+      const float ax = sx - static_cast<float>(x0), ay = sy - static_cast<float>(y0);
+      const std::uint8_t* q = cur.rgb + 3 * (sz(y0) * sw + sz(x0));
+      const std::size_t down = 3 * sw;
+      std::uint8_t rgb[3];
+      for (std::size_t c = 0; c < 3; ++c) {
+        const float top = static_cast<float>(q[c]) + ax * static_cast<float>(q[c + 3] - q[c]);
+        const float bot = static_cast<float>(q[down + c]) + ax * static_cast<float>(q[down + c + 3] - q[down + c]);
+        rgb[c] = static_cast<std::uint8_t>(top + ay * (bot - top) + 0.5f);
+      }
+      const int nx = static_cast<int>(sx + 0.5f), ny = static_cast<int>(sy + 0.5f);
+      MapPoint pt{};
+      pt.x = static_cast<float>(xm.x());
+      pt.y = static_cast<float>(xm.y());
+      pt.z = static_cast<float>(xm.z());
+      pt.r = rgb[0];
+      pt.g = rgb[1];
+      pt.b = rgb[2];
+      pt.cls = cur.cls[sz(ny) * sw + sz(nx)];
+      pt.cos_axis = static_cast<float>(xc.z() / xc.norm());
+      out.push_back(pt);
+    }
+  }
+}
 
 Result<std::size_t> DenseStereo::compute(const StereoImage& prev, const StereoImage& cur, std::vector<MapPoint>& out,
                                          StereoTiming* timing) {
@@ -174,134 +316,22 @@ Result<std::size_t> DenseStereo::compute(const StereoImage& prev, const StereoIm
     return plan.error();
   }
   m.geometry = plan.value();
-  const RectifiedGeometry& g = m.geometry;
-  const int w = g.width, h = g.height;
-  const std::size_t n = sz(w) * sz(h);
 
-  // 1. Rectify.
-  const std::size_t src = sz(m.camera.width) * sz(m.camera.height);
-  to_grey(cur.rgb, src, m.grey_ref.data());
-  to_grey(prev.rgb, src, m.grey_other.data());
-  for (auto* v : {&m.rect_ref, &m.rect_other, &m.invalid_ref, &m.invalid_other, &m.valid_ref, &m.valid_other, &m.tmp}) v->resize(n);
-  m.map_ref.resize(2 * n);
-  m.map_other.resize(2 * n);
-  m.raw.resize(n);
-  m.disp.resize(n);
-  detail::build_rectified(m.camera, g, g.rect_from_reference, m.max_r2, m.grey_ref.data(), m.map_ref.data(),
-                          m.map_ref.data() + n, m.rect_ref.data(), m.invalid_ref.data(), m.scratch.data());
-  detail::build_rectified(m.camera, g, g.rect_from_other, m.max_r2, m.grey_other.data(), m.map_other.data(),
-                          m.map_other.data() + n, m.rect_other.data(), m.invalid_other.data(), m.scratch.data());
-  detail::dilate_invalid(m.invalid_ref.data(), w, h, p.border_dilate_px, m.valid_ref.data(), m.tmp.data(), m.pad.data());
-  detail::dilate_invalid(m.invalid_other.data(), w, h, p.border_dilate_px, m.valid_other.data(), m.tmp.data(), m.pad.data());
+  m.rectify(prev, cur);
   const auto t1 = std::chrono::steady_clock::now();
-
-  // 2. Match, then drop disparities on or near the black border of either image (the other image is
-  //    checked at the matched column).
-  m.matcher.compute(m.rect_ref.data(), m.rect_other.data(), w, h, m.raw.data());
-  const std::int16_t filtered = m.matcher.filtered_value();
-  std::uint64_t valid = 0;
-  for (int y = 0; y < h; ++y) {
-    const std::size_t row = sz(y) * sz(w);
-    for (int x = 0; x < w; ++x) {
-      const std::size_t i = row + sz(x);
-      const std::int16_t d = m.raw[i];
-      bool ok = d != filtered && d > 0 && m.valid_ref[i] != 0;
-      if (ok) {
-        const int xo = x - (d + 8) / 16;
-        ok = xo >= 0 && m.valid_other[row + sz(xo)] != 0;
-      }
-      m.disp[i] = ok ? d : std::int16_t{-1};
-      valid += ok ? 1u : 0u;
-    }
-  }
+  std::uint64_t valid = m.match_inside_borders();
   m.stats.lr_rejected = m.matcher.lr_rejected();
   m.stats.edge_rejected = 0;
   const auto t_edge = std::chrono::steady_clock::now();
   if (p.edge_margin_px > 0) {
-    // Foreground fattening: near a depth edge the block straddles both surfaces and the one with more
-    // texture wins, so the foreground's disparity spreads up to half a block over the background (in
-    // the reference image where the background is visible in both views, in the other image's columns
-    // where the background beside the foreground is occluded in the other view and the spread pixels
-    // border the unmatched occlusion). Drop every disparity more than edge_jump_px above the smallest
-    // one within edge_margin_px, in both images' columns.
-    const int r = p.edge_margin_px, jump = 16 * p.edge_jump_px;
-    m.wa.resize(n);
-    m.wb.resize(n);
-    m.wt.resize(n);
-    // wb: window minimum in the reference's columns; wa: the same in the other image's columns.
-    window_min(m.disp.data(), w, h, r, m.wt.data(), m.wb.data(), m.pad16.data());
-    std::fill(m.wa.begin(), m.wa.end(), kNoDisparity);
-    for (int y = 0; y < h; ++y) {
-      const std::size_t row = sz(y) * sz(w);
-      for (int x = 0; x < w; ++x) {
-        const std::int16_t d = m.disp[row + sz(x)];
-        if (d <= 0) continue;
-        std::int16_t& o = m.wa[row + sz(x - (d + 8) / 16)];  // the border mask keeps the column >= 0
-        o = std::min(o, d);
-      }
-    }
-    window_min(m.wa.data(), w, h, r, m.wt.data(), m.wa.data(), m.pad16.data());
-    std::uint64_t dropped = 0;
-    for (int y = 0; y < h; ++y) {
-      const std::size_t row = sz(y) * sz(w);
-      for (int x = 0; x < w; ++x) {
-        std::int16_t& d = m.disp[row + sz(x)];
-        if (d <= 0) continue;
-        if (d - m.wb[row + sz(x)] > jump || d - m.wa[row + sz(x - (d + 8) / 16)] > jump) {
-          d = -1;
-          ++dropped;
-        }
-      }
-    }
+    const std::uint64_t dropped = m.drop_edge_fattening();
     valid -= dropped;
     m.stats.edge_rejected = dropped;
   }
   m.stats.valid_disparities = valid;
   const auto t2 = std::chrono::steady_clock::now();
 
-  // 3. Project.
-  const Eigen::Matrix3d map_r = g.map_from_rect.linear();
-  const Eigen::Vector3d map_t = g.map_from_rect.translation();
-  const Eigen::Matrix3d cam_from_rect = g.rect_from_reference.transpose();
-  const double fb16 = g.f * g.baseline_m * 16.0;
-  const int cw = m.camera.width, ch = m.camera.height;
-  const std::size_t sw = sz(cw);
-  for (int y = 0; y < h; ++y) {
-    const std::size_t row = sz(y) * sz(w);
-    const double yn = (y - g.cy) / g.f;
-    for (int x = 0; x < w; ++x) {
-      const std::size_t i = row + sz(x);
-      const std::int16_t d = m.disp[i];
-      if (d <= 0) continue;
-      const double z = fb16 / d;
-      if (z < p.min_depth_m || z > p.max_depth_m) continue;
-      const Eigen::Vector3d xr((x - g.cx) / g.f * z, yn * z, z);
-      const Eigen::Vector3d xm = map_r * xr + map_t;
-      const Eigen::Vector3d xc = cam_from_rect * xr;
-      const float sx = m.map_ref[i], sy = m.map_ref[n + i];
-      const int x0 = std::min(static_cast<int>(sx), cw - 2), y0 = std::min(static_cast<int>(sy), ch - 2);
-      const float ax = sx - static_cast<float>(x0), ay = sy - static_cast<float>(y0);
-      const std::uint8_t* q = cur.rgb + 3 * (sz(y0) * sw + sz(x0));
-      const std::size_t down = 3 * sw;
-      std::uint8_t rgb[3];
-      for (std::size_t c = 0; c < 3; ++c) {
-        const float top = static_cast<float>(q[c]) + ax * static_cast<float>(q[c + 3] - q[c]);
-        const float bot = static_cast<float>(q[down + c]) + ax * static_cast<float>(q[down + c + 3] - q[down + c]);
-        rgb[c] = static_cast<std::uint8_t>(top + ay * (bot - top) + 0.5f);
-      }
-      const int nx = static_cast<int>(sx + 0.5f), ny = static_cast<int>(sy + 0.5f);
-      MapPoint pt{};
-      pt.x = static_cast<float>(xm.x());
-      pt.y = static_cast<float>(xm.y());
-      pt.z = static_cast<float>(xm.z());
-      pt.r = rgb[0];
-      pt.g = rgb[1];
-      pt.b = rgb[2];
-      pt.cls = cur.cls[sz(ny) * sw + sz(nx)];
-      pt.cos_axis = static_cast<float>(xc.z() / xc.norm());
-      out.push_back(pt);
-    }
-  }
+  m.project(cur, out);
   if (timing != nullptr) {
     timing->rectify_ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
     timing->match_ms = std::chrono::duration<double, std::milli>(t2 - t1).count();
