@@ -1,4 +1,4 @@
-// The simulated nadir camera: lens model, YAML loading, per-pixel ray table and the ray-cast renderer.
+// The simulated nadir camera: lens model, per-pixel ray table and the ray-cast renderer.
 #include "airground/sim/camera.hpp"
 
 #include <Eigen/Geometry>
@@ -11,131 +11,9 @@
 #include <string>
 #include <utility>
 
-#include "airground/platform/config.hpp"
-
 namespace ag::sim {
 
 namespace {
-
-constexpr CameraModel kDefaultModel{};
-constexpr CameraShading kDefaultShading{};
-
-constexpr ParamSpec kCameraParams[] = {
-    ParamSpec::integer("width", kDefaultModel.width, 16, 16384, "px", "image width"),
-    ParamSpec::integer("height", kDefaultModel.height, 16, 16384, "px", "image height"),
-    ParamSpec::real("fx", kDefaultModel.fx, 1.0, 1.0e5, "px", "focal length along x"),
-    ParamSpec::real("fy", kDefaultModel.fy, 1.0, 1.0e5, "px", "focal length along y"),
-    ParamSpec::real("cx", kDefaultModel.cx, -0.5, 16383.5, "px", "principal point x (pixel centres are integers)"),
-    ParamSpec::real("cy", kDefaultModel.cy, -0.5, 16383.5, "px", "principal point y"),
-    ParamSpec::real("k1", kDefaultModel.k1, -5.0, 5.0, "", "radial distortion r^2"),
-    ParamSpec::real("k2", kDefaultModel.k2, -5.0, 5.0, "", "radial distortion r^4"),
-    ParamSpec::real("p1", kDefaultModel.p1, -1.0, 1.0, "", "tangential distortion"),
-    ParamSpec::real("p2", kDefaultModel.p2, -1.0, 1.0, "", "tangential distortion"),
-    ParamSpec::real("k3", kDefaultModel.k3, -5.0, 5.0, "", "radial distortion r^6"),
-};
-constexpr ParamSpec kShadingParams[] = {
-    ParamSpec::real("sun_azimuth_deg", kDefaultShading.sun_azimuth_deg, 0.0, 360.0, "deg",
-                    "compass azimuth of the sun, clockwise from north"),
-    ParamSpec::real("sun_elevation_deg", kDefaultShading.sun_elevation_deg, 1.0, 90.0, "deg", "sun above the horizon"),
-    ParamSpec::real("ambient", kDefaultShading.ambient, 0.0, 1.0, "", "light share reaching shadowed surfaces"),
-    ParamSpec::boolean("shadows", kDefaultShading.shadows, "cast shadows (a second ray toward the sun)"),
-    ParamSpec::boolean("detail_texture", kDefaultShading.detail_texture, "world-fixed fine texture for stereo"),
-    ParamSpec::real("max_range_m", kDefaultShading.max_range_m, 1.0, 1.0e6, "m", "longest ray; beyond is sky"),
-};
-constexpr CameraSensor kDefaultSensor = CameraSensor::field();  // a section's defaults: the real camera
-constexpr ParamSpec kSensorParams[] = {
-    ParamSpec::boolean("noise", kDefaultSensor.noise, "photon shot and read noise, gain, 8-bit quantisation"),
-    ParamSpec::real("full_well_e", kDefaultSensor.full_well_e, 100.0, 1.0e6, "e-", "full-well capacity per sensor pixel"),
-    ParamSpec::real("read_noise_e", kDefaultSensor.read_noise_e, 0.0, 1000.0, "e-", "read (temporal dark) noise rms per sensor pixel"),
-    ParamSpec::integer("sensor_width_px", kDefaultSensor.sensor_width_px, 16, 16384, "px",
-                       "native sensor width; a rendered pixel averages (this / width)^2 sensor pixels"),
-    ParamSpec::real("full_scale_exposure_s", kDefaultSensor.full_scale_exposure_s, 1.0e-6, 1.0, "s",
-                    "exposure at gain 1 that fills the well on a white sun-lit surface"),
-    ParamSpec::boolean("auto_exposure", kDefaultSensor.auto_exposure, "exposure and gain follow the frame mean"),
-    ParamSpec::real("exposure_s", kDefaultSensor.exposure_s, 1.0e-6, 1.0, "s", "fixed exposure; the auto-exposure's first"),
-    ParamSpec::real("gain", kDefaultSensor.gain, 1.0, 256.0, "", "fixed gain; the auto-exposure's first"),
-    ParamSpec::real("exposure_min_s", kDefaultSensor.exposure_min_s, 1.0e-6, 1.0, "s", "shortest exposure"),
-    ParamSpec::real("exposure_max_s", kDefaultSensor.exposure_max_s, 1.0e-6, 1.0, "s", "longest exposure; then gain"),
-    ParamSpec::real("gain_max", kDefaultSensor.gain_max, 1.0, 256.0, "", "highest gain"),
-    ParamSpec::real("ae_target", kDefaultSensor.ae_target, 0.05, 0.95, "", "frame mean aimed at, share of full scale"),
-    ParamSpec::real("ae_speed", kDefaultSensor.ae_speed, 0.05, 1.0, "", "share of the log error corrected per frame"),
-    ParamSpec::real("ae_tolerance", kDefaultSensor.ae_tolerance, 0.0, 0.5, "", "relative error within which exposure is held"),
-    ParamSpec::boolean("motion_blur", kDefaultSensor.motion_blur, "average sub-exposure samples along the motion"),
-    ParamSpec::integer("blur_max_samples", kDefaultSensor.blur_max_samples, 1, 63, "", "most sub-exposure samples per pixel (odd)"),
-    ParamSpec::boolean("vignetting", kDefaultSensor.vignetting, "cos^k illumination falloff toward the corners"),
-    ParamSpec::real("corner_illumination", kDefaultSensor.corner_illumination, 0.05, 1.0, "",
-                    "illumination at the farthest image corner relative to the centre"),
-};
-constexpr ParamSection kCameraSchema[] = {
-    {"camera", kCameraParams, "simulated nadir camera intrinsics (OpenCV model)"},
-    {"camera_shading", kShadingParams, "lighting and texture of the simulated camera"},
-    {"camera_sensor", kSensorParams, "noise, exposure, motion blur and vignetting of the simulated camera"},
-};
-
-Result<Config> load_camera_config(std::string_view yaml, std::string_view origin) {
-  return Config::load_string(kCameraSchema, yaml, origin);
-}
-Result<Config> load_camera_config_file(const std::string& path) { return Config::load_file(kCameraSchema, path); }
-
-Result<CameraModel> model_from(const Result<Config>& cfg, std::string_view origin) {
-  if (!cfg) return cfg.error();
-  const SectionView s(cfg.value(), "camera");
-  CameraModel m;
-  m.width = static_cast<int>(s.integer("width"));
-  m.height = static_cast<int>(s.integer("height"));
-  m.fx = s.real("fx");
-  m.fy = s.real("fy");
-  m.cx = s.real("cx");
-  m.cy = s.real("cy");
-  m.k1 = s.real("k1");
-  m.k2 = s.real("k2");
-  m.p1 = s.real("p1");
-  m.p2 = s.real("p2");
-  m.k3 = s.real("k3");
-  if (auto st = m.check(); !st)
-    return Error::make(ErrorCode::kConfig, "config error: " + std::string(origin) + ": " + st.error().message);
-  return m;
-}
-
-Result<CameraShading> shading_from(const Result<Config>& cfg) {
-  if (!cfg) return cfg.error();
-  const SectionView s(cfg.value(), "camera_shading");
-  CameraShading sh;
-  sh.sun_azimuth_deg = s.real("sun_azimuth_deg");
-  sh.sun_elevation_deg = s.real("sun_elevation_deg");
-  sh.ambient = s.real("ambient");
-  sh.shadows = s.boolean("shadows");
-  sh.detail_texture = s.boolean("detail_texture");
-  sh.max_range_m = s.real("max_range_m");
-  return sh;
-}
-
-Result<CameraSensor> sensor_from(const Result<Config>& cfg, std::string_view origin) {
-  if (!cfg) return cfg.error();
-  const SectionView s(cfg.value(), "camera_sensor");
-  CameraSensor c;
-  c.noise = s.boolean("noise");
-  c.full_well_e = s.real("full_well_e");
-  c.read_noise_e = s.real("read_noise_e");
-  c.sensor_width_px = static_cast<int>(s.integer("sensor_width_px"));
-  c.full_scale_exposure_s = s.real("full_scale_exposure_s");
-  c.auto_exposure = s.boolean("auto_exposure");
-  c.exposure_s = s.real("exposure_s");
-  c.gain = s.real("gain");
-  c.exposure_min_s = s.real("exposure_min_s");
-  c.exposure_max_s = s.real("exposure_max_s");
-  c.gain_max = s.real("gain_max");
-  c.ae_target = s.real("ae_target");
-  c.ae_speed = s.real("ae_speed");
-  c.ae_tolerance = s.real("ae_tolerance");
-  c.motion_blur = s.boolean("motion_blur");
-  c.blur_max_samples = static_cast<int>(s.integer("blur_max_samples"));
-  c.vignetting = s.boolean("vignetting");
-  c.corner_illumination = s.real("corner_illumination");
-  if (auto st = c.check(); !st)
-    return Error::make(ErrorCode::kConfig, "config error: " + std::string(origin) + ": " + st.error().message);
-  return c;
-}
 
 // splitmix64's finaliser: a counter-based hash, so any pixel's noise is known without a sequence.
 inline std::uint64_t mix64(std::uint64_t z) noexcept {
@@ -239,6 +117,180 @@ inline float detail_factor(double a, double b, double footprint) noexcept {
   return f;
 }
 
+// The sub-exposure samples of a shot, evenly spread over the exposure: the camera moved and yawed; the
+// middle one (time 0) is the frame's pose and gives the class and depth.
+struct SubExposures {
+  int samples, mid;
+  std::array<Eigen::Vector3d, kMaxBlurSamples> eyes;
+  std::array<Eigen::Matrix3d, kMaxBlurSamples> rots;
+  double ex_lo = kInf, ex_hi = -kInf, ey_lo = kInf, ey_hi = -kInf, ez_lo = kInf, ez_hi = -kInf;  // the eyes' box
+
+  SubExposures(const CameraShot& shot, int blur_samples, const Eigen::Vector3d& eye, const Eigen::Matrix3d& map_from_camera) noexcept
+      : samples(std::clamp(blur_samples, 1, kMaxBlurSamples) | 1), mid(samples / 2) {
+    for (int i = 0; i < samples; ++i) {
+      const double tau = ((i + 0.5) / samples - 0.5) * shot.exposure.exposure_s;
+      const auto si = static_cast<std::size_t>(i);
+      if (i == mid) {
+        eyes[si] = eye;
+        rots[si] = map_from_camera;
+      } else {
+        eyes[si] = eye + tau * shot.velocity;
+        rots[si] = Eigen::AngleAxisd(shot.yaw_rate * tau, Eigen::Vector3d::UnitZ()).toRotationMatrix() * map_from_camera;
+      }
+    }
+    for (int i = 0; i < samples; ++i) {
+      const Eigen::Vector3d& e = eyes[static_cast<std::size_t>(i)];
+      ex_lo = std::min(ex_lo, e.x()), ex_hi = std::max(ex_hi, e.x());
+      ey_lo = std::min(ey_lo, e.y()), ey_hi = std::max(ey_hi, e.y());
+      ez_lo = std::min(ez_lo, e.z()), ez_hi = std::max(ez_hi, e.z());
+    }
+  }
+};
+
+// Albedo x texture x light of a hit, in rendered units (a lit flat top at its albedo); sun_ceiling(col, row)
+// is the renderer's height above which nothing can shade that cell.
+template <class SunCeiling>
+struct HitShading {
+  const World& world;
+  const HeightfieldRaycaster& rc;
+  const CameraShading& shading;
+  const Eigen::Vector3d& sun;
+  SunCeiling sun_ceiling;
+  double inv_res, zmax, sun_flat, pixel_angle;
+
+  void operator()(const RayHit& hit, const Eigen::Vector3d& dw, double rad[3]) const noexcept {
+    const GridGeometry& g = world.grid();
+    // Steps lower than kGroundStep (terrain sampled into flat cells, curbs) are shaded as ground.
+    const Eigen::Vector3d& p = hit.point;
+    const float s_hit = rc.surface(hit.col, hit.row);
+    bool wall = hit.vertical_face;
+    if (wall) {
+      const std::int32_t nc = hit.col + static_cast<std::int32_t>(hit.normal.x());
+      const std::int32_t nr = hit.row - static_cast<std::int32_t>(hit.normal.y());
+      wall = !g.contains(nc, nr) || s_hit - rc.surface(nc, nr) >= kGroundStep;
+    }
+    const Eigen::Vector3d normal = wall ? hit.normal : Eigen::Vector3d::UnitZ();
+
+    // Albedo: bilinear between cell centres on the ground and tops, blending only cells of about the
+    // same surface (a roof edge does not take the street's colour); the wall's own cell on sides.
+    double alb[3] = {0, 0, 0};
+    const cv::Vec3b& own = world.albedo.at<cv::Vec3b>(hit.row, hit.col);
+    if (wall) {
+      for (int k = 0; k < 3; ++k) alb[k] = own[k];
+    } else {
+      const double u = (p.x() - g.origin_x) * inv_res - 0.5, v = (g.origin_y - p.y()) * inv_res - 0.5;
+      const double fu = std::floor(u), fv = std::floor(v);
+      const double tu = u - fu, tv = v - fv;
+      const auto i0 = static_cast<std::int32_t>(fu), j0 = static_cast<std::int32_t>(fv);
+      double wsum = 0.0;
+      for (int dj = 0; dj < 2; ++dj) {
+        for (int di = 0; di < 2; ++di) {
+          const std::int32_t i = std::clamp(i0 + di, 0, g.width - 1), j = std::clamp(j0 + dj, 0, g.height - 1);
+          if (std::abs(rc.surface(i, j) - s_hit) > kGroundStep) continue;
+          const double wgt = (di != 0 ? tu : 1.0 - tu) * (dj != 0 ? tv : 1.0 - tv);
+          const cv::Vec3b& a = world.albedo.at<cv::Vec3b>(j, i);
+          for (int k = 0; k < 3; ++k) alb[k] += wgt * a[k];
+          wsum += wgt;
+        }
+      }
+      if (wsum > 1e-9) {
+        const double inv = 1.0 / wsum;
+        for (double& a : alb) a *= inv;
+      } else {
+        for (int k = 0; k < 3; ++k) alb[k] = own[k];
+      }
+    }
+
+    float factor = 1.0f;
+    if (shading.detail_texture) {
+      const double cos_view = std::max(0.2, std::abs(normal.dot(dw)));
+      const double footprint = hit.range * pixel_angle / cos_view;
+      if (!wall) {
+        factor = detail_factor(p.x(), p.y(), footprint);
+      } else if (normal.x() != 0.0) {
+        factor = detail_factor(p.y(), p.z(), footprint);
+      } else {
+        factor = detail_factor(p.x(), p.z(), footprint);
+      }
+    }
+
+    double light = shading.ambient;
+    const double cos_sun = normal.dot(sun);
+    if (cos_sun > 0.0) {
+      bool lit = true;
+      if (shading.shadows) {
+        // From just off the surface (above the cell's top for ground), toward the sun; skipped where
+        // the sun ceiling proves nothing can shade that height.
+        const Eigen::Vector3d from = wall ? Eigen::Vector3d(p + 1e-3 * normal)
+                                          : Eigen::Vector3d(p.x(), p.y(), static_cast<double>(s_hit) + kShadowBias);
+        if (from.z() < zmax && (!shading.shadow_culling || from.z() <= static_cast<double>(sun_ceiling(hit.col, hit.row))))
+          lit = !rc.cast(from, sun, (zmax - from.z()) / sun.z() + 1.0).hit;
+      }
+      if (lit) light += (1.0 - shading.ambient) * cos_sun;
+    }
+    const double gain_light = static_cast<double>(factor) * light / sun_flat;
+    for (int k = 0; k < 3; ++k) rad[k] = alb[k] * gain_light;
+  }
+};
+
+// The map-frame directions of a tile's rays (every sub-exposure sample's): whether all of them point down,
+// and the range of their horizontal offset per metre of descent.
+struct TileCone {
+  double kx_lo = kInf, kx_hi = -kInf, ky_lo = kInf, ky_hi = -kInf;
+  bool down = true;
+
+  void extend(const Eigen::Vector3d& d) noexcept {
+    if (!(d.z() < 0.0)) {
+      down = false;
+      return;
+    }
+    const double kx = d.x() / -d.z(), ky = d.y() / -d.z();
+    kx_lo = std::min(kx_lo, kx), kx_hi = std::max(kx_hi, kx);
+    ky_lo = std::min(ky_lo, ky), ky_hi = std::max(ky_hi, ky);
+  }
+};
+
+// A height above which no ray of the tile meets anything (+inf: nothing known): the cells under the cone
+// between the highest surface (or the eyes) and a height P are known from a block max query, and when
+// they are all lower than P, no ray of the tile meets anything above P.
+double tile_free_height(const TileCone& cone, const SubExposures& blur, const HeightfieldRaycaster& rc, const GridGeometry& g,
+                        double inv_res, double zmax) noexcept {
+  if (!cone.down || !(cone.kx_lo <= cone.kx_hi)) return kInf;
+  constexpr double kMargin = 0.01;  // [m] above the highest surface found
+  const double ztop = std::min(blur.ez_hi, zmax);
+  // Cells under the tile's rays while they descend from ztop to height z (one cell of margin): a ray
+  // point below zmax lies s = (its eye's height - its height) times its offset per metre away.
+  const double s_lo = std::max(0.0, blur.ez_lo - zmax);
+  const auto highest = [&](double z) noexcept {
+    const double s_hi = blur.ez_hi - z;
+    const double x_lo = blur.ex_lo + std::min(s_lo * cone.kx_lo, s_hi * cone.kx_lo);
+    const double x_hi = blur.ex_hi + std::max(s_lo * cone.kx_hi, s_hi * cone.kx_hi);
+    const double y_lo = blur.ey_lo + std::min(s_lo * cone.ky_lo, s_hi * cone.ky_lo);
+    const double y_hi = blur.ey_hi + std::max(s_lo * cone.ky_hi, s_hi * cone.ky_hi);
+    const double u_lo = (x_lo - g.origin_x) * inv_res, u_hi = (x_hi - g.origin_x) * inv_res;
+    const double v_lo = (g.origin_y - y_hi) * inv_res, v_hi = (g.origin_y - y_lo) * inv_res;
+    constexpr double kBig = 1e9;  // keeps the casts to int defined
+    return static_cast<double>(rc.max_surface_in(
+        static_cast<std::int32_t>(std::floor(std::clamp(u_lo, -kBig, kBig))) - 1,
+        static_cast<std::int32_t>(std::floor(std::clamp(v_lo, -kBig, kBig))) - 1,
+        static_cast<std::int32_t>(std::floor(std::clamp(u_hi, -kBig, kBig))) + 1,
+        static_cast<std::int32_t>(std::floor(std::clamp(v_hi, -kBig, kBig))) + 1));
+  };
+  double proven = ztop;  // nothing is above zmax, and no ray point is above its eye
+  double cand = highest(ztop) + kMargin;
+  for (int it = 0; it < 6 && cand < proven; ++it) {
+    const double m = highest(cand);
+    if (m < cand) {  // free down to cand; try just above what that region holds
+      proven = cand;
+      cand = m + kMargin;
+    } else {  // the region down to m + margin lies inside the one just searched: free down to there
+      proven = std::min(proven, m + kMargin);
+      break;
+    }
+  }
+  return proven;
+}
+
 }  // namespace
 
 CameraModel CameraModel::scaled(double factor) const {
@@ -272,24 +324,6 @@ Eigen::Matrix3d CameraModel::body_from_camera() noexcept {
   return m;
 }
 
-Result<CameraModel> CameraModel::load_string(std::string_view yaml, std::string_view origin) {
-  return model_from(load_camera_config(yaml, origin), origin);
-}
-Result<CameraModel> CameraModel::load_file(const std::string& path) {
-  return model_from(load_camera_config_file(path), path);
-}
-Result<CameraShading> CameraShading::load_string(std::string_view yaml, std::string_view origin) {
-  return shading_from(load_camera_config(yaml, origin));
-}
-Result<CameraShading> CameraShading::load_file(const std::string& path) {
-  return shading_from(load_camera_config_file(path));
-}
-Result<CameraSensor> CameraSensor::load_string(std::string_view yaml, std::string_view origin) {
-  return sensor_from(load_camera_config(yaml, origin), origin);
-}
-Result<CameraSensor> CameraSensor::load_file(const std::string& path) {
-  return sensor_from(load_camera_config_file(path), path);
-}
 
 Status CameraSensor::check() const {
   const auto bad = [](const std::string& what) { return Error::make(ErrorCode::kInvalidArgument, what); };
@@ -516,31 +550,11 @@ void CameraRenderer::render_rows(const Pose3& pose, int row_begin, int row_end, 
   const double sun_flat = shading_.ambient + (1.0 - shading_.ambient) * sun_.z();  // a lit flat top renders at albedo
   const double pixel_angle = 1.0 / std::max(model_.fx, model_.fy);
 
-  // Sub-exposure samples, evenly spread over the exposure: the camera moved and yawed; the middle one
-  // (time 0) is the frame's pose and gives the class and depth.
   const CameraShot& shot = out.shot;
-  const int samples = std::clamp(out.blur_samples, 1, kMaxBlurSamples) | 1;
-  const int mid = samples / 2;
-  std::array<Eigen::Vector3d, kMaxBlurSamples> eyes;
-  std::array<Eigen::Matrix3d, kMaxBlurSamples> rots;
-  for (int i = 0; i < samples; ++i) {
-    const double tau = ((i + 0.5) / samples - 0.5) * shot.exposure.exposure_s;
-    const auto si = static_cast<std::size_t>(i);
-    if (i == mid) {
-      eyes[si] = eye;
-      rots[si] = map_from_camera;
-    } else {
-      eyes[si] = eye + tau * shot.velocity;
-      rots[si] = Eigen::AngleAxisd(shot.yaw_rate * tau, Eigen::Vector3d::UnitZ()).toRotationMatrix() * map_from_camera;
-    }
-  }
-  double ex_lo = kInf, ex_hi = -kInf, ey_lo = kInf, ey_hi = -kInf, ez_lo = kInf, ez_hi = -kInf;
-  for (int i = 0; i < samples; ++i) {
-    const Eigen::Vector3d& e = eyes[static_cast<std::size_t>(i)];
-    ex_lo = std::min(ex_lo, e.x()), ex_hi = std::max(ex_hi, e.x());
-    ey_lo = std::min(ey_lo, e.y()), ey_hi = std::max(ey_hi, e.y());
-    ez_lo = std::min(ez_lo, e.z()), ez_hi = std::max(ez_hi, e.z());
-  }
+  const SubExposures blur(shot, out.blur_samples, eye, map_from_camera);
+  const int samples = blur.samples, mid = blur.mid;
+  const auto& eyes = blur.eyes;
+  const auto& rots = blur.rots;
 
   // The sensor: exposure factor (rendered value 255 = full well), noise in DN at gain 1 (variance
   // a * signal + b), vignetting. The ideal camera skips it all and rounds the rendered value.
@@ -553,107 +567,21 @@ void CameraRenderer::render_rows(const Pose3& pose, int row_begin, int row_end, 
   const bool ideal = !sensor_.noise && vignette_.empty() && samples == 1 && exposure_factor * gain == 1.0;
   const std::uint64_t frame_key = mix64(shot.seed ^ mix64(shot.frame + 0x632BE59BD9B4E019ULL));
   const double inv_samples = 1.0 / samples;
-
-  // Albedo x texture x light of a hit, in rendered units (a lit flat top at its albedo).
-  const auto shade = [&](const RayHit& hit, const Eigen::Vector3d& dw, double rad[3]) noexcept {
-    // Steps lower than kGroundStep (terrain sampled into flat cells, curbs) are shaded as ground.
-    const Eigen::Vector3d& p = hit.point;
-    const float s_hit = rc.surface(hit.col, hit.row);
-    bool wall = hit.vertical_face;
-    if (wall) {
-      const std::int32_t nc = hit.col + static_cast<std::int32_t>(hit.normal.x());
-      const std::int32_t nr = hit.row - static_cast<std::int32_t>(hit.normal.y());
-      wall = !g.contains(nc, nr) || s_hit - rc.surface(nc, nr) >= kGroundStep;
-    }
-    const Eigen::Vector3d normal = wall ? hit.normal : Eigen::Vector3d::UnitZ();
-
-    // Albedo: bilinear between cell centres on the ground and tops, blending only cells of about the
-    // same surface (a roof edge does not take the street's colour); the wall's own cell on sides.
-    double alb[3] = {0, 0, 0};
-    const cv::Vec3b& own = world_.albedo.at<cv::Vec3b>(hit.row, hit.col);
-    if (wall) {
-      for (int k = 0; k < 3; ++k) alb[k] = own[k];
-    } else {
-      const double u = (p.x() - g.origin_x) * inv_res - 0.5, v = (g.origin_y - p.y()) * inv_res - 0.5;
-      const double fu = std::floor(u), fv = std::floor(v);
-      const double tu = u - fu, tv = v - fv;
-      const auto i0 = static_cast<std::int32_t>(fu), j0 = static_cast<std::int32_t>(fv);
-      double wsum = 0.0;
-      for (int dj = 0; dj < 2; ++dj) {
-        for (int di = 0; di < 2; ++di) {
-          const std::int32_t i = std::clamp(i0 + di, 0, g.width - 1), j = std::clamp(j0 + dj, 0, g.height - 1);
-          if (std::abs(rc.surface(i, j) - s_hit) > kGroundStep) continue;
-          const double wgt = (di != 0 ? tu : 1.0 - tu) * (dj != 0 ? tv : 1.0 - tv);
-          const cv::Vec3b& a = world_.albedo.at<cv::Vec3b>(j, i);
-          for (int k = 0; k < 3; ++k) alb[k] += wgt * a[k];
-          wsum += wgt;
-        }
-      }
-      if (wsum > 1e-9) {
-        const double inv = 1.0 / wsum;
-        for (double& a : alb) a *= inv;
-      } else {
-        for (int k = 0; k < 3; ++k) alb[k] = own[k];
-      }
-    }
-
-    float factor = 1.0f;
-    if (shading_.detail_texture) {
-      const double cos_view = std::max(0.2, std::abs(normal.dot(dw)));
-      const double footprint = hit.range * pixel_angle / cos_view;
-      if (!wall) {
-        factor = detail_factor(p.x(), p.y(), footprint);
-      } else if (normal.x() != 0.0) {
-        factor = detail_factor(p.y(), p.z(), footprint);
-      } else {
-        factor = detail_factor(p.x(), p.z(), footprint);
-      }
-    }
-
-    double light = shading_.ambient;
-    const double cos_sun = normal.dot(sun_);
-    if (cos_sun > 0.0) {
-      bool lit = true;
-      if (shading_.shadows) {
-        // From just off the surface (above the cell's top for ground), toward the sun; skipped where
-        // the sun ceiling proves nothing can shade that height.
-        const Eigen::Vector3d from = wall ? Eigen::Vector3d(p + 1e-3 * normal)
-                                          : Eigen::Vector3d(p.x(), p.y(), static_cast<double>(s_hit) + kShadowBias);
-        if (from.z() < zmax && (!shading_.shadow_culling || from.z() <= static_cast<double>(sun_ceiling(hit.col, hit.row))))
-          lit = !rc.cast(from, sun_, (zmax - from.z()) / sun_.z() + 1.0).hit;
-      }
-      if (lit) light += (1.0 - shading_.ambient) * cos_sun;
-    }
-    const double gain_light = static_cast<double>(factor) * light / sun_flat;
-    for (int k = 0; k < 3; ++k) rad[k] = alb[k] * gain_light;
-  };
+  const HitShading shade{world_, rc, shading_, sun_,
+                         [this](std::int32_t col, std::int32_t row) noexcept { return sun_ceiling(col, row); },
+                         inv_res, zmax, sun_flat, pixel_angle};
 
   // Tiles of kTile x kTile pixels. All rays of a tile (every sub-exposure sample's) leave their eyes
-  // downward inside a thin cone: the cells under the cone between the highest surface (or the eyes) and
-  // a height P are known from a block max query; when they are all lower than P, no ray of the tile
-  // meets anything above P, and each cast starts at P (the same hits as a cast from the eye, most of the
-  // descent skipped).
+  // downward inside a thin cone; each cast starts at the height the tile's rays are proven free above
+  // (the same hits as a cast from the eye, most of the descent skipped).
   constexpr int kTile = 8;
-  constexpr double kMargin = 0.01;  // [m] above the highest surface found
-  const double ztop = std::min(ez_hi, zmax);
   std::array<Eigen::Vector3d, kTile * kTile> dirs;
   for (int tr = row_begin; tr < row_end; tr += kTile) {
     const int tr1 = std::min(tr + kTile, row_end);
     for (int tc = 0; tc < model_.width; tc += kTile) {
       const int tc1 = std::min(tc + kTile, model_.width);
       const int tw = tc1 - tc;
-      // Map-frame directions, and the tile's range of horizontal offset per metre of descent.
-      double kx_lo = kInf, kx_hi = -kInf, ky_lo = kInf, ky_hi = -kInf;
-      bool down = true;
-      const auto extend = [&](const Eigen::Vector3d& d) noexcept {
-        if (!(d.z() < 0.0)) {
-          down = false;
-          return;
-        }
-        const double kx = d.x() / -d.z(), ky = d.y() / -d.z();
-        kx_lo = std::min(kx_lo, kx), kx_hi = std::max(kx_hi, kx);
-        ky_lo = std::min(ky_lo, ky), ky_hi = std::max(ky_hi, ky);
-      };
+      TileCone cone;
       for (int r = tr; r < tr1; ++r) {
         const float* ray = rays_.data() + 3 * (static_cast<std::size_t>(r) * static_cast<std::size_t>(model_.width) +
                                                static_cast<std::size_t>(tc));
@@ -662,42 +590,12 @@ void CameraRenderer::render_rows(const Pose3& pose, int row_begin, int row_end, 
           Eigen::Vector3d& d = dirs[static_cast<std::size_t>((r - tr) * kTile + c)];
           if (!(dc.z() > 0.0)) continue;  // no ray: sky, not cast
           d = map_from_camera * dc;
-          extend(d);
+          cone.extend(d);
           for (int i = 0; i < samples; ++i)
-            if (i != mid) extend(rots[static_cast<std::size_t>(i)] * dc);
+            if (i != mid) cone.extend(rots[static_cast<std::size_t>(i)] * dc);
         }
       }
-      double proven = kInf;  // every ray of the tile is free above this height (+inf: nothing known)
-      if (shading_.tile_start && down && kx_lo <= kx_hi) {
-        // Cells under the tile's rays while they descend from ztop to height z (one cell of margin): a ray
-        // point below zmax lies s = (its eye's height - its height) times its offset per metre away.
-        const double s_lo = std::max(0.0, ez_lo - zmax);
-        const auto highest = [&](double z) noexcept {
-          const double s_hi = ez_hi - z;
-          const double x_lo = ex_lo + std::min(s_lo * kx_lo, s_hi * kx_lo), x_hi = ex_hi + std::max(s_lo * kx_hi, s_hi * kx_hi);
-          const double y_lo = ey_lo + std::min(s_lo * ky_lo, s_hi * ky_lo), y_hi = ey_hi + std::max(s_lo * ky_hi, s_hi * ky_hi);
-          const double u_lo = (x_lo - g.origin_x) * inv_res, u_hi = (x_hi - g.origin_x) * inv_res;
-          const double v_lo = (g.origin_y - y_hi) * inv_res, v_hi = (g.origin_y - y_lo) * inv_res;
-          constexpr double kBig = 1e9;  // keeps the casts to int defined
-          return static_cast<double>(rc.max_surface_in(
-              static_cast<std::int32_t>(std::floor(std::clamp(u_lo, -kBig, kBig))) - 1,
-              static_cast<std::int32_t>(std::floor(std::clamp(v_lo, -kBig, kBig))) - 1,
-              static_cast<std::int32_t>(std::floor(std::clamp(u_hi, -kBig, kBig))) + 1,
-              static_cast<std::int32_t>(std::floor(std::clamp(v_hi, -kBig, kBig))) + 1));
-        };
-        proven = ztop;  // nothing is above zmax, and no ray point is above its eye
-        double cand = highest(ztop) + kMargin;
-        for (int it = 0; it < 6 && cand < proven; ++it) {
-          const double m = highest(cand);
-          if (m < cand) {  // free down to cand; try just above what that region holds
-            proven = cand;
-            cand = m + kMargin;
-          } else {  // the region down to m + margin lies inside the one just searched: free down to there
-            proven = std::min(proven, m + kMargin);
-            break;
-          }
-        }
-      }
+      const double proven = shading_.tile_start ? tile_free_height(cone, blur, rc, g, inv_res, zmax) : kInf;
       const auto cast = [&](const Eigen::Vector3d& from, const Eigen::Vector3d& dw) noexcept {
         if (proven < from.z()) {
           const double t_start = std::max(0.0, (proven - from.z()) / dw.z() - 1e-6);
