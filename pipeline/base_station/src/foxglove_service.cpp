@@ -324,9 +324,9 @@ void FoxgloveService::publish_model(net::http::HttpServer& s, const MissionModel
   const fg::Color region_c{0.95, 0.75, 0.1, 0.6}, goal_c{0.1, 0.8, 0.9, 0.9}, visit_c{0.2, 0.85, 0.3, 0.9};
   const fg::Color fail_c{0.9, 0.15, 0.1, 0.9}, object_c{0.8, 0.3, 0.9, 0.5}, white{1, 1, 1, 1};
   fg::SceneEntity regions{"regions", "map", {}, {}, {}};
-  m.for_each_region([&](const RegionEntry& e) {
+  m.for_each_region([&](const mission::RegionRecord& e) {
     regions.spheres.push_back({{e.cx, e.cy, 0}, std::max(1.0, std::sqrt(static_cast<double>(e.cells)) * 0.5), region_c});
-    if ((e.flags & 1u) != 0) regions.spheres.push_back({{e.goal_x, e.goal_y, 0}, 0.6, goal_c});
+    if (e.goal_valid) regions.spheres.push_back({{e.goal_x, e.goal_y, 0}, 0.6, goal_c});
     regions.texts.push_back({{e.cx, e.cy, 1.5}, "R" + std::to_string(e.id), white, 12});
   });
   if (!regions.spheres.empty()) publish(s, channels_[kFgRegions], t, [&](std::uint64_t u) { return fg::scene_update(u, {regions}); });
@@ -336,19 +336,19 @@ void FoxgloveService::publish_model(net::http::HttpServer& s, const MissionModel
     const RobotView& r = m.robots[i];
     const std::string name = robot_frame(r.id);
     if (r.has_claim) {
-      const ClaimRecord& c = r.claim;
+      const mission::ClaimRecord& c = r.claim;
       fg::SceneEntity e{"claim/" + name, "map", {}, {}, {}};
-      const bool region = c.region_id != kNoRegion;
+      const bool region = c.region_id != mission::kNoRegion;
       if (region) e.spheres.push_back({{c.goal_x, c.goal_y, 0}, 1.0, goal_c});
       if (region && r.has_pose) e.lines.push_back({{{r.x, r.y, 0.2}, {c.goal_x, c.goal_y, 0.2}}, goal_c, 0.2, false});
       e.texts.push_back({{region ? c.goal_x : r.x, region ? c.goal_y : r.y, 2.0},
-                         name + " " + claim_state_name(c.state) + (region ? " R" + std::to_string(c.region_id) : std::string()), white, 12});
+                         name + " " + mission::to_string(c.state) + (region ? " R" + std::to_string(c.region_id) : std::string()), white, 12});
       claims.push_back(std::move(e));
     }
     if (r.has_visited && r.visited.count > 0) {
       fg::SceneEntity e{"visits/" + name, "map", {}, {}, {}};
       for (std::size_t k = 0; k < r.visited.count; ++k) {
-        const VisitedEntry& v = r.visited.entries[k];
+        const mission::VisitedEntry& v = r.visited.entries[k];
         e.spheres.push_back({{v.x, v.y, 0}, 0.8, visit_c});
         e.texts.push_back({{v.x, v.y, 1.0}, name + " visited R" + std::to_string(v.region_id), white, 10});
       }
@@ -363,7 +363,7 @@ void FoxgloveService::publish_model(net::http::HttpServer& s, const MissionModel
     const FailureView& f = m.failures[i];
     failures.spheres.push_back({{f.f.x, f.f.y, 0}, 1.0, fail_c});
     failures.texts.push_back({{f.f.x, f.f.y, 1.5},
-                              robot_frame(f.origin) + " R" + std::to_string(f.f.region_id) + " " + failure_reason_name(f.f.reason) + " x" +
+                              robot_frame(f.origin) + " R" + std::to_string(f.f.region_id) + " " + mission::to_string(f.f.reason) + " x" +
                                   std::to_string(f.f.attempts),
                               white, 11});
   }
@@ -372,7 +372,7 @@ void FoxgloveService::publish_model(net::http::HttpServer& s, const MissionModel
   fg::SceneEntity objects{"objects", "map", {}, {}, {}};
   const ClassTable& classes = ClassTable::builtin();
   for (std::size_t i = 0; i < m.object_count; ++i) {
-    const ObjectRecord& o = m.objects[i].o;
+    const mission::ObjectRecord& o = m.objects[i].o;
     const double sigma = std::sqrt(std::max({static_cast<double>(o.cxx), static_cast<double>(o.cyy), 0.0}));
     objects.spheres.push_back({{o.x, o.y, 0}, std::max(0.5, 4.0 * sigma), object_c});  // the 2-sigma circle
     const std::string cls = classes.valid_id(o.cls) ? classes.info(static_cast<ClassId>(o.cls)).name : "class " + std::to_string(o.cls);

@@ -4,6 +4,8 @@
 
 namespace ag::base {
 
+using mission::DecodeError;
+
 void MissionModel::reset() noexcept {
   robot_index.fill(-1);
   robot_count = 0;
@@ -82,33 +84,30 @@ RecordKind MissionModel::apply_record(const comms::GossipRecordMsg& rec, TimeNs 
   ++counters.records_in;
   const RecordKind kind = record_kind(rec.key.topic);
   const std::span<const std::uint8_t> in(rec.payload.data(), rec.size <= rec.payload.size() ? rec.size : rec.payload.size());
-  err = DecodeError::kNone;
+  err = DecodeError::kOk;
   const comms::RobotId origin = rec.key.origin;
   if (RobotView* r = robot(origin); r != nullptr && kind != RecordKind::kRegions) r->heard = t;
   switch (kind) {
     case RecordKind::kRegions: {
       ++counters.regions_in;
       const std::uint32_t b = comms::topic_index(rec.key.topic);
-      static RegionsBatch scratch;  // decoded in place: no large stack frame on the stage thread
-      RegionsBatch& tmp = b < kRegionBatches ? batches[b] : scratch;
-      RegionsBatch before{};
+      static mission::RegionBatch scratch;  // tmp's target for a batch beyond the table (refused below)
+      mission::RegionBatch& tmp = b < kRegionBatches ? batches[b] : scratch;
+      mission::RegionBatch before{};
       const bool had = b < kRegionBatches && batch_valid[b];
       if (had) before = tmp;
-      err = b >= kRegionBatches ? DecodeError::kValue : decode_regions(in, tmp);
-      if (err != DecodeError::kNone) {
-        if (had) tmp = before;
-        break;
-      }
-      if (tmp.version < regions_version) {
+      err = b >= kRegionBatches ? DecodeError::kValue : mission::decode_detailed(in, tmp);
+      if (err != DecodeError::kOk) break;  // the codec left tmp as it was
+      if (tmp.regions_version < regions_version) {
         ++counters.stale_regions;
         if (had) tmp = before;
         else batch_valid[b] = false;
         break;
       }
-      if (tmp.version > regions_version) {
+      if (tmp.regions_version > regions_version) {
         // A new version: batches of the older one stay shown until their replacements arrive, but
         // only up to the new batch count.
-        regions_version = tmp.version;
+        regions_version = tmp.regions_version;
       }
       regions_batches = tmp.batches;
       regions_origin = origin;
@@ -117,9 +116,9 @@ RecordKind MissionModel::apply_record(const comms::GossipRecordMsg& rec, TimeNs 
     }
     case RecordKind::kClaim: {
       ++counters.claims_in;
-      ClaimRecord c;
-      err = decode_claim(in, c);
-      if (err == DecodeError::kNone) {
+      mission::ClaimRecord c;
+      err = mission::decode_detailed(in, c);
+      if (err == DecodeError::kOk) {
         if (RobotView* r = robot(origin)) {
           r->claim = c;
           r->has_claim = true;
@@ -131,17 +130,15 @@ RecordKind MissionModel::apply_record(const comms::GossipRecordMsg& rec, TimeNs 
       ++counters.visited_in;
       RobotView* r = robot(origin);
       if (r == nullptr) break;
-      const VisitedRecord before = r->visited;
-      err = decode_visited(in, r->visited);
-      if (err == DecodeError::kNone) r->has_visited = true;
-      else r->visited = before;
+      err = mission::decode_detailed(in, r->visited);  // a bad record leaves the held one
+      if (err == DecodeError::kOk) r->has_visited = true;
       break;
     }
     case RecordKind::kFailure: {
       ++counters.failures_in;
-      FailureRecord f;
-      err = decode_failure(in, f);
-      if (err != DecodeError::kNone) break;
+      mission::FailureRecord f;
+      err = mission::decode_detailed(in, f);
+      if (err != DecodeError::kOk) break;
       std::uint32_t k = 0;
       while (k < failure_count && !(failures[k].origin == origin && failures[k].f.region_id == f.region_id)) ++k;
       if (k == failure_count) {
@@ -156,9 +153,9 @@ RecordKind MissionModel::apply_record(const comms::GossipRecordMsg& rec, TimeNs 
     }
     case RecordKind::kObject: {
       ++counters.objects_in;
-      ObjectRecord o;
-      err = decode_object(in, o);
-      if (err != DecodeError::kNone) break;
+      mission::ObjectRecord o;
+      err = mission::decode_detailed(in, o);
+      if (err != DecodeError::kOk) break;
       std::uint32_t k = 0;
       while (k < object_count && !(objects[k].origin == origin && objects[k].o.object_id == o.object_id)) ++k;
       if (k == object_count) {
@@ -174,7 +171,7 @@ RecordKind MissionModel::apply_record(const comms::GossipRecordMsg& rec, TimeNs 
     case RecordKind::kStatus:
     case RecordKind::kOther: ++counters.other_in; break;
   }
-  if (err != DecodeError::kNone) {
+  if (err != DecodeError::kOk) {
     ++counters.decode_errors;
     counters.last_error = static_cast<std::uint8_t>(err);
     counters.last_error_kind = static_cast<std::uint8_t>(kind);

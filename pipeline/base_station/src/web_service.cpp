@@ -108,9 +108,9 @@ std::string WebService::state_json(const MissionModel& m, TimeNs start, const ne
     }
     j.end_array();
     if (r.has_claim) {
-      const ClaimRecord& c = r.claim;
-      j.key("claim").begin_object().kv("state", claim_state_name(c.state)).ki("priority", c.priority);
-      if (c.region_id == kNoRegion) j.key("region").null();
+      const mission::ClaimRecord& c = r.claim;
+      j.key("claim").begin_object().kv("state", mission::to_string(c.state)).ki("priority", c.priority);
+      if (c.region_id == mission::kNoRegion) j.key("region").null();
       else j.ku("region", c.region_id);
       j.kn("gx", c.goal_x, 2).kn("gy", c.goal_y, 2).kn("sigma_m", c.pose_sigma_m, 2).end_object();
     }
@@ -123,15 +123,15 @@ std::string WebService::state_json(const MissionModel& m, TimeNs start, const ne
   }
   j.end_array();
   j.key("regions").begin_object().ku("version", m.regions_version).ki("origin", m.regions_origin).key("list").begin_array();
-  m.for_each_region([&](const RegionEntry& e) {
+  m.for_each_region([&](const mission::RegionRecord& e) {
     j.begin_object().ku("id", e.id).kn("cx", e.cx, 2).kn("cy", e.cy, 2).kn("gx", e.goal_x, 2).kn("gy", e.goal_y, 2);
-    j.ki("cells", e.cells).kb("goal_valid", (e.flags & 1u) != 0).end_object();
+    j.ki("cells", e.cells).kb("goal_valid", e.goal_valid).end_object();
   });
   j.end_array().end_object();
   j.key("failures").begin_array();
   for (std::size_t i = 0; i < m.failure_count; ++i) {
     const FailureView& f = m.failures[i];
-    j.begin_object().ki("robot", f.origin).ku("region", f.f.region_id).kv("reason", failure_reason_name(f.f.reason));
+    j.begin_object().ki("robot", f.origin).ku("region", f.f.region_id).kv("reason", mission::to_string(f.f.reason));
     j.ki("attempts", f.f.attempts).kn("x", f.f.x, 2).kn("y", f.f.y, 2).end_object();
   }
   j.end_array();
@@ -166,7 +166,7 @@ std::string WebService::state_json(const MissionModel& m, TimeNs start, const ne
   j.ku("tiles_held_back", k.tiles_held_back).ku("log_dropped", k.log_dropped).ku("tiles_held", tiles_held);
   j.ku("log_lines", log_lines).ku("log_errors", log_errors);
   if (k.decode_errors > 0)
-    j.kv("last_error", to_string(static_cast<DecodeError>(k.last_error))).kv("last_error_kind", to_string(static_cast<RecordKind>(k.last_error_kind)))
+    j.kv("last_error", error_name(static_cast<mission::DecodeError>(k.last_error))).kv("last_error_kind", to_string(static_cast<RecordKind>(k.last_error_kind)))
         .ki("last_error_origin", k.last_error_origin);
   j.end_object();
   if (http != nullptr) {
@@ -199,36 +199,36 @@ std::string WebService::log_line(const LogItem& it, TimeNs start) {
   j.ki("origin", r.key.origin).kv("kind", to_string(kind)).kv("topic", topic_hex(r.key.topic)).ku("seq", r.seq);
   j.kn("stamp", secs(r.stamp), 3).ku("size", r.size);
   const std::span<const std::uint8_t> in(r.payload.data(), std::min<std::size_t>(r.size, r.payload.size()));
-  DecodeError e = DecodeError::kNone;
+  mission::DecodeError e = mission::DecodeError::kOk;
   j.key("fields").begin_object();
   switch (kind) {
     case RecordKind::kRegions: {
-      RegionsBatch b;
-      e = decode_regions(in, b);
-      if (e != DecodeError::kNone) break;
-      j.ku("batch", comms::topic_index(r.key.topic)).ku("batches", b.batches).ku("version", b.version).key("regions").begin_array();
+      mission::RegionBatch b;
+      e = mission::decode_detailed(in, b);
+      if (e != mission::DecodeError::kOk) break;
+      j.ku("batch", comms::topic_index(r.key.topic)).ku("batches", b.batches).ku("version", b.regions_version).key("regions").begin_array();
       for (std::size_t i = 0; i < b.count; ++i) {
-        const RegionEntry& x = b.regions[i];
+        const mission::RegionRecord& x = b.regions[i];
         j.begin_object().ku("id", x.id).kn("cx", x.cx, 2).kn("cy", x.cy, 2).kn("gx", x.goal_x, 2).kn("gy", x.goal_y, 2).ki("cells", x.cells);
-        j.kb("goal_valid", (x.flags & 1u) != 0).end_object();
+        j.kb("goal_valid", x.goal_valid).end_object();
       }
       j.end_array();
       break;
     }
     case RecordKind::kClaim: {
-      ClaimRecord c;
-      e = decode_claim(in, c);
-      if (e != DecodeError::kNone) break;
-      j.kv("state", claim_state_name(c.state)).ki("priority", c.priority);
-      if (c.region_id == kNoRegion) j.key("region").null();
+      mission::ClaimRecord c;
+      e = mission::decode_detailed(in, c);
+      if (e != mission::DecodeError::kOk) break;
+      j.kv("state", mission::to_string(c.state)).ki("priority", c.priority);
+      if (c.region_id == mission::kNoRegion) j.key("region").null();
       else j.ku("region", c.region_id);
       j.kn("gx", c.goal_x, 2).kn("gy", c.goal_y, 2).kn("sigma_m", c.pose_sigma_m, 2);
       break;
     }
     case RecordKind::kVisited: {
-      VisitedRecord v;
-      e = decode_visited(in, v);
-      if (e != DecodeError::kNone) break;
+      mission::VisitedRecord v;
+      e = mission::decode_detailed(in, v);
+      if (e != mission::DecodeError::kOk) break;
       j.key("visited").begin_array();
       for (std::size_t i = 0; i < v.count; ++i)
         j.begin_object().ku("region", v.entries[i].region_id).kn("x", v.entries[i].x, 2).kn("y", v.entries[i].y, 2).end_object();
@@ -236,16 +236,16 @@ std::string WebService::log_line(const LogItem& it, TimeNs start) {
       break;
     }
     case RecordKind::kFailure: {
-      FailureRecord f;
-      e = decode_failure(in, f);
-      if (e != DecodeError::kNone) break;
-      j.ku("region", f.region_id).kv("reason", failure_reason_name(f.reason)).ki("attempts", f.attempts).kn("x", f.x, 2).kn("y", f.y, 2);
+      mission::FailureRecord f;
+      e = mission::decode_detailed(in, f);
+      if (e != mission::DecodeError::kOk) break;
+      j.ku("region", f.region_id).kv("reason", mission::to_string(f.reason)).ki("attempts", f.attempts).kn("x", f.x, 2).kn("y", f.y, 2);
       break;
     }
     case RecordKind::kObject: {
-      ObjectRecord o;
-      e = decode_object(in, o);
-      if (e != DecodeError::kNone) break;
+      mission::ObjectRecord o;
+      e = mission::decode_detailed(in, o);
+      if (e != mission::DecodeError::kOk) break;
       j.ku("id", o.object_id).ki("cls", o.cls).ki("detections", o.detections).kn("x", o.x, 2).kn("y", o.y, 2);
       j.kn("cxx", o.cxx, 3).kn("cxy", o.cxy, 3).kn("cyy", o.cyy, 3);
       break;
@@ -254,7 +254,7 @@ std::string WebService::log_line(const LogItem& it, TimeNs start) {
     case RecordKind::kOther: break;
   }
   j.end_object();
-  if (e != DecodeError::kNone) j.kv("error", to_string(e));
+  if (e != mission::DecodeError::kOk) j.kv("error", error_name(e));
   j.end_object();
   return s;
 }

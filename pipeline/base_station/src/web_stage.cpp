@@ -68,7 +68,7 @@ void WebStage::step(TimeNs now) noexcept {
     tiles_.pop();
   }
   while (comms::GossipRecordMsg* r = records_.front()) {
-    DecodeError err = DecodeError::kNone;
+    mission::DecodeError err = mission::DecodeError::kOk;
     m.apply_record(*r, now, err);
     if (!log_to_server_->try_emplace(now, *r)) ++m.counters.log_dropped;
     records_.pop();

@@ -27,6 +27,7 @@ DecodeError check_size(std::span<const std::uint8_t> in, std::size_t need) noexc
   if (in.size() > need) return DecodeError::kTrailing;
   return DecodeError::kOk;
 }
+DecodeError coarse(DecodeError e) noexcept { return e == DecodeError::kNotFinite ? DecodeError::kValue : e; }
 }  // namespace
 
 const char* to_string(DecodeError e) noexcept {
@@ -37,6 +38,7 @@ const char* to_string(DecodeError e) noexcept {
     case DecodeError::kFormat: return "unknown format";
     case DecodeError::kCount: return "count above the limit";
     case DecodeError::kValue: return "value out of range";
+    case DecodeError::kNotFinite: return "non-finite number";
   }
   return "?";
 }
@@ -83,7 +85,7 @@ std::size_t encode(const RegionBatch& b, std::span<std::uint8_t> out) noexcept {
   return w.ok() ? w.size() : 0;
 }
 
-DecodeError decode(std::span<const std::uint8_t> in, RegionBatch& b) noexcept {
+DecodeError decode_detailed(std::span<const std::uint8_t> in, RegionBatch& b) noexcept {
   if (in.size() < kRegionBatchHeader) return DecodeError::kTruncated;
   ByteReader r(in);
   std::uint8_t fmt = 0, count = 0;
@@ -96,6 +98,7 @@ DecodeError decode(std::span<const std::uint8_t> in, RegionBatch& b) noexcept {
   out.count = count;
   (void)r.u16(out.batches);
   (void)r.u32(out.regions_version);
+  if (out.batches == 0) return DecodeError::kValue;  // an empty set still travels as one empty batch
   for (std::size_t i = 0; i < count; ++i) {
     RegionRecord& e = out.regions[i];
     std::uint8_t flags = 0, reserved = 0;
@@ -108,10 +111,9 @@ DecodeError decode(std::span<const std::uint8_t> in, RegionBatch& b) noexcept {
     (void)r.u8(flags);
     (void)r.u8(reserved);
     e.goal_valid = (flags & 1u) != 0;
-    if (!finite(e.cx) || !finite(e.cy) || !finite(e.goal_x) || !finite(e.goal_y)) return DecodeError::kValue;
+    if (!finite(e.cx) || !finite(e.cy) || !finite(e.goal_x) || !finite(e.goal_y)) return DecodeError::kNotFinite;
   }
   if (!r.ok()) return DecodeError::kTruncated;
-  if (out.batches == 0) return DecodeError::kValue;  // an empty set still travels as one empty batch
   b = out;
   return DecodeError::kOk;
 }
@@ -130,7 +132,7 @@ std::size_t encode(const ClaimRecord& c, std::span<std::uint8_t> out) noexcept {
   return w.ok() ? w.size() : 0;
 }
 
-DecodeError decode(std::span<const std::uint8_t> in, ClaimRecord& c) noexcept {
+DecodeError decode_detailed(std::span<const std::uint8_t> in, ClaimRecord& c) noexcept {
   if (!in.empty() && in[0] != kRecordFormat) return DecodeError::kFormat;
   if (const DecodeError e = check_size(in, kClaimBytes); e != DecodeError::kOk) return e;
   ByteReader r(in);
@@ -144,8 +146,8 @@ DecodeError decode(std::span<const std::uint8_t> in, ClaimRecord& c) noexcept {
   (void)f32(r, out.goal_x);
   (void)f32(r, out.goal_y);
   (void)f32(r, out.pose_sigma_m);
+  if (!finite(out.goal_x) || !finite(out.goal_y) || !finite(out.pose_sigma_m)) return DecodeError::kNotFinite;
   if (state > static_cast<std::uint8_t>(ClaimState::kStopped)) return DecodeError::kValue;
-  if (!finite(out.goal_x) || !finite(out.goal_y) || !finite(out.pose_sigma_m)) return DecodeError::kValue;
   out.state = static_cast<ClaimState>(state);
   c = out;
   return DecodeError::kOk;
@@ -166,7 +168,7 @@ std::size_t encode(const VisitedRecord& v, std::span<std::uint8_t> out) noexcept
   return w.ok() ? w.size() : 0;
 }
 
-DecodeError decode(std::span<const std::uint8_t> in, VisitedRecord& v) noexcept {
+DecodeError decode_detailed(std::span<const std::uint8_t> in, VisitedRecord& v) noexcept {
   if (in.size() < kVisitedHeader) return DecodeError::kTruncated;
   ByteReader r(in);
   std::uint8_t fmt = 0, reserved = 0;
@@ -183,7 +185,7 @@ DecodeError decode(std::span<const std::uint8_t> in, VisitedRecord& v) noexcept 
     (void)r.u32(out.entries[i].region_id);
     (void)f32(r, out.entries[i].x);
     (void)f32(r, out.entries[i].y);
-    if (!finite(out.entries[i].x) || !finite(out.entries[i].y)) return DecodeError::kValue;
+    if (!finite(out.entries[i].x) || !finite(out.entries[i].y)) return DecodeError::kNotFinite;
   }
   if (!r.ok()) return DecodeError::kTruncated;
   v = out;
@@ -202,7 +204,7 @@ std::size_t encode(const FailureRecord& f, std::span<std::uint8_t> out) noexcept
   return w.ok() ? w.size() : 0;
 }
 
-DecodeError decode(std::span<const std::uint8_t> in, FailureRecord& f) noexcept {
+DecodeError decode_detailed(std::span<const std::uint8_t> in, FailureRecord& f) noexcept {
   if (!in.empty() && in[0] != kRecordFormat) return DecodeError::kFormat;
   if (const DecodeError e = check_size(in, kFailureBytes); e != DecodeError::kOk) return e;
   ByteReader r(in);
@@ -214,8 +216,8 @@ DecodeError decode(std::span<const std::uint8_t> in, FailureRecord& f) noexcept 
   (void)r.u32(out.region_id);
   (void)f32(r, out.x);
   (void)f32(r, out.y);
+  if (!finite(out.x) || !finite(out.y)) return DecodeError::kNotFinite;
   if (reason < 1 || reason > 4) return DecodeError::kValue;
-  if (!finite(out.x) || !finite(out.y)) return DecodeError::kValue;
   out.reason = static_cast<FailureReason>(reason);
   f = out;
   return DecodeError::kOk;
@@ -236,7 +238,7 @@ std::size_t encode(const ObjectRecord& o, std::span<std::uint8_t> out) noexcept 
   return w.ok() ? w.size() : 0;
 }
 
-DecodeError decode(std::span<const std::uint8_t> in, ObjectRecord& o) noexcept {
+DecodeError decode_detailed(std::span<const std::uint8_t> in, ObjectRecord& o) noexcept {
   if (!in.empty() && in[0] != kRecordFormat) return DecodeError::kFormat;
   if (const DecodeError e = check_size(in, kObjectBytes); e != DecodeError::kOk) return e;
   ByteReader r(in);
@@ -252,10 +254,16 @@ DecodeError decode(std::span<const std::uint8_t> in, ObjectRecord& o) noexcept {
   (void)f32(r, out.cxy);
   (void)f32(r, out.cyy);
   for (float v : {out.x, out.y, out.cxx, out.cxy, out.cyy})
-    if (!finite(v)) return DecodeError::kValue;
+    if (!finite(v)) return DecodeError::kNotFinite;
   if (out.cxx < 0 || out.cyy < 0) return DecodeError::kValue;
   o = out;
   return DecodeError::kOk;
 }
+
+DecodeError decode(std::span<const std::uint8_t> in, RegionBatch& b) noexcept { return coarse(decode_detailed(in, b)); }
+DecodeError decode(std::span<const std::uint8_t> in, ClaimRecord& c) noexcept { return coarse(decode_detailed(in, c)); }
+DecodeError decode(std::span<const std::uint8_t> in, VisitedRecord& v) noexcept { return coarse(decode_detailed(in, v)); }
+DecodeError decode(std::span<const std::uint8_t> in, FailureRecord& f) noexcept { return coarse(decode_detailed(in, f)); }
+DecodeError decode(std::span<const std::uint8_t> in, ObjectRecord& o) noexcept { return coarse(decode_detailed(in, o)); }
 
 }  // namespace ag::mission

@@ -1,7 +1,7 @@
 // A small mission played over an in-process hub to a base station role: a quadrotor (robot 0) that
 // publishes map tiles and regions, two ground robots (1, 2) that publish poses, a claim, visited and
-// failed goals — every record encoded as the mission records define them. The base is endpoint 3,
-// registered as the inproc link of the instance "base".
+// failed goals — every record encoded with the mission codec, as the robots encode them. The base is
+// endpoint 3, registered as the inproc link of the instance "base".
 #pragma once
 
 #include <gtest/gtest.h>
@@ -14,13 +14,13 @@
 #include <string>
 #include <vector>
 
-#include "airground/base_station/records.hpp"
 #include "airground/comms/gossip_node.hpp"
 #include "airground/comms/link_hub.hpp"
 #include "airground/comms/record_store.hpp"
 #include "airground/comms/stage.hpp"
 #include "airground/comms/tile_codec.hpp"
 #include "airground/comms/wire.hpp"
+#include "airground/mission/records.hpp"
 
 namespace ag::base::test {
 
@@ -111,31 +111,31 @@ class MissionPlayer {
   }
 
   // The mission's regions, claim, visited and failed goal.
-  static RegionsBatch regions() {
-    RegionsBatch b;
+  static mission::RegionBatch regions() {
+    mission::RegionBatch b;
     b.count = 3;
     b.batches = 1;
-    b.version = 1;
-    b.regions[0] = RegionEntry{11, 20.0f, 40.0f, 21.0f, 38.0f, 40, 1};
-    b.regions[1] = RegionEntry{12, 45.0f, 15.0f, 44.0f, 13.0f, 24, 1};
-    b.regions[2] = RegionEntry{13, 10.0f, 52.0f, 11.0f, 50.0f, 30, 1};
+    b.regions_version = 1;
+    b.regions[0] = mission::RegionRecord{11, 20.0f, 40.0f, 21.0f, 38.0f, 40, true};
+    b.regions[1] = mission::RegionRecord{12, 45.0f, 15.0f, 44.0f, 13.0f, 24, true};
+    b.regions[2] = mission::RegionRecord{13, 10.0f, 52.0f, 11.0f, 50.0f, 30, true};
     return b;
   }
   void publish_mission_records(TimeNs stamp) {
     std::uint8_t buf[1024];
-    std::size_t n = encode_regions(regions(), buf);
-    record(0, comms::make_topic(comms::TopicKind::kRegions, 0), {buf, n}, stamp);
-    n = encode_claim(ClaimRecord{1, 1, 11, 21.0f, 38.0f, 0.6f}, buf);
-    record(1, comms::make_topic(comms::TopicKind::kClaims, 0), {buf, n}, stamp);
-    VisitedRecord v;
+    std::size_t n = mission::encode(regions(), buf);
+    record(0, mission::regions_topic(0), {buf, n}, stamp);
+    n = mission::encode(mission::ClaimRecord{mission::ClaimState::kGoing, 1, 11, 21.0f, 38.0f, 0.6f}, buf);
+    record(1, mission::kClaimTopic, {buf, n}, stamp);
+    mission::VisitedRecord v;
     v.count = 1;
-    v.entries[0] = VisitedEntry{12, 44.2f, 13.1f};
-    n = encode_visited(v, buf);
-    record(2, comms::make_topic(comms::TopicKind::kClaims, 1), {buf, n}, stamp);
-    n = encode_failure(FailureRecord{1, 2, 13, 11.0f, 50.0f}, buf);
-    record(2, comms::make_topic(comms::TopicKind::kFailures, 13), {buf, n}, stamp);
-    n = encode_object(ObjectRecord{5, 4, 1, 11.0f, 42.0f, 0.2f, 0.01f, 0.3f}, buf);
-    record(1, comms::make_topic(comms::TopicKind::kApp, kObjectIndexFlag | 1), {buf, n}, stamp);
+    v.entries[0] = mission::VisitedEntry{12, 44.2f, 13.1f};
+    n = mission::encode(v, buf);
+    record(2, mission::kVisitedTopic, {buf, n}, stamp);
+    n = mission::encode(mission::FailureRecord{mission::FailureReason::kNoRoute, 2, 13, 11.0f, 50.0f}, buf);
+    record(2, mission::failure_topic(13), {buf, n}, stamp);
+    n = mission::encode(mission::ObjectRecord{5, 4, 1, 11.0f, 42.0f, 0.2f, 0.01f, 0.3f}, buf);
+    record(1, mission::object_topic(1), {buf, n}, stamp);
   }
   // Where the ground robots are at time t [s] of the mission (they drive slowly, then stand).
   static Pose2 robot_pose(int robot, double t) {

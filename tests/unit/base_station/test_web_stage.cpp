@@ -57,7 +57,7 @@ TEST(WebStage, TheMissionReachesTheModelTheApiTheWebSocketAndTheLog) {
   EXPECT_EQ(m.failure_count, 1U);
   EXPECT_EQ(m.object_count, 1U);
   int regions = 0;
-  m.for_each_region([&](const RegionEntry&) { ++regions; });
+  m.for_each_region([&](const mission::RegionRecord&) { ++regions; });
   EXPECT_EQ(regions, 3);
   EXPECT_EQ(m.counters.decode_errors, 0U);
   EXPECT_TRUE(m.has_comms);

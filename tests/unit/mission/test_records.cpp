@@ -163,6 +163,57 @@ TEST(Records, RandomBytesNeverCrashAndAFailedDecodeLeavesTheOutputAlone) {
   SUCCEED() << ok << " random payloads happened to decode";
 }
 
+// decode_detailed() (the base station's) is decode() (the robots') but for naming a non-finite float.
+TEST(Records, DetailedDecodeDiffersOnlyInNamingANonFiniteFloat) {
+  Buf buf{};
+  ClaimRecord c{ClaimState::kGoing, 1, 1, std::numeric_limits<float>::infinity(), 0, 0};
+  std::size_t n = encode(c, buf);
+  ClaimRecord co;
+  EXPECT_EQ(decode(std::span<const std::uint8_t>(buf.data(), n), co), DecodeError::kValue);
+  EXPECT_EQ(decode_detailed(std::span<const std::uint8_t>(buf.data(), n), co), DecodeError::kNotFinite);
+  EXPECT_STREQ(to_string(DecodeError::kNotFinite), "non-finite number");
+  std::mt19937 rng(5);
+  const auto same = [](DecodeError coarse, DecodeError detailed) {
+    return coarse == (detailed == DecodeError::kNotFinite ? DecodeError::kValue : detailed);
+  };
+  for (int it = 0; it < 20000; ++it) {
+    for (std::size_t i = 0; i < 1024; ++i) buf[i] = static_cast<std::uint8_t>(rng());
+    buf[0] = kRecordFormat;
+    const auto k = static_cast<std::uint8_t>(rng() % 4);
+    switch (it % 6) {  // mostly the exact sizes, so that the values get checked
+      case 0: n = kClaimBytes; break;
+      case 1: n = kFailureBytes; break;
+      case 2: n = kObjectBytes; break;
+      case 3:
+        buf[1] = k;
+        n = kRegionBatchHeader + kRegionEntryBytes * k;
+        break;
+      case 4:
+        buf[2] = k;
+        buf[3] = 0;
+        n = kVisitedHeader + kVisitedEntryBytes * k;
+        break;
+      default: n = rng() % 1025;
+    }
+    const std::span<const std::uint8_t> in(buf.data(), n);
+    RegionBatch b1, b2;
+    EXPECT_TRUE(same(decode(in, b1), decode_detailed(in, b2)));
+    EXPECT_EQ(b1.regions_version, b2.regions_version);
+    ClaimRecord c1, c2;
+    EXPECT_TRUE(same(decode(in, c1), decode_detailed(in, c2)));
+    EXPECT_EQ(c1, c2);
+    VisitedRecord v1, v2;
+    EXPECT_TRUE(same(decode(in, v1), decode_detailed(in, v2)));
+    EXPECT_EQ(v1.count, v2.count);
+    FailureRecord f1, f2;
+    EXPECT_TRUE(same(decode(in, f1), decode_detailed(in, f2)));
+    EXPECT_EQ(f1, f2);
+    ObjectRecord o1, o2;
+    EXPECT_TRUE(same(decode(in, o1), decode_detailed(in, o2)));
+    EXPECT_EQ(o1, o2);
+  }
+}
+
 TEST(Records, Topics) {
   EXPECT_EQ(comms::topic_kind(regions_topic(2)), comms::TopicKind::kRegions);
   EXPECT_EQ(comms::topic_index(regions_topic(2)), 2U);

@@ -34,19 +34,19 @@ struct RobotView {
   std::uint32_t trail_head{0}, trail_count{0};  // ring: oldest at (head - count)
   std::array<TrailPoint, kTrailPoints> trail{};
   bool has_claim{false};
-  ClaimRecord claim;
+  mission::ClaimRecord claim;
   bool has_visited{false};
-  VisitedRecord visited;
+  mission::VisitedRecord visited;
 };
 
 struct FailureView {
   comms::RobotId origin{comms::kNoRobot};
   TimeNs received{0};
-  FailureRecord f;
+  mission::FailureRecord f;
 };
 struct ObjectView {
   comms::RobotId origin{comms::kNoRobot};
-  ObjectRecord o;
+  mission::ObjectRecord o;
 };
 
 struct ModelCounters {
@@ -58,7 +58,7 @@ struct ModelCounters {
   std::uint64_t tiles_held_back{0};   // steps where the tile hand-over to the server was full
   std::uint64_t log_dropped{0};       // log entries the writer thread could not take (the model has them)
   std::uint8_t last_error_kind{0};    // RecordKind of the last record that failed to decode
-  std::uint8_t last_error{0};         // its DecodeError
+  std::uint8_t last_error{0};         // its mission::DecodeError
   comms::RobotId last_error_origin{comms::kNoRobot};
 };
 
@@ -72,7 +72,7 @@ struct MissionModel {
   std::uint32_t regions_version{0};
   std::uint16_t regions_batches{0};
   std::array<bool, kRegionBatches> batch_valid{};
-  std::array<RegionsBatch, kRegionBatches> batches{};
+  std::array<mission::RegionBatch, kRegionBatches> batches{};
   std::uint32_t failure_count{0};
   std::array<FailureView, kModelFailures> failures{};
   std::uint32_t object_count{0};
@@ -89,7 +89,7 @@ struct MissionModel {
   // Applies the team's latest poses (new stamps extend the trails). Returns whether anything changed.
   bool apply_poses(const comms::TeamPosesMsg& m, TimeNs now) noexcept;
   // Applies one gossip record; returns its kind and sets `err` when it did not decode (counted).
-  RecordKind apply_record(const comms::GossipRecordMsg& r, TimeNs now, DecodeError& err) noexcept;
+  RecordKind apply_record(const comms::GossipRecordMsg& r, TimeNs now, mission::DecodeError& err) noexcept;
   void apply_comms(const comms::CommsStatsMsg& m) noexcept;
   // Regions currently shown: every valid batch below the held version's batch count.
   template <typename F>

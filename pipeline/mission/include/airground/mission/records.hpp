@@ -3,7 +3,8 @@
 // All little-endian, fixed layouts, each payload <= comms::kGossipPayloadMax. Encoding writes into a
 // caller's buffer and returns the bytes written (0: the buffer is too small or the content is out of
 // range); decoding checks every length, count, enum and float and returns a DecodeError instead of
-// reading past the end: a malformed payload is an error the caller counts, never a crash.
+// reading past the end: a malformed payload is an error the caller counts, never a crash. The one codec
+// of these records: the robots' stages and the base station (pipeline/base_station) both decode with it.
 #pragma once
 
 #include <array>
@@ -34,9 +35,13 @@ enum class DecodeError : std::uint8_t {
   kTrailing = 2,    // longer than its count says
   kFormat = 3,      // unknown format byte
   kCount = 4,       // count above the record's limit
-  kValue = 5,       // an enum out of range, a non-finite float
+  kValue = 5,       // an enum out of range, zero batches, a negative variance (decode(): a non-finite float too)
+  kNotFinite = 6,   // a non-finite float, told apart by decode_detailed() only
 };
 const char* to_string(DecodeError e) noexcept;
+// decode() is what the robots use: they only count a bad record, so a non-finite float is one more kValue.
+// decode_detailed() is the same decoder with kNotFinite kept apart, for the base station, which names the
+// error in its log and page.
 
 // ---------------------------------------------------------------- regions (kRegions, index = batch)
 struct RegionRecord {
@@ -55,6 +60,7 @@ struct RegionBatch {
 };
 std::size_t encode(const RegionBatch& b, std::span<std::uint8_t> out) noexcept;
 DecodeError decode(std::span<const std::uint8_t> in, RegionBatch& b) noexcept;
+DecodeError decode_detailed(std::span<const std::uint8_t> in, RegionBatch& b) noexcept;
 constexpr comms::Topic regions_topic(std::uint32_t batch) noexcept { return comms::make_topic(comms::TopicKind::kRegions, batch); }
 
 // ---------------------------------------------------------------- claim (kClaims, index 0)
@@ -70,6 +76,7 @@ struct ClaimRecord {
 };
 std::size_t encode(const ClaimRecord& c, std::span<std::uint8_t> out) noexcept;
 DecodeError decode(std::span<const std::uint8_t> in, ClaimRecord& c) noexcept;
+DecodeError decode_detailed(std::span<const std::uint8_t> in, ClaimRecord& c) noexcept;
 inline constexpr comms::Topic kClaimTopic = comms::make_topic(comms::TopicKind::kClaims, 0);
 
 // ---------------------------------------------------------------- visited (kClaims, index 1)
@@ -84,6 +91,7 @@ struct VisitedRecord {
 };
 std::size_t encode(const VisitedRecord& v, std::span<std::uint8_t> out) noexcept;
 DecodeError decode(std::span<const std::uint8_t> in, VisitedRecord& v) noexcept;
+DecodeError decode_detailed(std::span<const std::uint8_t> in, VisitedRecord& v) noexcept;
 inline constexpr comms::Topic kVisitedTopic = comms::make_topic(comms::TopicKind::kClaims, 1);
 
 // ---------------------------------------------------------------- failure (kFailures, index = region & 0xFFFFFF)
@@ -98,6 +106,7 @@ struct FailureRecord {
 };
 std::size_t encode(const FailureRecord& f, std::span<std::uint8_t> out) noexcept;
 DecodeError decode(std::span<const std::uint8_t> in, FailureRecord& f) noexcept;
+DecodeError decode_detailed(std::span<const std::uint8_t> in, FailureRecord& f) noexcept;
 constexpr comms::Topic failure_topic(std::uint32_t region_id) noexcept {
   return comms::make_topic(comms::TopicKind::kFailures, region_id & 0xFFFFFFu);
 }
@@ -113,6 +122,7 @@ struct ObjectRecord {
 };
 std::size_t encode(const ObjectRecord& o, std::span<std::uint8_t> out) noexcept;
 DecodeError decode(std::span<const std::uint8_t> in, ObjectRecord& o) noexcept;
+DecodeError decode_detailed(std::span<const std::uint8_t> in, ObjectRecord& o) noexcept;
 constexpr comms::Topic object_topic(std::uint32_t n) noexcept {
   return comms::make_topic(comms::TopicKind::kApp, kObjectIndexBase | (n & 0xFFFFFu));
 }
