@@ -14,7 +14,7 @@ constexpr StageSpec kBaseStages[] = {
     {"status", &StatusStage::make, 1.0, 2'000, 10, -1, StatusStage::kParams, "scheduler counters, once a second"},
     {"comms", &comms::CommsStage::make, 20.0, 5'000, 25, -1, comms::CommsStage::kParams,
      "gossip: the team's latest records (poses, map tiles, claims, failures) over the radio mesh"},
-    {"web", &base::WebStage::make, 10.0, 2'000, 5, -1, base::WebStage::kParams,
+    {"web", &base_station::WebStage::make, 10.0, 2'000, 5, -1, base_station::WebStage::kParams,
      "live page (HTTP + WebSocket on its own thread) and the mission log: map, robots, regions, claims, comms"},
 };
 static_assert(role_table_ok(kBaseStages));

@@ -3,12 +3,12 @@
 
 #include "airground/comms/stage.hpp"
 #include "airground/drivers/base/base_stage.hpp"
-#include "airground/drivers/ouster/stage.hpp"
+#include "airground/drivers/lidar/ouster/stage.hpp"
 
 #include "airground/localization/stage.hpp"
 #include "airground/mission/stages.hpp"
 #include "airground/planning/stages.hpp"
-#include "airground/drivers/recording/recorder_stage.hpp"
+#include "airground/drivers/recording/recorder/recorder_stage.hpp"
 #include "airground/platform/status_stage.hpp"
 
 namespace ag {

@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "airground/drivers/ouster/capture_info.hpp"
+#include "airground/drivers/lidar/ouster/capture_info.hpp"
 
 namespace fs = std::filesystem;
 

@@ -13,7 +13,7 @@
 #include <thread>
 #include <vector>
 
-#include "airground/core/classes.hpp"
+#include "airground/messages/classes.hpp"
 #include "airground/segmentation/erfnet.hpp"
 #include "airground/sim/world_png.hpp"
 

@@ -15,7 +15,7 @@
 #include <unistd.h>
 #include <vector>
 
-#include "airground/core/camera.hpp"
+#include "airground/messages/camera.hpp"
 #include "airground/sim/camera.hpp"
 #include "airground/sim/eval_vo.hpp"
 #include "airground/sim/plot.hpp"

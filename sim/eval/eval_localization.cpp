@@ -14,12 +14,12 @@
 #include <fstream>
 #include <sstream>
 
-#include "airground/core/messages.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/platform/config.hpp"
 #include "airground/platform/log.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "airground/sim/diff_drive.hpp"
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/rng.hpp"
 #include "airground/sim/scripted_driver.hpp"
 #include "airground/sim/world_png.hpp"

@@ -14,8 +14,8 @@
 #include <yaml-cpp/yaml.h>
 
 #include "airground/aerial_mapping/stages.hpp"
-#include "airground/core/classes.hpp"
-#include "airground/core/pose_math.hpp"
+#include "airground/messages/classes.hpp"
+#include "airground/messages/pose_math.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "airground/sim/map_export.hpp"
 #include "airground/sim/model_params.hpp"

@@ -12,7 +12,7 @@
 
 #include "airground/aerial_mapping/stages.hpp"
 #include "airground/comms/stage.hpp"
-#include "airground/core/messages.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/mission/mission_file.hpp"
 #include "airground/mission/stages.hpp"
 #include "airground/platform/role_instance.hpp"

@@ -11,14 +11,14 @@
 #include <memory>
 #include <span>
 
-#include "airground/core/messages.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/planning/drive_control.hpp"
 #include "airground/planning/grid_reference.hpp"
 #include "airground/planning/roadmap.hpp"
 #include "airground/planning/stages.hpp"
 #include "airground/platform/config.hpp"
 #include "airground/sim/diff_drive.hpp"
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/rng.hpp"
 #include "airground/sim/runner.hpp"
 

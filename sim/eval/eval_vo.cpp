@@ -15,8 +15,8 @@
 #include <memory>
 #include <optional>
 
-#include "airground/core/camera.hpp"
-#include "airground/core/pose_math.hpp"
+#include "airground/messages/camera.hpp"
+#include "airground/messages/pose_math.hpp"
 #include "airground/platform/clock.hpp"
 #include "airground/platform/time.hpp"
 #include "airground/sim/attitude.hpp"

@@ -14,7 +14,7 @@
 #include <filesystem>
 #include <limits>
 
-#include "airground/core/classes.hpp"
+#include "airground/messages/classes.hpp"
 #include "airground/sim/world_png.hpp"
 
 namespace ag::sim {

@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "airground/aerial_mapping/ortho_map.hpp"
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/mission/messages.hpp"
 #include "airground/mission/records.hpp"
 #include "airground/platform/result.hpp"

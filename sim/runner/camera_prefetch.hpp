@@ -7,7 +7,7 @@
 #include <mutex>
 #include <thread>
 
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/time.hpp"
 #include "airground/sim/camera.hpp"
 

@@ -14,7 +14,7 @@
 #include <fstream>
 #include <opencv2/core.hpp>
 
-#include "airground/drivers/ublox/ubx.hpp"
+#include "airground/drivers/gps/ublox/ubx.hpp"
 #include "hil_run.hpp"
 
 namespace ag::sim::hil {

@@ -19,15 +19,15 @@
 #include <utility>
 #include <vector>
 
-#include "airground/core/geometry.hpp"
-#include "airground/core/messages.hpp"
+#include "airground/messages/geometry.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/drivers/base/diff_drive_base.hpp"
 #include "airground/drivers/base/odrive_sim.hpp"
-#include "airground/drivers/camera/frame_stream.hpp"
+#include "airground/drivers/camera/frame_stream/frame_stream.hpp"
 #include "airground/drivers/can/cannelloni.hpp"
-#include "airground/drivers/ouster/frame.hpp"
-#include "airground/drivers/ouster/metadata.hpp"
-#include "airground/drivers/ouster/packet_format.hpp"
+#include "airground/drivers/lidar/ouster/frame.hpp"
+#include "airground/drivers/lidar/ouster/metadata.hpp"
+#include "airground/drivers/lidar/ouster/packet_format.hpp"
 #include "airground/mission/mission_file.hpp"
 #include "airground/platform/result.hpp"
 #include "airground/platform/role_table.hpp"

@@ -4,8 +4,8 @@
 #include <map>
 
 #include "airground/comms/stage.hpp"
-#include "airground/drivers/recording/counters_json.hpp"
-#include "airground/drivers/recording/foxglove_json.hpp"
+#include "airground/drivers/recording/mcap/counters_json.hpp"
+#include "airground/drivers/recording/mcap/foxglove_json.hpp"
 #include "airground/platform/perf_counters.hpp"
 #include "airground/platform/role_instance.hpp"
 

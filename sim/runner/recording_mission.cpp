@@ -4,7 +4,7 @@
 #include <algorithm>
 #include <cstdio>
 
-#include "airground/drivers/recording/foxglove_json.hpp"
+#include "airground/drivers/recording/mcap/foxglove_json.hpp"
 #include "airground/mission/stages.hpp"
 #include "airground/planning/stages.hpp"
 #include "airground/platform/role_instance.hpp"

@@ -8,7 +8,7 @@
 #include <limits>
 #include <queue>
 
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/rng.hpp"
 
 namespace ag::sim {

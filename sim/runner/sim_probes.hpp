@@ -4,8 +4,8 @@
 
 #include <memory>
 
-#include "airground/core/drive_messages.hpp"
-#include "airground/core/messages.hpp"
+#include "airground/messages/drive_messages.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/platform/channels.hpp"
 #include "airground/platform/stage.hpp"
 

@@ -20,8 +20,8 @@
 #include <vector>
 
 #include "airground/aerial_mapping/ortho_map.hpp"
-#include "airground/core/drive_messages.hpp"
-#include "airground/core/messages.hpp"
+#include "airground/messages/drive_messages.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/platform/channels.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "airground/sim/attitude.hpp"

@@ -12,8 +12,8 @@
 #include <fstream>
 
 #include "airground/aerial_mapping/ortho_map.hpp"
-#include "airground/core/messages.hpp"
-#include "airground/drivers/recording/foxglove_json.hpp"
+#include "airground/messages/messages.hpp"
+#include "airground/drivers/recording/mcap/foxglove_json.hpp"
 #include "airground/platform/perf_counters.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "recording_counters.hpp"

@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
-#include "airground/core/geometry.hpp"
-#include "airground/drivers/recording/mcap_writer.hpp"
+#include "airground/messages/geometry.hpp"
+#include "airground/drivers/recording/mcap/mcap_writer.hpp"
 #include "airground/platform/result.hpp"
 #include "airground/platform/time.hpp"
 #include "airground/sim/lidar.hpp"

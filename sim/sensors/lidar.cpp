@@ -13,7 +13,7 @@
 #include <stdexcept>
 
 #include "airground/platform/config.hpp"
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/rng.hpp"
 
 namespace ag::sim {

@@ -11,7 +11,7 @@
 #include <utility>
 #include <vector>
 
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/rng.hpp"
 #include "airground/sim/generator.hpp"
 

@@ -15,7 +15,7 @@
 #include <sstream>
 #include <unordered_map>
 
-#include "airground/core/classes.hpp"
+#include "airground/messages/classes.hpp"
 #include "airground/sim/world_raster.hpp"
 #include "airground/sim/world_texture.hpp"
 

@@ -8,8 +8,8 @@
 #include <cmath>
 #include <vector>
 
-#include "airground/core/classes.hpp"
-#include "airground/core/geometry.hpp"
+#include "airground/messages/classes.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/rng.hpp"
 
 namespace ag::sim {

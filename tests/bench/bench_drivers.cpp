@@ -10,13 +10,13 @@
 #include <vector>
 
 #include "airground/drivers/can/cannelloni.hpp"
-#include "airground/drivers/ouster/frame.hpp"
-#include "airground/drivers/ouster/packet_source.hpp"
-#include "airground/drivers/ouster/xyz_lut.hpp"
-#include "airground/drivers/ublox/byte_source.hpp"
-#include "airground/drivers/ublox/stream_parser.hpp"
-#include "airground/drivers/ublox/ubx.hpp"
-#include "airground/drivers/v4l2/camera.hpp"
+#include "airground/drivers/lidar/ouster/frame.hpp"
+#include "airground/drivers/lidar/ouster/packet_source.hpp"
+#include "airground/drivers/lidar/ouster/xyz_lut.hpp"
+#include "airground/drivers/gps/ublox/byte_source.hpp"
+#include "airground/drivers/gps/ublox/stream_parser.hpp"
+#include "airground/drivers/gps/ublox/ubx.hpp"
+#include "airground/drivers/camera/v4l2/camera.hpp"
 #include "bench_common.hpp"
 
 namespace {

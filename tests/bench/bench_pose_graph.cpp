@@ -16,7 +16,7 @@
 #include <vector>
 
 #include "airground/aerial_mapping/pose_graph.hpp"
-#include "airground/core/pose_math.hpp"
+#include "airground/messages/pose_math.hpp"
 #include "airground/sim/gps.hpp"
 #include "airground/sim/quadrotor.hpp"
 #include "airground/sim/survey.hpp"

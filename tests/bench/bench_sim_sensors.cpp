@@ -15,7 +15,7 @@
 #include <string>
 #include <vector>
 
-#include "airground/core/classes.hpp"
+#include "airground/messages/classes.hpp"
 #include "airground/planning/local_tracker.hpp"
 #include "airground/sim/camera.hpp"
 #include "airground/sim/lidar.hpp"

@@ -20,8 +20,8 @@
 #include <vector>
 
 #include "airground/aerial_mapping/stereo.hpp"
-#include "airground/core/classes.hpp"
-#include "airground/core/pose_math.hpp"
+#include "airground/messages/classes.hpp"
+#include "airground/messages/pose_math.hpp"
 #include "airground/sim/camera.hpp"
 #include "airground/sim/generator.hpp"
 #include "bench_common.hpp"

@@ -18,7 +18,7 @@
 
 #include "../unit/base_station/base_rig.hpp"
 
-namespace ag::base::test {
+namespace ag::base_station::test {
 namespace {
 
 std::string env_or(const char* name, const std::string& fallback) {
@@ -134,4 +134,4 @@ TEST(BaseStationBrowser, ChromiumDrawsTheMapRobotsRegionsAndGoalsOfALiveMission)
 }
 
 }  // namespace
-}  // namespace ag::base::test
+}  // namespace ag::base_station::test

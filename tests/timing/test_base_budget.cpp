@@ -15,12 +15,12 @@ namespace ag {
 namespace {
 
 TEST(BaseBudget, WebAndCommsRowsWithALiveMissionStayWithinTheirBudgets) {
-  base::test::TempDir dir;
-  base::test::MissionPlayer pl;
+  base_station::test::TempDir dir;
+  base_station::test::MissionPlayer pl;
   timing::BudgetCase c;
   c.role = &base_role();
   c.duration = 30 * kNsPerS;
-  c.overrides = {"robot.id=200", "comms.transport=inproc", "comms.key_file=" + base::test::write_key(dir.file("team.key")),
+  c.overrides = {"robot.id=200", "comms.transport=inproc", "comms.key_file=" + base_station::test::write_key(dir.file("team.key")),
                  "comms.deliver_map_tiles=true", "comms.epoch_from_clock=false", "comms.budget_bytes_per_s=400000",
                  "web.port=0", "web.bind=127.0.0.1", "web.log_path=" + dir.file("mission.jsonl")};
   c.before_tick = [&](TimeNs t, RoleInstance&) {
@@ -31,7 +31,7 @@ TEST(BaseBudget, WebAndCommsRowsWithALiveMissionStayWithinTheirBudgets) {
     }
     if (t % (200 * kNsPerMs) == 0)
       for (int r = 1; r <= 2; ++r) {
-        const Pose2 p = base::test::MissionPlayer::robot_pose(r, static_cast<double>(t) * 1e-9);
+        const Pose2 p = base_station::test::MissionPlayer::robot_pose(r, static_cast<double>(t) * 1e-9);
         pl.pose(r, p.x, p.y, p.yaw, t);
       }
     pl.tick(t);

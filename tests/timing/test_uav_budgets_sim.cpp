@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "airground/aerial_mapping/stages.hpp"
-#include "airground/drivers/recording/recorder_stage.hpp"
+#include "airground/drivers/recording/recorder/recorder_stage.hpp"
 #include "airground/segmentation/stage.hpp"
 #include "airground/platform/calibration.hpp"
 #include "airground/platform/perf_counters.hpp"

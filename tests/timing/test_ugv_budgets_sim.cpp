@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "airground/drivers/recording/recorder_stage.hpp"
+#include "airground/drivers/recording/recorder/recorder_stage.hpp"
 #include "airground/localization/stage.hpp"
 #include "airground/platform/calibration.hpp"
 #include "airground/platform/perf_counters.hpp"

@@ -4,7 +4,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/log.hpp"
 
 namespace ag::base {

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <limits>
 
-#include "airground/core/classes.hpp"
+#include "airground/messages/classes.hpp"
 
 namespace ag::mapping {
 

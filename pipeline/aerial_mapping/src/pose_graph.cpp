@@ -44,7 +44,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "airground/core/pose_math.hpp"
+#include "airground/messages/pose_math.hpp"
 #include "pose_graph_internal.hpp"
 
 namespace ag::mapping {

@@ -6,7 +6,7 @@
 #include <cstring>
 #include <limits>
 
-#include "airground/core/pose_math.hpp"
+#include "airground/messages/pose_math.hpp"
 #include "airground/platform/clock.hpp"
 #include "airground/platform/log.hpp"
 

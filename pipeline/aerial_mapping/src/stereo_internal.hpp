@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "airground/aerial_mapping/stereo.hpp"
-#include "airground/core/camera.hpp"
+#include "airground/messages/camera.hpp"
 #include "airground/platform/result.hpp"
 
 namespace ag::mapping::detail {

@@ -8,12 +8,12 @@
 #include <cstring>
 #include <ctime>
 
-#include "airground/core/classes.hpp"
-#include "airground/drivers/recording/foxglove_json.hpp"
+#include "airground/messages/classes.hpp"
+#include "airground/drivers/recording/mcap/foxglove_json.hpp"
 #include "airground/platform/clock.hpp"
 #include "airground/platform/log.hpp"
 
-namespace ag::base {
+namespace ag::base_station {
 namespace fg = ag::foxglove;
 
 namespace {
@@ -425,4 +425,4 @@ void FoxgloveService::tick(net::http::HttpServer& s, const MissionModel& m, cons
   send_tiles(s);
 }
 
-}  // namespace ag::base
+}  // namespace ag::base_station

@@ -27,9 +27,9 @@
 
 #include "airground/base_station/model.hpp"
 #include "airground/base_station/web_stage.hpp"
-#include "airground/net/http/server.hpp"
+#include "airground/drivers/net/http/server.hpp"
 
-namespace ag::base {
+namespace ag::base_station {
 
 inline constexpr std::string_view kFoxgloveSubprotocol = "foxglove.websocket.v1";
 
@@ -124,4 +124,4 @@ class FoxgloveService {
   std::int64_t last_model_ns_{0}, last_counters_ns_{0};
 };
 
-}  // namespace ag::base
+}  // namespace ag::base_station

@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-namespace ag::base {
+namespace ag::base_station {
 
 using mission::DecodeError;
 
@@ -188,4 +188,4 @@ void MissionModel::apply_comms(const comms::CommsStatsMsg& m) noexcept {
   ++seq;
 }
 
-}  // namespace ag::base
+}  // namespace ag::base_station

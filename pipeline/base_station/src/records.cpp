@@ -1,6 +1,6 @@
 #include "airground/base_station/records.hpp"
 
-namespace ag::base {
+namespace ag::base_station {
 
 RecordKind record_kind(comms::Topic t) noexcept {
   using comms::TopicKind;
@@ -32,4 +32,4 @@ const char* error_name(mission::DecodeError e) noexcept {
   return e == mission::DecodeError::kFormat ? "unknown format byte" : mission::to_string(e);
 }
 
-}  // namespace ag::base
+}  // namespace ag::base_station

@@ -6,11 +6,11 @@
 #include <ctime>
 
 #include "airground/base_station/json_out.hpp"
-#include "airground/core/classes.hpp"
+#include "airground/messages/classes.hpp"
 #include "airground/platform/clock.hpp"
 #include "airground/platform/log.hpp"
 
-namespace ag::base {
+namespace ag::base_station {
 
 namespace {
 double secs(TimeNs t) { return static_cast<double>(t) * 1e-9; }
@@ -428,4 +428,4 @@ net::http::HttpResponse WebService::get(const net::http::HttpRequest& req) {
           "not found: " + std::string(req.path) + "\n(try / , /api/state, the WebSocket /ws, or Foxglove's WebSocket (foxglove.websocket.v1) at /)\n", {}};
 }
 
-}  // namespace ag::base
+}  // namespace ag::base_station

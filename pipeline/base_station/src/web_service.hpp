@@ -13,10 +13,10 @@
 
 #include "airground/base_station/model.hpp"
 #include "airground/base_station/web_stage.hpp"
-#include "airground/net/http/server.hpp"
+#include "airground/drivers/net/http/server.hpp"
 #include "foxglove_service.hpp"
 
-namespace ag::base {
+namespace ag::base_station {
 
 // The embedded page (generated from pipeline/base_station/web/ at build time).
 struct WebAsset {
@@ -107,4 +107,4 @@ class WebService final : public net::http::HttpServer::Handler {
   FoxgloveService fox_;
 };
 
-}  // namespace ag::base
+}  // namespace ag::base_station

@@ -3,7 +3,7 @@
 #include "airground/platform/log.hpp"
 #include "web_service.hpp"
 
-namespace ag::base {
+namespace ag::base_station {
 
 WebStage::WebStage() = default;
 
@@ -110,4 +110,4 @@ const net::http::HttpServerCounters* WebStage::server_counters() const noexcept 
 
 std::string WebStage::foxglove_counters_json() const { return service_ ? service_->foxglove_counters_json() : std::string(); }
 
-}  // namespace ag::base
+}  // namespace ag::base_station

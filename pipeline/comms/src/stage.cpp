@@ -11,7 +11,7 @@
 #include <string>
 
 #include "airground/comms/bytes.hpp"
-#include "airground/net/udp_link.hpp"
+#include "airground/drivers/net/udp/udp_link.hpp"
 #include "airground/platform/log.hpp"
 
 namespace ag::comms {

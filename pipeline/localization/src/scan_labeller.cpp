@@ -4,7 +4,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 
 namespace ag::loc {
 

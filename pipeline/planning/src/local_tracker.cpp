@@ -5,7 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "airground/core/pose_math.hpp"
+#include "airground/messages/pose_math.hpp"
 
 namespace ag::plan {
 

@@ -4,7 +4,7 @@
 #include <cstring>
 #include <string>
 
-#include "airground/core/classes.hpp"
+#include "airground/messages/classes.hpp"
 
 namespace ag::seg {
 

@@ -4,7 +4,7 @@
 #include <cmath>
 
 #include "airground/aerial_mapping/stages.hpp"
-#include "airground/core/pose_math.hpp"
+#include "airground/messages/pose_math.hpp"
 #include "airground/platform/log.hpp"
 
 namespace ag::vo {

@@ -12,9 +12,9 @@
 #include <cstring>
 #include <vector>
 
-#include "airground/drivers/ouster/frame.hpp"
-#include "airground/drivers/ouster/pcap_reader.hpp"
-#include "airground/drivers/ouster/xyz_lut.hpp"
+#include "airground/drivers/lidar/ouster/frame.hpp"
+#include "airground/drivers/lidar/ouster/pcap_reader.hpp"
+#include "airground/drivers/lidar/ouster/xyz_lut.hpp"
 
 namespace {
 using namespace ag::ouster;

@@ -4,9 +4,9 @@
 #include <cstddef>
 #include <cstdint>
 
-#include "airground/drivers/ublox/nmea.hpp"
-#include "airground/drivers/ublox/stream_parser.hpp"
-#include "airground/drivers/ublox/ubx.hpp"
+#include "airground/drivers/gps/ublox/nmea.hpp"
+#include "airground/drivers/gps/ublox/stream_parser.hpp"
+#include "airground/drivers/gps/ublox/ubx.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace ag::ublox;

@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "airground/aerial_mapping/stages.hpp"
-#include "airground/core/messages.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/platform/clock.hpp"
 #include "airground/platform/config.hpp"
 #include "airground/platform/executor.hpp"

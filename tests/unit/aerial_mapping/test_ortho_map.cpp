@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "airground/aerial_mapping/ortho_map.hpp"
-#include "airground/core/classes.hpp"
+#include "airground/messages/classes.hpp"
 
 namespace ag::mapping {
 namespace {

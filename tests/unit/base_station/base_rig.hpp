@@ -13,7 +13,7 @@
 #include "mission_player.hpp"
 #include "roles.hpp"
 
-namespace ag::base::test {
+namespace ag::base_station::test {
 
 struct BaseRig {
   SimClock clock{0};
@@ -53,4 +53,4 @@ struct BaseRig {
   }
 };
 
-}  // namespace ag::base::test
+}  // namespace ag::base_station::test

@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-namespace ag::base::test {
+namespace ag::base_station::test {
 
 class Client {
  public:
@@ -118,4 +118,4 @@ inline std::vector<std::uint8_t> client_frame(std::uint8_t opcode, const std::st
   return f;
 }
 
-}  // namespace ag::base::test
+}  // namespace ag::base_station::test

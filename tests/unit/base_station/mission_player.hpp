@@ -22,7 +22,7 @@
 #include "airground/comms/wire.hpp"
 #include "airground/mission/records.hpp"
 
-namespace ag::base::test {
+namespace ag::base_station::test {
 
 inline constexpr const char* kKeyHex = "00112233445566778899aabbccddeeff00112233445566778899aabbccddeeff";
 
@@ -151,4 +151,4 @@ class MissionPlayer {
   std::vector<std::unique_ptr<comms::GossipNode>> nodes_;
 };
 
-}  // namespace ag::base::test
+}  // namespace ag::base_station::test

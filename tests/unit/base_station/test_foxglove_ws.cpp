@@ -17,7 +17,7 @@
 #include "base_rig.hpp"
 #include "http_client.hpp"
 
-namespace ag::base::test {
+namespace ag::base_station::test {
 namespace {
 
 // Plays the mission in real time (50 ms steps) on its own thread until stopped: poses every 200 ms.
@@ -286,4 +286,4 @@ TEST(FoxgloveWs, AClientThatDoesNotReadLosesMessagesNotTheBase) {
 }
 
 }  // namespace
-}  // namespace ag::base::test
+}  // namespace ag::base_station::test

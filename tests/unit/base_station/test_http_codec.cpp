@@ -5,9 +5,9 @@
 #include <string>
 #include <vector>
 
-#include "airground/net/http/http_request.hpp"
-#include "airground/net/http/sha1.hpp"
-#include "airground/net/http/websocket.hpp"
+#include "airground/drivers/net/http/http_request.hpp"
+#include "airground/drivers/net/http/sha1.hpp"
+#include "airground/drivers/net/http/websocket.hpp"
 
 namespace ag::net::http {
 namespace {

@@ -6,7 +6,7 @@
 #include "base_rig.hpp"
 #include "http_client.hpp"
 
-namespace ag::base::test {
+namespace ag::base_station::test {
 namespace {
 using test_alloc::AllocationWindow;
 
@@ -62,4 +62,4 @@ TEST(NoAllocation, WebStageStepWithTilesRecordsPosesAndABrowserConnected) {
 }
 
 }  // namespace
-}  // namespace ag::base::test
+}  // namespace ag::base_station::test

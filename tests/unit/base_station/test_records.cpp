@@ -10,7 +10,7 @@
 #include "airground/base_station/model.hpp"
 #include "airground/base_station/records.hpp"
 
-namespace ag::base {
+namespace ag::base_station {
 namespace {
 
 using mission::ClaimRecord;
@@ -301,4 +301,4 @@ TEST(MissionModel, TrailsGrowWithMovementNotWithRepeats) {
 }
 
 }  // namespace
-}  // namespace ag::base
+}  // namespace ag::base_station

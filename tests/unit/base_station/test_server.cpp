@@ -12,14 +12,14 @@
 #include <mutex>
 #include <thread>
 
-#include "airground/net/http/server.hpp"
+#include "airground/drivers/net/http/server.hpp"
 #include "http_client.hpp"
 
 namespace ag::net::http {
 namespace {
-using base::test::Client;
-using base::test::get_request;
-using base::test::ws_upgrade;
+using base_station::test::Client;
+using base_station::test::get_request;
+using base_station::test::ws_upgrade;
 
 // Serves "/" and pushes a numbered binary frame of `frame_bytes` to every WebSocket client each tick.
 class TestHandler final : public HttpServer::Handler {
@@ -113,18 +113,18 @@ TEST(HttpServer, WebSocketHandshakeFramesPingAndClose) {
   ASSERT_TRUE(c.read_contains("hello")) << c.buf;
   EXPECT_EQ(c.buf.find("HTTP/1.1 101 Switching Protocols\r\n"), 0U);
   EXPECT_NE(c.buf.find("Sec-WebSocket-Accept: s3pPLMBiTxaQ9kYGzzhZRbK+xOo=\r\n"), std::string::npos);
-  c.send(base::test::client_frame(1, "abc"));
-  c.send(base::test::client_frame(9, "pp"));
-  ASSERT_TRUE(c.read_until([](const std::string& b) { return base::test::ws_frames(b).size() >= 3; }));
-  auto f = base::test::ws_frames(c.buf);
+  c.send(base_station::test::client_frame(1, "abc"));
+  c.send(base_station::test::client_frame(9, "pp"));
+  ASSERT_TRUE(c.read_until([](const std::string& b) { return base_station::test::ws_frames(b).size() >= 3; }));
+  auto f = base_station::test::ws_frames(c.buf);
   EXPECT_EQ(f[0].opcode, 1);
   EXPECT_EQ(f[0].payload, "hello");
   EXPECT_EQ(f[1].payload, "echo:abc");
   EXPECT_EQ(f[2].opcode, 10);
   EXPECT_EQ(f[2].payload, "pp") << "pong echoes the ping";
-  c.send(base::test::client_frame(8, std::string("\x03\xe8", 2)));
+  c.send(base_station::test::client_frame(8, std::string("\x03\xe8", 2)));
   ASSERT_TRUE(c.read_to_close());
-  f = base::test::ws_frames(c.buf);
+  f = base_station::test::ws_frames(c.buf);
   EXPECT_EQ(f.back().opcode, 8);
   EXPECT_TRUE(eventually([&] { return s->counters().ws_closed.load() == 1 && s->counters().ws_clients.load() == 0; }));
 }
@@ -151,9 +151,9 @@ TEST(HttpServer, BadHandshakesAndUnmaskedFramesAreRefused) {
   Client c(s->port());
   c.send(ws_upgrade());
   ASSERT_TRUE(c.read_contains("hello"));
-  c.send(base::test::client_frame(1, "x", false));
+  c.send(base_station::test::client_frame(1, "x", false));
   ASSERT_TRUE(c.read_to_close());
-  const auto f = base::test::ws_frames(c.buf);
+  const auto f = base_station::test::ws_frames(c.buf);
   ASSERT_FALSE(f.empty());
   EXPECT_EQ(f.back().opcode, 8);
   EXPECT_EQ(f.back().payload, std::string("\x03\xea", 2)) << "close 1002 protocol error";
@@ -278,7 +278,7 @@ TEST(HttpServer, ASubprotocolIsNegotiatedAtAnyPathTheHandlerAccepts) {
   EXPECT_NE(a.buf.find("\r\nSec-WebSocket-Protocol: chat.v2\r\n"), std::string::npos) << a.buf;
   // ws_path without one: upgraded with none, and no Sec-WebSocket-Protocol in the answer.
   Client b(s->port());
-  b.send(base::test::ws_upgrade());
+  b.send(base_station::test::ws_upgrade());
   ASSERT_TRUE(b.read_contains("proto=;")) << b.buf;
   EXPECT_EQ(b.buf.find("Sec-WebSocket-Protocol"), std::string::npos);
   // Only a subprotocol the handler does not speak, elsewhere: no upgrade, the handler's GET answers.

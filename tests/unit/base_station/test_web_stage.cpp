@@ -9,7 +9,7 @@
 #include "base_rig.hpp"
 #include "http_client.hpp"
 
-namespace ag::base::test {
+namespace ag::base_station::test {
 namespace {
 
 std::string slurp(const std::string& p) {
@@ -175,4 +175,4 @@ TEST(WebStage, AnUnwritableLogPathFailsInitNamingThePath) {
 }
 
 }  // namespace
-}  // namespace ag::base::test
+}  // namespace ag::base_station::test

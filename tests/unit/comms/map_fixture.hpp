@@ -7,7 +7,7 @@
 #include <cstdint>
 #include <limits>
 
-#include "airground/core/messages.hpp"
+#include "airground/messages/messages.hpp"
 
 namespace ag::comms::test {
 

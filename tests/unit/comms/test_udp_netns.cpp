@@ -15,7 +15,7 @@
 #include <thread>
 
 #include "airground/comms/link_hub.hpp"
-#include "airground/net/udp_link.hpp"
+#include "airground/drivers/net/udp/udp_link.hpp"
 #include "team_rig.hpp"
 
 namespace ag::comms {

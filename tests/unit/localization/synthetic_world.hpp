@@ -10,8 +10,8 @@
 #include <span>
 #include <vector>
 
-#include "airground/core/classes.hpp"
-#include "airground/core/geometry.hpp"
+#include "airground/messages/classes.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/localization/class_distance_fields.hpp"
 #include "airground/localization/fused_pose.hpp"
 #include "airground/localization/scan.hpp"

@@ -4,7 +4,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "airground/core/classes.hpp"
+#include "airground/messages/classes.hpp"
 #include "airground/mission/regions.hpp"
 
 namespace ag::mission::test {

@@ -5,8 +5,8 @@
 #include <cmath>
 #include <vector>
 
-#include "airground/core/messages.hpp"
-#include "airground/core/pose_math.hpp"
+#include "airground/messages/messages.hpp"
+#include "airground/messages/pose_math.hpp"
 
 namespace ag::plan::test {
 

@@ -6,7 +6,7 @@
 #include <cmath>
 #include <vector>
 
-#include "airground/core/pose_math.hpp"
+#include "airground/messages/pose_math.hpp"
 #include "airground/planning/local_tracker.hpp"
 #include "synthetic_scan.hpp"
 

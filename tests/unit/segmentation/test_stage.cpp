@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "airground/core/classes.hpp"
+#include "airground/messages/classes.hpp"
 #include "fixture.hpp"
 #include "stage_rig.hpp"
 

@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "airground/core/messages.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/platform/config.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "airground/sim/runner.hpp"

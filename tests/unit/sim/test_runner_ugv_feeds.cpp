@@ -13,7 +13,7 @@
 #include <unistd.h>
 
 #include "airground/aerial_mapping/stages.hpp"
-#include "airground/core/messages.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "airground/sim/generator.hpp"
 #include "airground/sim/runner.hpp"

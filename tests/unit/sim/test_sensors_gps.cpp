@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "airground/sim/gps.hpp"
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/rng.hpp"
 
 namespace ag::sim {

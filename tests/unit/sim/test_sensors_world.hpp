@@ -6,7 +6,7 @@
 #include <algorithm>
 #include <cstdint>
 
-#include "airground/core/classes.hpp"
+#include "airground/messages/classes.hpp"
 #include "airground/sim/world.hpp"
 
 namespace ag::sim::testing {

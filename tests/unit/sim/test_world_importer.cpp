@@ -18,7 +18,7 @@
 #include <unistd.h>
 
 #include "airground/sim/importer.hpp"
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/rng.hpp"
 
 namespace ag::sim {

@@ -9,7 +9,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "airground/core/camera.hpp"
+#include "airground/messages/camera.hpp"
 
 namespace ag::vo::test {
 

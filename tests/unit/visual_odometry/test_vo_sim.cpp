@@ -11,8 +11,8 @@
 #include <optional>
 #include <vector>
 
-#include "airground/core/camera.hpp"
-#include "airground/core/pose_math.hpp"
+#include "airground/messages/camera.hpp"
+#include "airground/messages/pose_math.hpp"
 #include "airground/sim/attitude.hpp"
 #include "airground/sim/camera.hpp"
 #include "airground/sim/generator.hpp"

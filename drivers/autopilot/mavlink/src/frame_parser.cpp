@@ -1,5 +1,5 @@
 // MAVLink frame cutting with resynchronisation.
-#include "airground/drivers/mavlink/frame_parser.hpp"
+#include "airground/drivers/autopilot/mavlink/frame_parser.hpp"
 
 #include <algorithm>
 #include <cstring>

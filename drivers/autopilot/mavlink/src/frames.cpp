@@ -1,5 +1,5 @@
 // FRD/NED to FLU/ENU attitude conversion.
-#include "airground/drivers/mavlink/frames.hpp"
+#include "airground/drivers/autopilot/mavlink/frames.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -1,11 +1,10 @@
 // Serial port (termios), UDP socket and tlog replay.
-#include "airground/drivers/mavlink/link.hpp"
+#include "airground/drivers/autopilot/mavlink/link.hpp"
 
 #include <arpa/inet.h>
 #include <fcntl.h>
 #include <poll.h>
 #include <sys/socket.h>
-#include <termios.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -14,26 +13,12 @@
 #include <fstream>
 #include <iterator>
 
-#include "airground/drivers/mavlink/mavlink.hpp"
+#include "airground/drivers/autopilot/mavlink/mavlink.hpp"
+#include "airground/drivers/serial/tty.hpp"
 
 namespace ag::mavlink {
 
 namespace {
-bool baud_constant(int baud, speed_t& out) noexcept {
-  switch (baud) {
-    case 57600: out = B57600; return true;
-    case 115200: out = B115200; return true;
-    case 230400: out = B230400; return true;
-    case 460800: out = B460800; return true;
-    case 500000: out = B500000; return true;
-    case 921600: out = B921600; return true;
-    case 1000000: out = B1000000; return true;
-    case 1500000: out = B1500000; return true;
-    case 2000000: out = B2000000; return true;
-    case 3000000: out = B3000000; return true;
-    default: return false;
-  }
-}
 
 bool poll_in(int fd, TimeNs timeout) noexcept {
   pollfd p{fd, POLLIN, 0};
@@ -43,33 +28,10 @@ bool poll_in(int fd, TimeNs timeout) noexcept {
 }  // namespace
 
 Result<std::unique_ptr<SerialLink>> SerialLink::open(const std::string& device, int baud) {
-  speed_t speed{};
-  if (!baud_constant(baud, speed))
-    return Error::make(ErrorCode::kConfig, "autopilot: baud " + std::to_string(baud) + " for " + device +
-                                               " is not one of 57600, 115200, 230400, 460800, 500000, 921600, 1000000, 1500000, 2000000, 3000000");
-  const int fd = ::open(device.c_str(), O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
-  if (fd < 0) return Error::make(ErrorCode::kIo, "autopilot: cannot open " + device + ": " + std::strerror(errno));
-  termios t{};
-  if (::tcgetattr(fd, &t) != 0) {
-    const int e = errno;
-    ::close(fd);
-    return Error::make(ErrorCode::kIo, "autopilot: " + device + " is not a terminal: " + std::strerror(e));
-  }
-  ::cfmakeraw(&t);
-  t.c_cflag |= CLOCAL | CREAD;
-  // PX4's TELEM ports default to flow control off (SER_TEL2_BAUD, no CTS/RTS wired on many cables).
-  t.c_cflag &= ~static_cast<tcflag_t>(CSTOPB | PARENB | CRTSCTS);
-  t.c_cc[VMIN] = 0;
-  t.c_cc[VTIME] = 0;
-  ::cfsetispeed(&t, speed);
-  ::cfsetospeed(&t, speed);
-  if (::tcsetattr(fd, TCSANOW, &t) != 0) {
-    const int e = errno;
-    ::close(fd);
-    return Error::make(ErrorCode::kIo, "autopilot: cannot configure " + device + ": " + std::strerror(e));
-  }
-  ::tcflush(fd, TCIFLUSH);
-  return std::unique_ptr<SerialLink>(new SerialLink(fd, device));
+  static constexpr int kBauds[] = {57600, 115200, 230400, 460800, 500000, 921600, 1000000, 1500000, 2000000, 3000000};
+  auto fd = serial::open_raw_tty(device, baud, serial::TtyOptions{"autopilot", kBauds, "57600, 115200, 230400, 460800, 500000, 921600, 1000000, 1500000, 2000000, 3000000"});
+  if (!fd) return fd.error();
+  return std::unique_ptr<SerialLink>(new SerialLink(fd.value(), device));
 }
 
 SerialLink::~SerialLink() {

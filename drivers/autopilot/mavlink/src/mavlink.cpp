@@ -1,5 +1,5 @@
 // MAVLink payloads (little-endian, zero-extended when a v2 sender truncated them) and frame encoding.
-#include "airground/drivers/mavlink/mavlink.hpp"
+#include "airground/drivers/autopilot/mavlink/mavlink.hpp"
 
 #include <algorithm>
 #include <cstring>

@@ -1,10 +1,10 @@
 // The autopilot stage: MAVLink bytes to checked frames to "attitude" in REP-103.
-#include "airground/drivers/mavlink/stage.hpp"
+#include "airground/drivers/autopilot/mavlink/stage.hpp"
 
 #include <cmath>
 #include <string>
 
-#include "airground/drivers/mavlink/frames.hpp"
+#include "airground/drivers/autopilot/mavlink/frames.hpp"
 #include "airground/platform/log.hpp"
 
 namespace ag::mavlink {

@@ -1,5 +1,5 @@
 // Frame-stream records: encoding, the writer, and the resynchronising reader.
-#include "airground/drivers/camera/frame_stream.hpp"
+#include "airground/drivers/camera/frame_stream/frame_stream.hpp"
 
 #include <fcntl.h>
 #include <poll.h>

@@ -1,5 +1,5 @@
 // The camera stage: a V4L2 device or a frame-stream replay onto "camera" and "visual_odometry".
-#include "airground/drivers/camera/camera_stage.hpp"
+#include "airground/drivers/camera/stage/camera_stage.hpp"
 
 #include <fcntl.h>
 #include <sys/stat.h>

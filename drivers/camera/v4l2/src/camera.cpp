@@ -1,5 +1,5 @@
 // V4L2 mmap streaming.
-#include "airground/drivers/v4l2/camera.hpp"
+#include "airground/drivers/camera/v4l2/camera.hpp"
 
 #include <fcntl.h>
 #include <linux/videodev2.h>

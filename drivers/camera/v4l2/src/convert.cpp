@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cstdint>
 
-#include "airground/drivers/v4l2/camera.hpp"
+#include "airground/drivers/camera/v4l2/camera.hpp"
 
 namespace ag::v4l2 {
 

@@ -1,5 +1,5 @@
 // The real system calls.
-#include "airground/drivers/v4l2/syscalls.hpp"
+#include "airground/drivers/camera/v4l2/syscalls.hpp"
 
 #include <fcntl.h>
 #include <sys/ioctl.h>

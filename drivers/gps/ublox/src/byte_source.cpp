@@ -1,5 +1,5 @@
 // Serial port (termios) and replay file.
-#include "airground/drivers/ublox/byte_source.hpp"
+#include "airground/drivers/gps/ublox/byte_source.hpp"
 
 #include <algorithm>
 #include <cerrno>
@@ -8,53 +8,17 @@
 #include <fstream>
 #include <iterator>
 #include <poll.h>
-#include <termios.h>
 #include <unistd.h>
+
+#include "airground/drivers/serial/tty.hpp"
 
 namespace ag::ublox {
 
-namespace {
-bool baud_constant(int baud, speed_t& out) noexcept {
-  switch (baud) {
-    case 9600: out = B9600; return true;
-    case 19200: out = B19200; return true;
-    case 38400: out = B38400; return true;
-    case 57600: out = B57600; return true;
-    case 115200: out = B115200; return true;
-    case 230400: out = B230400; return true;
-    case 460800: out = B460800; return true;
-    case 921600: out = B921600; return true;
-    default: return false;
-  }
-}
-}  // namespace
-
 Result<std::unique_ptr<SerialPort>> SerialPort::open(const std::string& device, int baud) {
-  speed_t speed{};
-  if (!baud_constant(baud, speed))
-    return Error::make(ErrorCode::kConfig, "gps: baud " + std::to_string(baud) + " for " + device + " is not one of 9600..921600");
-  const int fd = ::open(device.c_str(), O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
-  if (fd < 0) return Error::make(ErrorCode::kIo, "gps: cannot open " + device + ": " + std::strerror(errno));
-  termios t{};
-  if (::tcgetattr(fd, &t) != 0) {
-    const int e = errno;
-    ::close(fd);
-    return Error::make(ErrorCode::kIo, "gps: " + device + " is not a terminal: " + std::strerror(e));
-  }
-  ::cfmakeraw(&t);
-  t.c_cflag |= CLOCAL | CREAD;
-  t.c_cflag &= ~static_cast<tcflag_t>(CSTOPB | PARENB | CRTSCTS);
-  t.c_cc[VMIN] = 0;
-  t.c_cc[VTIME] = 0;
-  ::cfsetispeed(&t, speed);
-  ::cfsetospeed(&t, speed);
-  if (::tcsetattr(fd, TCSANOW, &t) != 0) {
-    const int e = errno;
-    ::close(fd);
-    return Error::make(ErrorCode::kIo, "gps: cannot configure " + device + ": " + std::strerror(e));
-  }
-  ::tcflush(fd, TCIFLUSH);
-  return std::unique_ptr<SerialPort>(new SerialPort(fd, device));
+  static constexpr int kBauds[] = {9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600};
+  auto fd = serial::open_raw_tty(device, baud, serial::TtyOptions{"gps", kBauds, "9600..921600"});
+  if (!fd) return fd.error();
+  return std::unique_ptr<SerialPort>(new SerialPort(fd.value(), device));
 }
 
 SerialPort::~SerialPort() {

@@ -1,5 +1,5 @@
 // NMEA GGA and RMC.
-#include "airground/drivers/ublox/nmea.hpp"
+#include "airground/drivers/gps/ublox/nmea.hpp"
 
 #include <array>
 #include <charconv>

@@ -1,13 +1,13 @@
 // The u-blox stage: bytes to fixes to "gps".
-#include "airground/drivers/ublox/stage.hpp"
+#include "airground/drivers/gps/ublox/stage.hpp"
 
 #include "airground/platform/log.hpp"
 
 #include <cmath>
 #include <string>
 
-#include "airground/drivers/ublox/nmea.hpp"
-#include "airground/drivers/ublox/ubx.hpp"
+#include "airground/drivers/gps/ublox/nmea.hpp"
+#include "airground/drivers/gps/ublox/ubx.hpp"
 
 namespace ag::ublox {
 

@@ -1,10 +1,10 @@
 // UBX / NMEA stream cutting with resynchronisation.
-#include "airground/drivers/ublox/stream_parser.hpp"
+#include "airground/drivers/gps/ublox/stream_parser.hpp"
 
 #include <cstring>
 
-#include "airground/drivers/ublox/nmea.hpp"
-#include "airground/drivers/ublox/ubx.hpp"
+#include "airground/drivers/gps/ublox/nmea.hpp"
+#include "airground/drivers/gps/ublox/ubx.hpp"
 
 namespace ag::ublox {
 

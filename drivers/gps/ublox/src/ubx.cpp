@@ -1,5 +1,5 @@
 // UBX checksum, framing and NAV-PVT.
-#include "airground/drivers/ublox/ubx.hpp"
+#include "airground/drivers/gps/ublox/ubx.hpp"
 
 #include <cstring>
 

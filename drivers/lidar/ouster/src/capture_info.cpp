@@ -1,11 +1,11 @@
 // A capture decoded end to end for a person to read (capture_info.hpp).
-#include "airground/drivers/ouster/capture_info.hpp"
+#include "airground/drivers/lidar/ouster/capture_info.hpp"
 
 #include <cmath>
 #include <cstdio>
 #include <memory>
 
-#include "airground/drivers/ouster/packet_source.hpp"
+#include "airground/drivers/lidar/ouster/packet_source.hpp"
 
 namespace ag::ouster {
 

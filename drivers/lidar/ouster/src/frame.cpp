@@ -1,5 +1,5 @@
 // Frame assembly: columns into a staggered image, one frame in progress plus the one handed out.
-#include "airground/drivers/ouster/frame.hpp"
+#include "airground/drivers/lidar/ouster/frame.hpp"
 
 #include <algorithm>
 #include <cstring>

@@ -1,5 +1,5 @@
 // Ouster metadata JSON into SensorInfo (nlohmann-json; init-time code, exceptions stay inside).
-#include "airground/drivers/ouster/metadata.hpp"
+#include "airground/drivers/lidar/ouster/metadata.hpp"
 
 #include <charconv>
 #include <cmath>

@@ -1,5 +1,5 @@
 // Ouster packet decoders (layouts in packet_format.hpp).
-#include "airground/drivers/ouster/packet_format.hpp"
+#include "airground/drivers/lidar/ouster/packet_format.hpp"
 
 #include <cstring>
 

@@ -1,5 +1,5 @@
 // The UDP client and the pcap replay source.
-#include "airground/drivers/ouster/packet_source.hpp"
+#include "airground/drivers/lidar/ouster/packet_source.hpp"
 
 #include <arpa/inet.h>
 #include <cerrno>

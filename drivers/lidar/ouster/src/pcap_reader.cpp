@@ -1,5 +1,5 @@
 // pcap / pcapng reading (formats: tcpdump.org pcap(5) and the pcapng IETF draft).
-#include "airground/drivers/ouster/pcap_reader.hpp"
+#include "airground/drivers/lidar/ouster/pcap_reader.hpp"
 
 #include <cstring>
 #include <fstream>

@@ -1,5 +1,5 @@
 // The Ouster stage: packets to frames to scans.
-#include "airground/drivers/ouster/stage.hpp"
+#include "airground/drivers/lidar/ouster/stage.hpp"
 
 #include <cmath>
 #include <cstdio>

@@ -1,5 +1,5 @@
 // XYZ lookup table (formula in xyz_lut.hpp).
-#include "airground/drivers/ouster/xyz_lut.hpp"
+#include "airground/drivers/lidar/ouster/xyz_lut.hpp"
 
 #include <cmath>
 #include <limits>

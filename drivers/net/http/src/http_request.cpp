@@ -1,4 +1,4 @@
-#include "airground/net/http/http_request.hpp"
+#include "airground/drivers/net/http/http_request.hpp"
 
 #include <cctype>
 

@@ -1,4 +1,4 @@
-#include "airground/net/http/server.hpp"
+#include "airground/drivers/net/http/server.hpp"
 
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -12,7 +12,7 @@
 #include <cerrno>
 #include <cstring>
 
-#include "airground/net/http/sha1.hpp"
+#include "airground/drivers/net/http/sha1.hpp"
 #include "airground/platform/clock.hpp"
 #include "airground/platform/log.hpp"
 

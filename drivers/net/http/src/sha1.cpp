@@ -1,4 +1,4 @@
-#include "airground/net/http/sha1.hpp"
+#include "airground/drivers/net/http/sha1.hpp"
 
 #include <cstring>
 

@@ -1,4 +1,4 @@
-#include "airground/net/http/websocket.hpp"
+#include "airground/drivers/net/http/websocket.hpp"
 
 namespace ag::net::http {
 

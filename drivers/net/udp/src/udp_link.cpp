@@ -1,5 +1,5 @@
 // UDP transport: a non-blocking IPv4 socket with broadcast and a unicast peer list.
-#include "airground/net/udp_link.hpp"
+#include "airground/drivers/net/udp/udp_link.hpp"
 
 #include <arpa/inet.h>
 #include <fcntl.h>
@@ -15,7 +15,7 @@ namespace ag::net {
 
 namespace {
 std::string err(const std::string& what) { return "udp: " + what + ": " + std::strerror(errno); }
-sockaddr_in sockaddr_of(const comms::LinkAddress& a) noexcept {
+sockaddr_in sockaddr_of(const LinkAddress& a) noexcept {
   sockaddr_in s{};
   s.sin_family = AF_INET;
   s.sin_addr.s_addr = htonl(static_cast<std::uint32_t>(a.value >> 16));
@@ -24,7 +24,7 @@ sockaddr_in sockaddr_of(const comms::LinkAddress& a) noexcept {
 }
 }  // namespace
 
-Result<comms::LinkAddress> parse_udp_address(const std::string& text, std::uint16_t default_port) {
+Result<LinkAddress> parse_udp_address(const std::string& text, std::uint16_t default_port) {
   std::string host = text;
   std::uint16_t port = default_port;
   const auto colon = text.rfind(':');
@@ -43,7 +43,7 @@ Result<comms::LinkAddress> parse_udp_address(const std::string& text, std::uint1
   return udp_address(ntohl(a.s_addr), port);
 }
 
-std::string format_udp_address(const comms::LinkAddress& a) {
+std::string format_udp_address(const LinkAddress& a) {
   if (a.broadcast) return "broadcast";
   const sockaddr_in s = sockaddr_of(a);
   char buf[INET_ADDRSTRLEN] = {};
@@ -54,13 +54,13 @@ std::string format_udp_address(const comms::LinkAddress& a) {
 Result<std::unique_ptr<UdpLink>> UdpLink::open(const UdpLinkConfig& cfg) {
   auto bind_addr = parse_udp_address(cfg.bind_address, cfg.port);
   if (!bind_addr) return bind_addr.error();
-  std::vector<comms::LinkAddress> peers;
+  std::vector<LinkAddress> peers;
   for (const auto& p : cfg.peers) {
     auto a = parse_udp_address(p, cfg.port);
     if (!a) return a.error();
     peers.push_back(a.value());
   }
-  comms::LinkAddress bcast{};
+  LinkAddress bcast{};
   const bool have_bcast = !cfg.broadcast_address.empty();
   if (have_bcast) {
     auto a = parse_udp_address(cfg.broadcast_address, cfg.port);
@@ -105,41 +105,41 @@ UdpLink::~UdpLink() {
   if (fd_ >= 0) ::close(fd_);
 }
 
-comms::SendStatus UdpLink::send_to(const comms::LinkAddress& to, std::span<const std::uint8_t> bytes) noexcept {
+SendStatus UdpLink::send_to(const LinkAddress& to, std::span<const std::uint8_t> bytes) noexcept {
   const sockaddr_in sa = sockaddr_of(to);
   for (;;) {
     const ssize_t n = ::sendto(fd_, bytes.data(), bytes.size(), MSG_DONTWAIT | MSG_NOSIGNAL,
                                reinterpret_cast<const sockaddr*>(&sa), sizeof sa);
     if (n >= 0) {
       ++stats_.sent;
-      return comms::SendStatus::kSent;
+      return SendStatus::kSent;
     }
     if (errno == EINTR) continue;
     stats_.last_errno = errno;
     if (errno == EAGAIN || errno == ENOBUFS) {  // EWOULDBLOCK == EAGAIN on Linux
       ++stats_.would_block;
-      return comms::SendStatus::kWouldBlock;
+      return SendStatus::kWouldBlock;
     }
     ++stats_.send_errors;
-    if (errno == EMSGSIZE) return comms::SendStatus::kTooLarge;
-    if (errno == ENETUNREACH || errno == EHOSTUNREACH || errno == ENETDOWN) return comms::SendStatus::kUnreachable;
-    return comms::SendStatus::kError;
+    if (errno == EMSGSIZE) return SendStatus::kTooLarge;
+    if (errno == ENETUNREACH || errno == EHOSTUNREACH || errno == ENETDOWN) return SendStatus::kUnreachable;
+    return SendStatus::kError;
   }
 }
 
-comms::SendStatus UdpLink::send(TimeNs, const comms::LinkAddress& to, std::span<const std::uint8_t> bytes) noexcept {
-  if (fd_ < 0) return comms::SendStatus::kError;
-  if (bytes.size() > cfg_.mtu) return comms::SendStatus::kTooLarge;
+SendStatus UdpLink::send(TimeNs, const LinkAddress& to, std::span<const std::uint8_t> bytes) noexcept {
+  if (fd_ < 0) return SendStatus::kError;
+  if (bytes.size() > cfg_.mtu) return SendStatus::kTooLarge;
   if (!to.broadcast) return send_to(to, bytes);
   // A broadcast reaches the link's neighbours and every listed peer; it left if any copy left.
-  comms::SendStatus result = comms::SendStatus::kUnreachable;
+  SendStatus result = SendStatus::kUnreachable;
   if (have_broadcast_) result = send_to(broadcast_, bytes);
   for (const auto& p : peers_)
-    if (send_to(p, bytes) == comms::SendStatus::kSent) result = comms::SendStatus::kSent;
+    if (send_to(p, bytes) == SendStatus::kSent) result = SendStatus::kSent;
   return result;
 }
 
-std::size_t UdpLink::receive(TimeNs, comms::LinkAddress& from, std::span<std::uint8_t> buf, bool& truncated) noexcept {
+std::size_t UdpLink::receive(TimeNs, LinkAddress& from, std::span<std::uint8_t> buf, bool& truncated) noexcept {
   truncated = false;
   if (fd_ < 0) return 0;
   for (int attempt = 0; attempt < 8; ++attempt) {

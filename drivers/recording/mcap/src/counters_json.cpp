@@ -1,7 +1,7 @@
 // airground.SchedulerCounters: schema and message (see counters_json.hpp).
-#include "airground/drivers/recording/counters_json.hpp"
+#include "airground/drivers/recording/mcap/counters_json.hpp"
 
-#include "airground/drivers/recording/foxglove_json.hpp"
+#include "airground/drivers/recording/mcap/foxglove_json.hpp"
 
 namespace ag::foxglove {
 namespace {

@@ -1,13 +1,13 @@
 // Foxglove's message schemas as JSON Schema text (composed from shared parts: time, pose, packed field,
 // colour), and the message JSON our recordings write. Numbers print in their shortest round-trip form,
 // so the same values give the same bytes.
-#include "airground/drivers/recording/foxglove_json.hpp"
+#include "airground/drivers/recording/mcap/foxglove_json.hpp"
 
 #include <charconv>
 #include <cmath>
 #include <map>
 
-#include "airground/drivers/recording/mcap_writer.hpp"
+#include "airground/drivers/recording/mcap/mcap_writer.hpp"
 
 namespace ag::foxglove {
 namespace {

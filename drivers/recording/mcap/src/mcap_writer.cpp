@@ -1,6 +1,6 @@
 // MCAP writer: records are built little-endian in memory, chunks compressed with libzstd, and the file
 // is written sequentially (no seeking back), so a robot can stream to it.
-#include "airground/drivers/recording/mcap_writer.hpp"
+#include "airground/drivers/recording/mcap/mcap_writer.hpp"
 
 #include <zstd.h>
 

@@ -1,5 +1,5 @@
 // McapRotation: size-bounded MCAP files in one directory and a cap on the family's total.
-#include "airground/drivers/recording/mcap_rotation.hpp"
+#include "airground/drivers/recording/recorder/mcap_rotation.hpp"
 
 #include <algorithm>
 #include <cstdio>

@@ -1,14 +1,14 @@
 // RecorderStage: the robot's channels as Foxglove JSON in rotating MCAP files (topics as the simulator's
 // recording.mcap: /tf, /<robot>/pose, /<robot>/gps, /<robot>/lidar/points, /<robot>/map_tiles, /scheduler).
-#include "airground/drivers/recording/recorder_stage.hpp"
+#include "airground/drivers/recording/recorder/recorder_stage.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <ctime>
 
-#include "airground/drivers/recording/counters_json.hpp"
-#include "airground/drivers/recording/foxglove_json.hpp"
+#include "airground/drivers/recording/mcap/counters_json.hpp"
+#include "airground/drivers/recording/mcap/foxglove_json.hpp"
 #include "airground/platform/log.hpp"
 
 namespace ag::recording {

@@ -10,8 +10,8 @@
 #include <string_view>
 #include <vector>
 
-#include "airground/core/camera.hpp"
-#include "airground/core/geometry.hpp"
+#include "airground/messages/camera.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/result.hpp"
 #include "airground/sim/raycast.hpp"
 #include "airground/sim/world.hpp"
@@ -32,7 +32,7 @@ struct CameraModel {
   [[nodiscard]] Status check() const;
   // Rotation taking camera-frame vectors to the body frame (columns: camera x, y, z in body axes).
   [[nodiscard]] static Eigen::Matrix3d body_from_camera() noexcept;
-  // The same intrinsics as the robot's camera model (pipeline/core), for the stages and their tests.
+  // The same intrinsics as the robot's camera model (messages/), for the stages and their tests.
   [[nodiscard]] PinholeCamera pinhole() const noexcept {
     PinholeCamera c;
     c.width = width;

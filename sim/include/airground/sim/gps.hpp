@@ -6,7 +6,7 @@
 #include <span>
 #include <string_view>
 
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/config.hpp"
 #include "airground/platform/result.hpp"
 #include "airground/platform/time.hpp"

@@ -7,7 +7,7 @@
 #include <string_view>
 #include <vector>
 
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/config.hpp"
 #include "airground/platform/result.hpp"
 

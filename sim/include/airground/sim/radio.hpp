@@ -12,7 +12,7 @@
 #include "airground/platform/config.hpp"
 #include "airground/platform/result.hpp"
 #include "airground/platform/time.hpp"
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/rng.hpp"
 
 namespace YAML {

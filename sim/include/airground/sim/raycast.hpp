@@ -8,7 +8,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/sim/world.hpp"
 
 namespace ag::sim {

@@ -12,7 +12,7 @@
 #include <string_view>
 #include <vector>
 
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/result.hpp"
 #include "airground/platform/time.hpp"
 #include "airground/sim/compute_time.hpp"

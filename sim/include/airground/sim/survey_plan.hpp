@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/result.hpp"
 #include "airground/sim/quadrotor.hpp"
 #include "airground/sim/world.hpp"

@@ -6,8 +6,8 @@
 #include <cstdint>
 #include <string>
 
-#include "airground/core/classes.hpp"
-#include "airground/core/geometry.hpp"
+#include "airground/messages/classes.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/result.hpp"
 
 namespace ag::sim {

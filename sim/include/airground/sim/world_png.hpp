@@ -6,7 +6,7 @@
 
 #include <string>
 
-#include "airground/core/classes.hpp"
+#include "airground/messages/classes.hpp"
 #include "airground/platform/result.hpp"
 #include "airground/sim/world.hpp"
 

@@ -9,7 +9,7 @@
 #include <string>
 #include <string_view>
 
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/result.hpp"
 #include "airground/sim/world.hpp"
 

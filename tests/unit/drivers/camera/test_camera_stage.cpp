@@ -21,8 +21,8 @@
 #include <thread>
 #include <vector>
 
-#include "airground/drivers/camera/camera_stage.hpp"
-#include "airground/drivers/camera/frame_stream.hpp"
+#include "airground/drivers/camera/stage/camera_stage.hpp"
+#include "airground/drivers/camera/frame_stream/frame_stream.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "fake_device.hpp"
 

@@ -18,10 +18,10 @@
 #include <map>
 #include <vector>
 
-#include "airground/drivers/mavlink/frame_parser.hpp"
-#include "airground/drivers/mavlink/frames.hpp"
-#include "airground/drivers/mavlink/link.hpp"
-#include "airground/drivers/mavlink/mavlink.hpp"
+#include "airground/drivers/autopilot/mavlink/frame_parser.hpp"
+#include "airground/drivers/autopilot/mavlink/frames.hpp"
+#include "airground/drivers/autopilot/mavlink/link.hpp"
+#include "airground/drivers/autopilot/mavlink/mavlink.hpp"
 
 namespace ag::mavlink {
 namespace {

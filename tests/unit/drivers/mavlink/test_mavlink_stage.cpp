@@ -13,7 +13,7 @@
 #include <iterator>
 #include <memory>
 
-#include "airground/drivers/mavlink/stage.hpp"
+#include "airground/drivers/autopilot/mavlink/stage.hpp"
 #include "airground/platform/role_instance.hpp"
 
 #if AG_COUNT_ALLOC

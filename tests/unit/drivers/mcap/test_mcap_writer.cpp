@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "airground/drivers/recording/foxglove_json.hpp"
-#include "airground/drivers/recording/mcap_writer.hpp"
+#include "airground/drivers/recording/mcap/foxglove_json.hpp"
+#include "airground/drivers/recording/mcap/mcap_writer.hpp"
 #include "mcap_read.hpp"
 
 namespace ag {

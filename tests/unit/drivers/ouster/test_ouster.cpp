@@ -14,9 +14,9 @@
 #include <random>
 #include <vector>
 
-#include "airground/drivers/ouster/frame.hpp"
-#include "airground/drivers/ouster/packet_source.hpp"
-#include "airground/drivers/ouster/xyz_lut.hpp"
+#include "airground/drivers/lidar/ouster/frame.hpp"
+#include "airground/drivers/lidar/ouster/packet_source.hpp"
+#include "airground/drivers/lidar/ouster/xyz_lut.hpp"
 
 namespace ag::ouster {
 namespace {

@@ -8,7 +8,7 @@
 #include <memory>
 #include <sstream>
 
-#include "airground/drivers/ouster/stage.hpp"
+#include "airground/drivers/lidar/ouster/stage.hpp"
 #include "airground/platform/role_instance.hpp"
 
 #if AG_COUNT_ALLOC

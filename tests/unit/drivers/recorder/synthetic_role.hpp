@@ -10,8 +10,8 @@
 #include <string>
 #include <vector>
 
-#include "airground/core/messages.hpp"
-#include "airground/drivers/recording/recorder_stage.hpp"
+#include "airground/messages/messages.hpp"
+#include "airground/drivers/recording/recorder/recorder_stage.hpp"
 #include "airground/platform/executor.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "airground/platform/role_table.hpp"

@@ -18,10 +18,10 @@
 #include <string>
 #include <vector>
 
-#include "airground/drivers/ublox/byte_source.hpp"
-#include "airground/drivers/ublox/nmea.hpp"
-#include "airground/drivers/ublox/stream_parser.hpp"
-#include "airground/drivers/ublox/ubx.hpp"
+#include "airground/drivers/gps/ublox/byte_source.hpp"
+#include "airground/drivers/gps/ublox/nmea.hpp"
+#include "airground/drivers/gps/ublox/stream_parser.hpp"
+#include "airground/drivers/gps/ublox/ubx.hpp"
 
 namespace ag::ublox {
 namespace {

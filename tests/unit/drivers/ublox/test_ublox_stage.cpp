@@ -7,7 +7,7 @@
 #include <fstream>
 #include <memory>
 
-#include "airground/drivers/ublox/stage.hpp"
+#include "airground/drivers/gps/ublox/stage.hpp"
 #include "airground/platform/role_instance.hpp"
 
 #if AG_COUNT_ALLOC

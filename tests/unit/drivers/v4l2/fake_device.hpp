@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "airground/drivers/v4l2/syscalls.hpp"
+#include "airground/drivers/camera/v4l2/syscalls.hpp"
 
 namespace ag::v4l2::testing {
 

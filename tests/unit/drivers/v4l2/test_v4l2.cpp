@@ -5,7 +5,7 @@
 #include <random>
 #include <vector>
 
-#include "airground/drivers/v4l2/camera.hpp"
+#include "airground/drivers/camera/v4l2/camera.hpp"
 #include "fake_device.hpp"
 
 #if AG_HAVE_OPENCV

@@ -20,7 +20,7 @@
 #include <vector>
 
 #include "airground/aerial_mapping/stereo.hpp"
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 
 namespace ag::mapping {
 

@@ -13,7 +13,7 @@
 #include <memory>
 #include <vector>
 
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/time.hpp"
 
 namespace ag::mapping {

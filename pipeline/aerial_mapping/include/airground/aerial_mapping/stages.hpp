@@ -13,7 +13,7 @@
 #include "airground/aerial_mapping/ortho_map.hpp"
 #include "airground/aerial_mapping/pose_graph.hpp"
 #include "airground/aerial_mapping/stereo.hpp"
-#include "airground/core/messages.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/platform/config.hpp"
 #include "airground/platform/stage.hpp"
 

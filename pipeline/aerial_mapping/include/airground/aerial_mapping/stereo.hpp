@@ -14,7 +14,7 @@
 #include <memory>
 #include <vector>
 
-#include "airground/core/camera.hpp"
+#include "airground/messages/camera.hpp"
 #include "airground/platform/result.hpp"
 
 namespace ag::mapping {

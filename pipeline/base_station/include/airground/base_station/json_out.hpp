@@ -7,7 +7,7 @@
 #include <string>
 #include <string_view>
 
-namespace ag::base {
+namespace ag::base_station {
 
 class JsonOut {
  public:
@@ -73,4 +73,4 @@ class JsonOut {
   bool first_{true};
 };
 
-}  // namespace ag::base
+}  // namespace ag::base_station

@@ -10,7 +10,7 @@
 #include "airground/base_station/records.hpp"
 #include "airground/comms/messages.hpp"
 
-namespace ag::base {
+namespace ag::base_station {
 
 inline constexpr std::size_t kModelRobots = comms::kTeamMax;
 inline constexpr std::size_t kTrailPoints = 600;
@@ -100,4 +100,4 @@ struct MissionModel {
   }
 };
 
-}  // namespace ag::base
+}  // namespace ag::base_station

@@ -8,7 +8,7 @@
 #include "airground/comms/topics.hpp"
 #include "airground/mission/records.hpp"
 
-namespace ag::base {
+namespace ag::base_station {
 
 // Which record a topic carries.
 enum class RecordKind : std::uint8_t { kRegions, kClaim, kVisited, kFailure, kObject, kStatus, kOther };
@@ -18,4 +18,4 @@ enum class RecordKind : std::uint8_t { kRegions, kClaim, kVisited, kFailure, kOb
 // The codec's names but for a bad format byte, which docs/base_station.md names in full.
 [[nodiscard]] const char* error_name(mission::DecodeError e) noexcept;
 
-}  // namespace ag::base
+}  // namespace ag::base_station

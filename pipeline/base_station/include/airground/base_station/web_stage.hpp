@@ -13,14 +13,14 @@
 
 #include "airground/base_station/model.hpp"
 #include "airground/comms/messages.hpp"
-#include "airground/core/messages.hpp"
-#include "airground/net/http/server.hpp"
+#include "airground/messages/messages.hpp"
+#include "airground/drivers/net/http/server.hpp"
 #include "airground/platform/config.hpp"
 #include "airground/platform/latest_value.hpp"
 #include "airground/platform/spsc_ring.hpp"
 #include "airground/platform/stage.hpp"
 
-namespace ag::base {
+namespace ag::base_station {
 
 inline constexpr ParamSpec kWebStageParams[] = {
     ParamSpec::integer("port", 8080, 0, 65535, "", "TCP port of the live page (http://<base>:<port>/) and its WebSocket; 0 = any free port"),
@@ -96,4 +96,4 @@ class WebStage final : public Stage {
   TimeNs last_comms_{-kNsPerS};
 };
 
-}  // namespace ag::base
+}  // namespace ag::base_station

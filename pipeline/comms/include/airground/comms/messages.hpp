@@ -7,7 +7,7 @@
 
 #include "airground/comms/topics.hpp"
 #include "airground/comms/wire.hpp"
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/time.hpp"
 
 namespace ag::comms {

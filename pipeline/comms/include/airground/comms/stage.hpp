@@ -18,7 +18,7 @@
 #include "airground/comms/journal.hpp"
 #include "airground/comms/messages.hpp"
 #include "airground/comms/tile_codec.hpp"
-#include "airground/core/messages.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/platform/stage.hpp"
 
 namespace ag::comms {

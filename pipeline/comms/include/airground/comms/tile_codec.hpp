@@ -12,7 +12,7 @@
 #include <span>
 #include <vector>
 
-#include "airground/core/messages.hpp"
+#include "airground/messages/messages.hpp"
 
 typedef struct ZSTD_CCtx_s ZSTD_CCtx;
 typedef struct ZSTD_DCtx_s ZSTD_DCtx;

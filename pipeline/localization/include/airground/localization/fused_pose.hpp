@@ -7,8 +7,8 @@
 #include <array>
 #include <cstdint>
 
-#include "airground/core/geometry.hpp"
-#include "airground/core/messages.hpp"
+#include "airground/messages/geometry.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/localization/particle_filter.hpp"
 #include "airground/platform/config.hpp"
 #include "airground/platform/time.hpp"

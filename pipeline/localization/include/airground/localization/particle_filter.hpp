@@ -31,7 +31,7 @@
 #include <vector>
 
 #include "airground/platform/rng.hpp"
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/localization/class_distance_fields.hpp"
 #include "airground/localization/polar_render.hpp"
 #include "airground/platform/config.hpp"

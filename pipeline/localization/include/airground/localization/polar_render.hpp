@@ -7,7 +7,7 @@
 #include <span>
 #include <vector>
 
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/localization/scan.hpp"
 #include "airground/platform/config.hpp"
 

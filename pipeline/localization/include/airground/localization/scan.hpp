@@ -6,8 +6,8 @@
 #include <span>
 #include <string>
 
-#include "airground/core/classes.hpp"
-#include "airground/core/messages.hpp"
+#include "airground/messages/classes.hpp"
+#include "airground/messages/messages.hpp"
 
 namespace ag::loc {
 

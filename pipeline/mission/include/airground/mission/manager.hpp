@@ -16,8 +16,8 @@
 #include <span>
 
 #include "airground/comms/messages.hpp"
-#include "airground/core/drive_messages.hpp"
-#include "airground/core/messages.hpp"
+#include "airground/messages/drive_messages.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/mission/messages.hpp"
 #include "airground/mission/records.hpp"
 

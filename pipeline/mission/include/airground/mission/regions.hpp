@@ -21,7 +21,7 @@
 #include <span>
 #include <vector>
 
-#include "airground/core/classes.hpp"
+#include "airground/messages/classes.hpp"
 #include "airground/planning/roadmap.hpp"
 
 namespace ag::mission {

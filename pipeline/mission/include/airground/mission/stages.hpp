@@ -17,8 +17,8 @@
 #include <string_view>
 
 #include "airground/comms/messages.hpp"
-#include "airground/core/drive_messages.hpp"
-#include "airground/core/messages.hpp"
+#include "airground/messages/drive_messages.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/mission/manager.hpp"
 #include "airground/mission/messages.hpp"
 #include "airground/mission/regions.hpp"

@@ -17,8 +17,8 @@
 #include <span>
 #include <vector>
 
-#include "airground/core/geometry.hpp"
-#include "airground/core/messages.hpp"
+#include "airground/messages/geometry.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/mission/records.hpp"
 
 namespace ag::mission {

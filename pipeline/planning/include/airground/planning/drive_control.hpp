@@ -6,7 +6,7 @@
 #include <array>
 #include <cstdint>
 
-#include "airground/core/geometry.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/planning/roadmap.hpp"
 #include "airground/platform/config.hpp"
 

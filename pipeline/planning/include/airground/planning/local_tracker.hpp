@@ -14,8 +14,8 @@
 #include <span>
 #include <vector>
 
-#include "airground/core/geometry.hpp"
-#include "airground/core/messages.hpp"
+#include "airground/messages/geometry.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/planning/roadmap.hpp"
 
 namespace ag::plan {

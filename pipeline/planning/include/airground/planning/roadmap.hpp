@@ -20,7 +20,7 @@
 #include <span>
 #include <vector>
 
-#include "airground/core/classes.hpp"
+#include "airground/messages/classes.hpp"
 #include "airground/platform/config.hpp"
 
 namespace ag::plan {

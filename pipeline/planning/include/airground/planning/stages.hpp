@@ -13,8 +13,8 @@
 #include <memory>
 #include <span>
 
-#include "airground/core/drive_messages.hpp"
-#include "airground/core/messages.hpp"
+#include "airground/messages/drive_messages.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/planning/drive_control.hpp"
 #include "airground/planning/local_tracker.hpp"
 #include "airground/planning/roadmap.hpp"

@@ -10,7 +10,7 @@
 #include <memory>
 #include <span>
 
-#include "airground/core/messages.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/platform/config.hpp"
 #include "airground/platform/stage.hpp"
 #include "airground/segmentation/erfnet.hpp"

@@ -5,7 +5,7 @@
 #include <array>
 #include <memory>
 
-#include "airground/core/messages.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/platform/stage.hpp"
 #include "airground/visual_odometry/visual_odometry.hpp"
 

@@ -12,7 +12,7 @@
 #include <optional>
 #include <vector>
 
-#include "airground/core/camera.hpp"
+#include "airground/messages/camera.hpp"
 #include "airground/platform/time.hpp"
 #include "airground/visual_odometry/geometry.hpp"
 #include "airground/visual_odometry/image_features.hpp"

@@ -19,8 +19,8 @@
 #include <memory>
 #include <span>
 
-#include "airground/core/drive_messages.hpp"
-#include "airground/core/messages.hpp"
+#include "airground/messages/drive_messages.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/drivers/can/candump_log.hpp"
 #include "airground/drivers/base/diff_drive_base.hpp"
 #include "airground/drivers/gpio/estop.hpp"

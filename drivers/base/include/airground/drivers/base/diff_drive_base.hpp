@@ -11,7 +11,7 @@
 #include <array>
 #include <cstdint>
 
-#include "airground/core/messages.hpp"
+#include "airground/messages/messages.hpp"
 #include "airground/drivers/base/odrive_can_simple.hpp"
 #include "airground/drivers/can/can_bus.hpp"
 #include "airground/platform/config.hpp"
