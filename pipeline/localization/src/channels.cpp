@@ -6,7 +6,10 @@
 
 namespace ag::loc {
 
-LocalizationChannels::LocalizationChannels() noexcept { scan_.fill(-1); }
+LocalizationChannels::LocalizationChannels() noexcept {
+  scan_.fill(-1);
+  fine_.fill(-1);
+}
 
 int LocalizationChannels::add_channel(std::string name, double weight) {
   if (count_ >= kMaxChannels) throw std::invalid_argument("LocalizationChannels: more than kMaxChannels channels");
@@ -27,17 +30,24 @@ LocalizationChannels LocalizationChannels::per_class(const ClassTable& table) {
   return c;
 }
 
-LocalizationChannels LocalizationChannels::two_class(double ground_weight, double obstacle_weight) {
+LocalizationChannels LocalizationChannels::two_class(double ground_weight, double obstacle_weight, bool obstacle_faces) {
   LocalizationChannels c;
   const int ground = c.add_channel("ground", ground_weight);
   const int obstacle = c.add_channel("obstacle", obstacle_weight);
-  for (const ClassId id : {ClassId::kRoad, ClassId::kDirt, ClassId::kGrass}) {
+  for (const ClassId id : {ClassId::kRoad, ClassId::kDirt, ClassId::kGrass, ClassId::kWater}) {
     c.count_scan_label(raw(id), ground);
     c.add_map_source(raw(id), ground);
   }
   for (const ClassId id : {ClassId::kTree, ClassId::kBuilding, ClassId::kVehicle}) {
     c.count_scan_label(raw(id), obstacle);
     c.add_map_source(raw(id), obstacle);
+  }
+  if (!obstacle_faces) return c;
+  const int faces = c.add_channel("obstacle faces", obstacle_weight);
+  c.set_surface(faces, true);
+  for (const ClassId id : {ClassId::kTree, ClassId::kBuilding, ClassId::kVehicle}) {
+    c.count_scan_label_fine(raw(id), faces, kFacesMaxBinM);
+    c.add_map_source(raw(id), faces);
   }
   return c;
 }

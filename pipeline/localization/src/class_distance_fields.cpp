@@ -19,6 +19,7 @@ DistanceFieldParams load_distance_field_params(const SectionView& s, double reso
   p.tile_cells = tile_cells;
   p.truncation_m = s.real("field_truncation_m");
   p.unknown_is_source = s.boolean("field_unknown_is_source");
+  p.obstacle_faces = s.boolean("field_obstacle_faces");
   return p;
 }
 
@@ -68,7 +69,8 @@ ClassDistanceFields::ClassDistanceFields(const DistanceFieldParams& params, cons
     quantise_[d2] = static_cast<std::uint8_t>(std::min(255.0, std::round(d / quantum_m_)));
   }
 
-  max_out_ = p_.full_block_tiles * p_.tile_cells + 2 * margin_;  // a group of tiles in update() and its margins
+  reach_ = margin_ + (channels_.surface_channels() != 0 ? 1 : 0);
+  max_out_ = p_.full_block_tiles * p_.tile_cells + 2 * reach_;  // a group of tiles in update() and its margins
   const auto in = static_cast<std::size_t>(max_out_ + 2 * margin_);
   src_.resize(in * in);
   g_.resize(static_cast<std::size_t>(channels_.count()) * static_cast<std::size_t>(max_out_) * in);
@@ -122,8 +124,8 @@ bool ClassDistanceFields::set_tile(std::int32_t tx, std::int32_t ty, std::uint64
 }
 
 double ClassDistanceFields::rect_cost(std::int32_t tiles_w, std::int32_t tiles_h) const noexcept {
-  const double tc = p_.tile_cells, m = margin_;
-  const double in_w = tiles_w * tc + 4.0 * m, in_h = tiles_h * tc + 4.0 * m, out_h = tiles_h * tc + 2.0 * m;
+  const double tc = p_.tile_cells, m = margin_, r = reach_;
+  const double in_w = tiles_w * tc + 2.0 * (m + r), in_h = tiles_h * tc + 2.0 * (m + r), out_h = tiles_h * tc + 2.0 * r;
   return in_w * in_h + out_h * in_w;  // pass 1 runs over the input rectangle, pass 2 along the output rows
 }
 
@@ -166,7 +168,7 @@ std::size_t ClassDistanceFields::update(std::size_t max_tiles) noexcept {
     }
     n_dirty_ = kept;
     if (n_dirty_ == 0) dirty_head_ = 0;
-    recompute_rect(bx0 * tc - margin_, by0 * tc - margin_, (bx1 + 1) * tc + margin_, (by1 + 1) * tc + margin_);
+    recompute_rect(bx0 * tc - reach_, by0 * tc - reach_, (bx1 + 1) * tc + reach_, (by1 + 1) * tc + reach_);
     spent += cost;
     done += group;
   }
@@ -199,6 +201,7 @@ void ClassDistanceFields::recompute_rect(std::int32_t x0, std::int32_t y0, std::
 
   // Source bits of the input rectangle (outside the extent: unknown).
   const std::uint8_t outside_bits = source_mask_[255];
+  const std::uint8_t surface = channels_.surface_channels();
   for (std::int32_t yi = 0; yi < ih; ++yi) {
     std::uint8_t* dst = &src_[static_cast<std::size_t>(yi) * uiw];
     const std::int32_t gy = iy0 + yi;
@@ -211,6 +214,7 @@ void ClassDistanceFields::recompute_rect(std::int32_t x0, std::int32_t y0, std::
       const std::int32_t gx = ix0 + xi;
       dst[xi] = (gx < 0 || gx >= width_) ? outside_bits : source_mask_[row[static_cast<std::size_t>(gx) * kStride]];
     }
+    if (surface != 0) keep_faces(gy, ix0, iw, dst);
   }
 
   // Pass 1: vertical distance to the nearest source in each input column, for the output rows: a run
@@ -287,6 +291,26 @@ void ClassDistanceFields::recompute_rect(std::int32_t x0, std::int32_t y0, std::
         out[static_cast<std::size_t>(xo) * kStride] = d2 <= max_d2 ? quantise_[d2] : std::uint8_t{255};
       }
     }
+}
+
+void ClassDistanceFields::keep_faces(std::int32_t gy, std::int32_t gx0, std::int32_t n, std::uint8_t* bits) const noexcept {
+  if (gy < 0 || gy >= height_) return;  // outside: unknown, not a member
+  const std::uint8_t surface = channels_.surface_channels(), outside = source_mask_[255];
+  const auto w = static_cast<std::size_t>(width_);
+  const std::uint8_t* row = &cells_[static_cast<std::size_t>(gy) * w * kStride + kStride - 1];  // class of cell gx at [gx * kStride]
+  const std::uint8_t* south = gy > 0 ? row - w * kStride : nullptr;
+  const std::uint8_t* north = gy + 1 < height_ ? row + w * kStride : nullptr;
+  const std::int32_t first = std::max(0, -gx0), last = std::min(n, width_ - gx0);
+  for (std::int32_t i = first; i < last; ++i) {
+    if ((bits[i] & surface) == 0) continue;  // a member of no surface channel (most cells: ground)
+    const auto gx = static_cast<std::size_t>(gx0 + i);
+    if (row[gx * kStride] == 255) continue;  // unknown cells stay sources of every channel they are a source of (the optimism)
+    const std::uint8_t west = gx > 0 ? source_mask_[row[(gx - 1) * kStride]] : outside;
+    const std::uint8_t east = gx + 1 < w ? source_mask_[row[(gx + 1) * kStride]] : outside;
+    const std::uint8_t s = south != nullptr ? source_mask_[south[gx * kStride]] : outside;
+    const std::uint8_t nn = north != nullptr ? source_mask_[north[gx * kStride]] : outside;
+    bits[i] = static_cast<std::uint8_t>(bits[i] & ~(surface & west & east & s & nn));
+  }
 }
 
 std::size_t ClassDistanceFields::index_at(double x, double y) const noexcept {

@@ -51,8 +51,9 @@ void ScanRenderPolar::render(std::span<const ScanPoint> points, double range_bin
   const auto min_r = static_cast<float>(p_.min_range_m), max_z = static_cast<float>(p_.max_height_m);
   const auto cap = p_.max_count_per_bin > 0 ? static_cast<std::uint16_t>(std::min(p_.max_count_per_bin, 65535)) : std::uint16_t{65535};
   points_counted_ = 0;
+  const bool fine = range_bin_m_ <= channels_.fine_max_bin_m();
   for (const ScanPoint& p : points) {
-    const int ch = channels_.scan_channel(p.cls);
+    const int ch = fine ? channels_.fine_scan_channel(p.cls) : channels_.scan_channel(p.cls);
     if (ch < 0 || p.z > max_z) continue;
     const float bx = mx + c * p.x - s * p.y, by = my + s * p.x + c * p.y;
     const float r = std::sqrt(bx * bx + by * by);

@@ -30,7 +30,8 @@ Status LocalizationStage::init(StageContext& ctx) {
   if (p.filter.range_bin_max_m < p.filter.range_bin_min_m)
     return Error::make(ErrorCode::kConfig, "config error: " + where + "pf_range_bin_max_m must be >= pf_range_bin_min_m");
   geometric_ = v.text("labels") == "geometric";
-  const LocalizationChannels channels = geometric_ ? LocalizationChannels::two_class() : LocalizationChannels::per_class();
+  const LocalizationChannels channels =
+      geometric_ ? LocalizationChannels::two_class(1.0, 1.5, p.fields.obstacle_faces) : LocalizationChannels::per_class();
   if (geometric_) labeller_ = std::make_unique<GeometricLabeller>(p.label, 128, 2048);
   else labeller_ = std::make_unique<GroundTruthLabeller>();
   const TileExtent extent = extent_covering(x0, y0, x1, y1, kMapResolutionM, kTileCells);

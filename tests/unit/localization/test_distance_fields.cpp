@@ -17,16 +17,23 @@ using test::SyntheticWorld;
 using test::TestRng;
 
 // Brute force: the quantised truncated distance from cell (c, r) to the nearest source of `channel`
-// (unknown and outside cells are sources when unknown_is_source).
+// (unknown and outside cells are sources when unknown_is_source; of a surface channel, only the faces).
 std::uint8_t brute_force(const SyntheticWorld& w, const std::vector<std::uint8_t>& cls, const LocalizationChannels& ch,
                          const DistanceFieldParams& p, int c, int r, int channel) {
   const int m = static_cast<int>(std::ceil(p.truncation_m / p.resolution_m - 1e-9));
+  const bool surface = ((static_cast<unsigned>(ch.surface_channels()) >> static_cast<unsigned>(channel)) & 1U) != 0;
+  auto member = [&](int cc, int rr) {
+    const std::uint8_t k = w.inside(cc, rr) ? cls[w.index(cc, rr)] : std::uint8_t{255};
+    return k == 255 ? p.unknown_is_source : ((static_cast<unsigned>(ch.map_sources(k)) >> static_cast<unsigned>(channel)) & 1U) != 0;
+  };
   double best2 = 1e30;
   for (int dr = -m; dr <= m; ++dr)
     for (int dc = -m; dc <= m; ++dc) {
       const int cc = c + dc, rr = r + dr;
       const std::uint8_t k = w.inside(cc, rr) ? cls[w.index(cc, rr)] : std::uint8_t{255};
-      const bool src = k == 255 ? p.unknown_is_source : ((static_cast<unsigned>(ch.map_sources(k)) >> static_cast<unsigned>(channel)) & 1U) != 0;
+      bool src = member(cc, rr);
+      // a surface channel: a known member with members on all four sides is inside, not a face
+      if (src && surface && k != 255 && member(cc - 1, rr) && member(cc + 1, rr) && member(cc, rr - 1) && member(cc, rr + 1)) src = false;
       if (src) best2 = std::min(best2, static_cast<double>(dc * dc + dr * dr));
     }
   const double t = p.truncation_m / p.resolution_m;
@@ -86,30 +93,54 @@ TEST(ClassDistanceFields, ClassGroupsOfTheGeometricLabelling) {
   DistanceFieldParams p;
   p.truncation_m = 10.0;
   p.unknown_is_source = false;
-  const LocalizationChannels ch = LocalizationChannels::two_class();
-  ASSERT_EQ(ch.count(), 2);
-  ClassDistanceFields f(p, ch, w.extent());
-  test::load_world(w, f);
-  expect_equal_to_brute_force(w, f, ch, p, 2);
-  // on a building and on a road
-  for (int r = 0; r < w.height; r += 5)
-    for (int c = 0; c < w.width; c += 5) {
-      const std::uint8_t k = w.cls[w.index(c, r)];
-      const double x = (c + 0.5) * w.resolution, y = (r + 0.5) * w.resolution;
-      if (k == raw(ClassId::kBuilding)) {
-        EXPECT_EQ(f.distance_m(x, y, 1), 0.0);
+  for (const bool faces : {false, true}) {
+    const LocalizationChannels ch = LocalizationChannels::two_class(1.0, 1.5, faces);
+    ASSERT_EQ(ch.count(), faces ? 3 : 2);  // ground, obstacle regions, and their faces
+    EXPECT_EQ(ch.surface_channels(), faces ? 4U : 0U);
+    ClassDistanceFields f(p, ch, w.extent());
+    test::load_world(w, f);
+    expect_equal_to_brute_force(w, f, ch, p, 2);
+    // On a road: ground. On a building: an obstacle region, and with faces its wall (the edge cells) and,
+    // inside, the distance to the nearest wall.
+    int inside = 0;
+    for (int r = 1; r + 1 < w.height; r += 3)
+      for (int c = 1; c + 1 < w.width; c += 3) {
+        const std::uint8_t k = w.cls[w.index(c, r)];
+        const double x = (c + 0.5) * w.resolution, y = (r + 0.5) * w.resolution;
+        if (k == raw(ClassId::kRoad)) {
+          EXPECT_EQ(f.distance_m(x, y, 0), 0.0);
+        }
+        if (k != raw(ClassId::kBuilding)) continue;
+        const auto obstacle = [&](int cc, int rr) { return (ch.map_sources(w.cls[w.index(cc, rr)]) & 2U) != 0; };
+        const bool face = !obstacle(c - 1, r) || !obstacle(c + 1, r) || !obstacle(c, r - 1) || !obstacle(c, r + 1);
+        EXPECT_EQ(f.distance_m(x, y, 1), 0.0) << c << "," << r;
+        if (!faces) continue;
+        if (face) {
+          EXPECT_EQ(f.distance_m(x, y, 2), 0.0) << c << "," << r;
+        } else {
+          EXPECT_GE(f.distance_m(x, y, 2), 0.45) << c << "," << r;
+          ++inside;
+        }
       }
-      if (k == raw(ClassId::kRoad)) {
-        EXPECT_EQ(f.distance_m(x, y, 0), 0.0);
-      }
+    if (faces) {
+      EXPECT_GT(inside, 50) << "the map must have building insides";
     }
+  }
 }
 
+void incremental_updates_equal_a_full_recompute(const LocalizationChannels& ch);
+
 TEST(ClassDistanceFields, IncrementalTileUpdatesEqualAFullRecompute) {
+  // per class, and the geometric grouping with its obstacle faces (a tile's change moves faces in the
+  // cells just beyond it)
+  for (const LocalizationChannels& ch : {LocalizationChannels::per_class(), LocalizationChannels::two_class()})
+    incremental_updates_equal_a_full_recompute(ch);
+}
+
+void incremental_updates_equal_a_full_recompute(const LocalizationChannels& ch) {
   SyntheticWorld w = random_blocks(6, 21, 0.05);
   DistanceFieldParams p;
   p.truncation_m = 25.0;
-  const LocalizationChannels ch = LocalizationChannels::per_class();
   ClassDistanceFields inc(p, ch, w.extent());
   test::load_world(w, inc);
   TestRng rng(99);

@@ -85,9 +85,14 @@ TEST(ScanRenderPolar, TwoClassChannelsCountGroupsOfLabels) {
   std::vector<ScanPoint> pts{at(5.5, 1.0, ClassId::kRoad), at(5.5, 1.0, ClassId::kGrass), at(5.5, 1.0, ClassId::kDirt),
                              at(5.5, 1.0, ClassId::kTree), at(5.5, 1.0, ClassId::kBuilding), at(5.5, 1.0, ClassId::kVehicle),
                              at(5.5, 1.0, ClassId::kWater)};
-  r.render(pts, 1.0);
-  EXPECT_EQ(r.count(0, 5, 0), 3);
-  EXPECT_EQ(r.count(0, 5, 1), 3);
+  r.render(pts, 1.0);  // fine bins: obstacles count into the faces
+  EXPECT_EQ(r.count(0, 5, 0), 4);  // road, grass, dirt and water: flat
+  EXPECT_EQ(r.count(0, 5, 1), 0);
+  EXPECT_EQ(r.count(0, 5, 2), 3);
+  r.render(pts, 2.0);  // coarse bins (converging): into the regions
+  EXPECT_EQ(r.count(0, 2, 0), 4);
+  EXPECT_EQ(r.count(0, 2, 1), 3);
+  EXPECT_EQ(r.count(0, 2, 2), 0);
 }
 
 TEST(ScanRenderPolar, ARayCastScanFillsTheNearBinsAllAround) {

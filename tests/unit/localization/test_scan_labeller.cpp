@@ -27,12 +27,16 @@ TEST(LocalizationChannels, PerClassAndTwoClass) {
   EXPECT_EQ(pc.map_sources(255), 0U);
 
   const LocalizationChannels tc = LocalizationChannels::two_class();
-  EXPECT_EQ(tc.count(), 2);
+  EXPECT_EQ(tc.count(), 3);  // ground, obstacle, obstacle faces (obstacle points while tracking)
+  EXPECT_EQ(tc.fine_scan_channel(raw(kObstacleLabel)), 2);
+  EXPECT_EQ(tc.fine_scan_channel(raw(kGroundLabel)), 0);
+  EXPECT_EQ(tc.map_sources(raw(ClassId::kTree)), 6U);
+  EXPECT_EQ(LocalizationChannels::two_class(1.0, 1.5, false).count(), 2);
   EXPECT_EQ(tc.scan_channel(raw(kGroundLabel)), 0);
   EXPECT_EQ(tc.scan_channel(raw(kObstacleLabel)), 1);
   EXPECT_EQ(tc.map_sources(raw(ClassId::kGrass)), 1U);
-  EXPECT_EQ(tc.map_sources(raw(ClassId::kVehicle)), 2U);
-  EXPECT_EQ(tc.map_sources(raw(ClassId::kWater)), 0U);
+  EXPECT_EQ(tc.map_sources(raw(ClassId::kVehicle)), 6U);
+  EXPECT_EQ(tc.map_sources(raw(ClassId::kWater)), 1U);  // flat: what a LiDAR gets back from water is ground
 }
 
 TEST(GroundTruthLabeller, ClassesPassThroughAndUnknownIdsBecome255) {

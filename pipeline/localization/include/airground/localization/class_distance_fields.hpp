@@ -12,6 +12,11 @@
 // cost. With unknown_is_source, unknown cells also count as sources of every channel, so a distance
 // next to unexplored ground is the optimistic min(distance to the class, distance to the unknown): the
 // class may be just behind the edge of what the quadrotor has seen.
+//
+// A surface channel (LocalizationChannels::set_surface) takes as sources only its member cells with a
+// 4-neighbour that is not a member (unknown and outside count as members when unknown_is_source); a
+// changed tile then also changes the sources one cell beyond it, so its recomputed rectangle reaches one
+// cell further.
 #pragma once
 
 #include <array>
@@ -31,11 +36,15 @@ struct DistanceFieldParams {
   bool unknown_is_source{true}; // unknown cells count as sources of every channel (optimistic distances)
   int full_block_tiles{4};      // recompute_all() works in blocks of this many tiles squared; update() groups
                                 // changed tiles within such a block
+  bool obstacle_faces{true};    // geometric labels: obstacle points match the faces of the map's obstacle regions
 };
 
 inline constexpr ParamSpec kDistanceFieldParamSpecs[] = {
     ParamSpec::real("field_truncation_m", 25.0, 1.0, 60.0, "m", "distances are clamped here (their code: 50 px)"),
     ParamSpec::boolean("field_unknown_is_source", true, "unknown cells count as sources (optimistic distances near the unknown)"),
+    ParamSpec::boolean("field_obstacle_faces", true,
+                       "geometric labels: an obstacle point matches the edge of the map's obstacle regions (walls, vehicles, "
+                       "crowns down to the ground), not their inside; false where the LiDAR sees trunks deep under wide crowns"),
 };
 // resolution_m and tile_cells come from the aerial map, not from here.
 DistanceFieldParams load_distance_field_params(const SectionView& s, double resolution_m, int tile_cells);
@@ -95,6 +104,8 @@ class ClassDistanceFields {
  private:
   // Recomputes the output rectangle [x0, x1) x [y0, y1) (cells, clamped to the extent).
   void recompute_rect(std::int32_t x0, std::int32_t y0, std::int32_t x1, std::int32_t y1) noexcept;
+  // Clears the surface-channel bits of the interior cells in row gy, cells gx0 .. gx0 + n - 1.
+  void keep_faces(std::int32_t gy, std::int32_t gx0, std::int32_t n, std::uint8_t* bits) const noexcept;
   // The work of recompute_rect() around a rectangle of tiles_w x tiles_h tiles [cell visits].
   [[nodiscard]] double rect_cost(std::int32_t tiles_w, std::int32_t tiles_h) const noexcept;
 
@@ -105,6 +116,7 @@ class ClassDistanceFields {
   double origin_x_{0}, origin_y_{0};
   double quantum_m_{0.1};
   std::int32_t margin_{0};  // [cells] ceil(truncation / resolution)
+  std::int32_t reach_{0};   // [cells] how far a changed tile's fields change: margin_, + 1 with surface channels
   std::int32_t max_out_{0};  // [cells] largest output rectangle edge the scratch holds
   std::array<std::uint8_t, 256> source_mask_{};  // class id -> channel bits
   std::vector<std::uint8_t> cells_;

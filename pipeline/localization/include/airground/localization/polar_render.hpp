@@ -51,6 +51,7 @@ class ScanRenderPolar {
 
   // Replaces the render with `points` (labelled, sensor frame) at range bins of `range_bin_m`. Never
   // allocates. Points with an uncounted label, too close, too high or beyond the last bin are skipped.
+  // A label counts into its fine_scan_channel when range_bin_m <= the channels' fine_max_bin_m.
   void render(std::span<const ScanPoint> points, double range_bin_m) noexcept;
 
   // Bin (a, r) covers body angles [a, a + 1) x 360 / angle_bins CCW from forward and ranges
