@@ -76,12 +76,45 @@ int world_import(const Args& a) {
   o.name = a.get("name", fs::path(o.classes_path).stem().string());
   o.datum = parse_datum(a);
   const std::string out = required(a, "out");
+  DeriveTargetsOptions derive;
+  if (a.has("target-link")) {
+    derive.link_m = number(a, "target-link", derive.link_m);
+    if (!(derive.link_m > 0)) usage_error("--target-link must be positive (metres between the cars of one cluster)");
+  }
   auto w = import_world(o);
   if (!w) return fail(w.error());
-  if (auto st = save_world(w.value(), out); !st) return fail(st.error());
-  if (auto st = write_world_pngs(w.value(), (fs::path(out) / "png").string()); !st) return fail(st.error());
-  std::printf("world %s: %dx%d cells at %.3f m; layer pictures in %s/png\n", out.c_str(), w.value().grid().width,
-              w.value().grid().height, w.value().grid().resolution, out.c_str());
+  World& world = w.value();
+  // The mission's targets: the user's file (checked against this world; its staging pose is where the
+  // robots start), or the map's own parked-car clusters.
+  std::vector<TargetCluster> targets;
+  std::string targets_from;
+  if (a.has("targets")) {
+    const std::string path = a.get("targets");
+    auto tf = load_targets_file(path);
+    if (!tf) return fail(tf.error());
+    if (auto st = check_targets_in_world(tf.value(), world, path); !st) return fail(st.error());
+    world.header.staging = tf.value().staging;
+    targets = tf.value().targets;
+    targets_from = "from " + path;
+  } else {
+    const DerivedTargets d = derive_targets(world, derive);
+    targets = d.targets;
+    char buf[256];
+    std::snprintf(buf, sizeof buf, "derived from the vehicle class: %d cars, clusters linked within %.1f m", d.cars, derive.link_m);
+    targets_from = buf;
+    if (d.small_blobs > 0) targets_from += "; " + std::to_string(d.small_blobs) + " vehicle specks under 1.5 m2 dropped";
+    if (d.large_blobs > 0) targets_from += "; " + std::to_string(d.large_blobs) + " vehicle areas over 20 m2 each taken as one car";
+    if (targets.empty())
+      std::fprintf(stderr, "world import: the map has no vehicle cells, so a mission on it has no targets to score; give "
+                           "--targets FILE.yaml\n");
+  }
+  if (auto st = save_world(world, out); !st) return fail(st.error());
+  if (auto st = save_targets(targets, world.header.staging, out); !st) return fail(st.error());
+  if (auto st = write_world_pngs(world, (fs::path(out) / "png").string()); !st) return fail(st.error());
+  std::printf("world %s: %dx%d cells at %.3f m; staging (%.1f, %.1f); %zu targets %s -> %s/targets.yaml (edit it, or "
+              "import with --targets FILE.yaml); layer pictures in %s/png\n",
+              out.c_str(), world.grid().width, world.grid().height, world.grid().resolution, world.header.staging.x,
+              world.header.staging.y, targets.size(), targets_from.c_str(), out.c_str(), out.c_str());
   return 0;
 }
 

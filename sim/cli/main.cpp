@@ -18,6 +18,8 @@ constexpr const char* kUsage =
     "  airground-sim world import --classes RASTER.png --legend LEGEND.yaml --resolution METRES_PER_PIXEL\n"
     "                             --out DIR [--elevation RASTER.tif] [--color IMAGE.png] [--name NAME]\n"
     "                             [--datum LAT,LON,HEIGHT]   (--px-per-m P instead of --resolution)\n"
+    "                             [--targets FILE.yaml | --target-link METRES]   (the mission's targets: your file,\n"
+    "                             or the map's parked-car clusters, cars within 12 m of each other one cluster)\n"
     "  airground-sim world show DIR --out DIR\n"
     "  airground-sim render --world W --pose X Y Z ROLL PITCH YAW --out DIR [--scale 0.5] [--config camera.yaml]\n"
     "  airground-sim scan --world W --pose X Y YAW --out DIR [--columns 512|1024|2048] [--height 0.6]\n"

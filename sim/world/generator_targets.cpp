@@ -86,7 +86,10 @@ Status save_targets(const std::vector<TargetCluster>& targets, const Pose2& stag
 }
 
 Result<TargetsFile> load_targets(const std::string& dir) {
-  const std::string path = (std::filesystem::path(dir) / "targets.yaml").string();
+  return load_targets_file((std::filesystem::path(dir) / "targets.yaml").string());
+}
+
+Result<TargetsFile> load_targets_file(const std::string& path) {
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) return targets_error(ErrorCode::kIo, path, "missing (no such file)");
   std::ifstream in(path, std::ios::binary);

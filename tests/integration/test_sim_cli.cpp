@@ -77,6 +77,50 @@ TEST(SimCli, GenerateShowRenderScanOnASmallWorld) {
   EXPECT_EQ(first, "ply");
 }
 
+// A user's own map is a whole mission: world import derives targets.yaml from the map's parked cars (or
+// takes the user's file, checked against the world), and a mission on the imported world is scored.
+TEST(SimCli, AnImportedMapIsAScoredMission) {
+  const std::string gen = tmp("import-gen"), imp = tmp("import-world"), mine = tmp("import-mine"), m = tmp("import-mission");
+  for (const std::string& d : {gen, imp, mine, m}) fs::remove_all(d);
+  ASSERT_EQ(run({sim_bin(), "world", "generate", "--seed", "7", "--size", "200", "--targets", "6", "--out", gen}, 120).exit_code, 0);
+  const std::string legend = tmp("import-legend.yaml");
+  std::ofstream(legend) << "classes:\n  - {value: 0, class: road}\n  - {value: 1, class: dirt}\n  - {value: 2, class: grass}\n"
+                           "  - {value: 3, class: tree}\n  - {value: 4, class: building}\n  - {value: 5, class: vehicle}\n"
+                           "  - {value: 6, class: water}\n";
+  const std::vector<std::string> base{sim_bin(), "world", "import", "--classes", gen + "/class.png", "--legend", legend, "--resolution", "0.25"};
+  auto with = [&](std::vector<std::string> extra) {
+    std::vector<std::string> v = base;
+    v.insert(v.end(), extra.begin(), extra.end());
+    return v;
+  };
+  const auto derived = run(with({"--out", imp}), 120);
+  ASSERT_EQ(derived.exit_code, 0) << derived.err;
+  EXPECT_NE(derived.out.find("6 targets derived from the vehicle class"), std::string::npos) << derived.out;
+  EXPECT_TRUE(fs::exists(fs::path(imp) / "targets.yaml"));
+
+  // The user's own file: its staging pose becomes the world's; a target outside the world is refused.
+  const auto own = run(with({"--targets", gen + "/targets.yaml", "--out", mine}), 120);
+  ASSERT_EQ(own.exit_code, 0) << own.err;
+  EXPECT_NE(own.out.find("6 targets from " + gen + "/targets.yaml"), std::string::npos) << own.out;
+  const std::string bad = tmp("import-bad-targets.yaml");
+  std::ofstream(bad) << "format_version: 1\nstaging: {x: 0, y: 0, yaw: 0}\ntargets:\n  - id: 4\n    x: 500\n    y: 0\n    cars: 1\n"
+                        "    car_poses:\n      - [500, 0, 0]\n";
+  const auto refused = run(with({"--targets", bad, "--out", tmp("import-refused")}), 120);
+  EXPECT_EQ(refused.exit_code, 1);
+  EXPECT_NE(refused.err.find("target 4"), std::string::npos) << refused.err;
+  EXPECT_EQ(run(with({"--target-link", "0", "--out", tmp("import-refused")}), 60).exit_code, 2);
+
+  const auto mission = run({sim_bin(), "mission", "--world", imp, "--ugvs", "1", "--seed", "1", "--max-duration", "10", "--record", "none",
+                            "--quiet", "--out", m},
+                           300);
+  ASSERT_EQ(mission.exit_code, 0) << mission.err;
+  std::ifstream metrics(fs::path(m) / "metrics.json");
+  std::stringstream ss;
+  ss << metrics.rdbuf();
+  EXPECT_NE(ss.str().find("\"targets_total\": 6"), std::string::npos) << ss.str().substr(0, 400);
+  EXPECT_EQ(mission.err.find("targets are not scored"), std::string::npos) << mission.err;
+}
+
 TEST(SimCli, CorruptWorldIsAClearError) {
   const std::string w = tmp("corrupt");
   fs::remove_all(w);

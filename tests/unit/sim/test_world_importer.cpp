@@ -1,5 +1,6 @@
 // Map importer: value rasters, anti-aliased and noisy colour rasters, palettes and transparency,
-// elevation and colour images (resampled), synthesised heights, and clear errors for bad inputs.
+// elevation and colour images (resampled), synthesised heights, clear errors for bad inputs, and the
+// mission targets derived from the map's parked cars or taken from a user's file.
 #include <gtest/gtest.h>
 
 #include <gdal_priv.h>
@@ -17,6 +18,7 @@
 
 #include <unistd.h>
 
+#include "airground/sim/generator.hpp"
 #include "airground/sim/importer.hpp"
 #include "airground/messages/geometry.hpp"
 #include "airground/platform/rng.hpp"
@@ -462,6 +464,116 @@ TEST(WorldImporter, Errors) {
     o.legend_path = write_text(d / "colours.yaml", kColourLegend);
     expect_error(o, "colour [255, 0, 255] covers 1600 pixels and is not in the legend", ErrorCode::kInvalidArgument);
   }
+}
+
+// A generated world's class raster, imported as a user's map with part of it unknown (value 255, in no
+// legend), gives back the generator's own target clusters: the same number, each centre within 0.5 m and
+// the same cars, except those whose cars fell into the unknown part.
+TEST(WorldTargets, AnImportedMapGivesBackTheGeneratorsCarClusters) {
+  GeneratorOptions g;
+  g.seed = 7;
+  g.size_m = 200;
+  g.targets = 6;
+  std::vector<TargetCluster> truth;
+  auto gen = generate_world(g, &truth);
+  ASSERT_TRUE(gen.ok()) << gen.error().message;
+  ASSERT_EQ(truth.size(), 6U);
+  const fs::path d = dir_for("targets");
+  cv::Mat raster = gen.value().class_id.clone();
+  // Unknown over the north-east quarter's corner: what the user could not label.
+  const cv::Rect hole(raster.cols * 3 / 4, 0, raster.cols / 4, raster.rows / 4);
+  raster(hole).setTo(255);
+  ImportOptions o;
+  o.classes_path = (d / "classes.png").string();
+  ASSERT_TRUE(cv::imwrite(o.classes_path, raster));
+  o.legend_path = write_text(d / "legend.yaml", R"(classes:
+  - {value: 0, class: road}
+  - {value: 1, class: dirt}
+  - {value: 2, class: grass}
+  - {value: 3, class: tree}
+  - {value: 4, class: building}
+  - {value: 5, class: vehicle}
+  - {value: 6, class: water}
+)");
+  o.resolution_m_per_px = g.resolution;
+  ImportReport rep;
+  auto w = import_world(o, &rep);
+  ASSERT_TRUE(w.ok()) << w.error().message;
+  EXPECT_EQ(rep.unknown_value_cells, static_cast<std::int64_t>(hole.area()));
+  const GridGeometry& grid = w.value().grid();
+  auto in_hole = [&](const Pose2& p) { return hole.contains(cv::Point(grid.col(p.x), grid.row(p.y))); };
+
+  const DerivedTargets got = derive_targets(w.value());
+  EXPECT_EQ(got.small_blobs, 0);
+  std::size_t expected = 0;
+  for (const TargetCluster& t : truth) {
+    bool hidden = false;
+    for (const Pose2& p : t.car_poses) hidden = hidden || in_hole(p);
+    if (hidden) continue;  // (a cluster partly in the hole would come back smaller; none of seed 7's is)
+    ++expected;
+    const TargetCluster* best = nullptr;
+    for (const TargetCluster& c : got.targets)
+      if (best == nullptr || std::hypot(c.x - t.x, c.y - t.y) < std::hypot(best->x - t.x, best->y - t.y)) best = &c;
+    ASSERT_NE(best, nullptr);
+    EXPECT_LT(std::hypot(best->x - t.x, best->y - t.y), 0.5) << "target " << t.id;
+    EXPECT_EQ(best->cars, t.cars) << "target " << t.id;
+    for (const Pose2& car : t.car_poses) {  // every car found, its long axis along the car's
+      double nearest = 1e9, axis = 0;
+      for (const Pose2& c : best->car_poses)
+        if (std::hypot(c.x - car.x, c.y - car.y) < nearest) {
+          nearest = std::hypot(c.x - car.x, c.y - car.y);
+          axis = std::fabs(std::sin(c.yaw - car.yaw));
+        }
+      EXPECT_LT(nearest, 0.3);
+      EXPECT_LT(axis, 0.1) << "yaw along the car (either way)";
+    }
+  }
+  EXPECT_GE(expected, 4U);
+  EXPECT_EQ(got.targets.size(), expected);
+  for (std::size_t i = 0; i < got.targets.size(); ++i) EXPECT_EQ(got.targets[i].id, static_cast<int>(i) + 1);
+
+  // Linking wider than the clusters are apart merges them; a car's length apart splits every cluster.
+  DeriveTargetsOptions wide;
+  wide.link_m = 150;
+  EXPECT_LT(derive_targets(w.value(), wide).targets.size(), expected);
+  DeriveTargetsOptions tight;
+  tight.link_m = 1.0;
+  EXPECT_EQ(derive_targets(w.value(), tight).targets.size(), static_cast<std::size_t>(got.cars));
+}
+
+TEST(WorldTargets, AUsersTargetsFileIsCheckedAgainstTheWorld) {
+  const fs::path d = dir_for("user_targets");
+  auto w = import_world(value_options(d));
+  ASSERT_TRUE(w.ok()) << w.error().message;
+  // value_raster(): 60 x 40 px at 0.5 m (x -15..15, y -10..10), the road across rows 20-25 (y -3..0).
+  TargetsFile f;
+  f.staging = Pose2{-10.0, -1.5, 0.0};
+  TargetCluster t;
+  t.id = 3;
+  t.x = 6.0;
+  t.y = -5.0;
+  t.cars = 1;
+  t.car_poses = {Pose2{6.0, -5.0, 0.0}};
+  f.targets = {t};
+  EXPECT_TRUE(check_targets_in_world(f, w.value(), "mine.yaml").ok());
+  ASSERT_TRUE(save_targets(f.targets, f.staging, d.string()).ok());
+  auto back = load_targets_file((d / "targets.yaml").string());
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_EQ(back.value().targets.size(), 1U);
+  EXPECT_EQ(back.value().targets[0].id, 3);
+
+  TargetsFile off = f;
+  off.targets[0].x = 40.0;
+  auto e = check_targets_in_world(off, w.value(), "mine.yaml");
+  ASSERT_FALSE(e.ok());
+  EXPECT_NE(e.error().message.find("mine.yaml"), std::string::npos) << e.error().message;
+  EXPECT_NE(e.error().message.find("target 3"), std::string::npos) << e.error().message;
+  TargetsFile roof = f;
+  roof.staging = Pose2{-5.0, 7.0, 0.0};  // the building: rows 5-14, cols 10-29
+  e = check_targets_in_world(roof, w.value(), "mine.yaml");
+  ASSERT_FALSE(e.ok());
+  EXPECT_NE(e.error().message.find("building"), std::string::npos) << e.error().message;
+  EXPECT_FALSE(load_targets_file((d / "none.yaml").string()).ok());
 }
 
 }  // namespace

@@ -47,5 +47,31 @@ struct TargetsFile {
   std::vector<TargetCluster> targets;
 };
 Result<TargetsFile> load_targets(const std::string& dir);
+// A targets file anywhere (load_targets reads DIR/targets.yaml with this).
+Result<TargetsFile> load_targets_file(const std::string& path);
+
+// The targets a class map shows, for a world imported from a user's map: every 8-connected group of
+// vehicle cells of at least min_car_m2 is one car (its centre; yaw along its long axis; cars that touch
+// are one car); cars within link_m of each other, centre to centre, are one cluster, and a cluster of at
+// least min_cars is a target. Ids 1..N from south-west to north-east. The generator's clusters are at
+// least 15 m apart car to car, and its cars at most 11.3 m apart within one (across a lot's aisle):
+// link_m 12 separates them.
+struct DeriveTargetsOptions {
+  double link_m{12.0};
+  double min_car_m2{1.5};   // smaller groups are labelling noise
+  double max_car_m2{20.0};  // larger groups are counted (touching cars, trucks), still one car each
+  int min_cars{1};
+};
+struct DerivedTargets {
+  std::vector<TargetCluster> targets;
+  int cars{0};         // in the targets
+  int small_blobs{0};  // vehicle groups under min_car_m2, dropped
+  int large_blobs{0};  // vehicle groups over max_car_m2
+  int lone_cars{0};    // in clusters of fewer than min_cars, dropped
+};
+DerivedTargets derive_targets(const World& w, const DeriveTargetsOptions& options = {});
+// A user's targets file for world w: its staging pose inside the world on ground a robot can stand on,
+// every target inside the world; the error names the file and the target.
+Status check_targets_in_world(const TargetsFile& f, const World& w, const std::string& path);
 
 }  // namespace ag::sim
