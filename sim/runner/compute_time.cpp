@@ -5,6 +5,7 @@
 #include <array>
 
 #include "airground/platform/calibration.hpp"
+#include "roles.hpp"
 
 namespace ag::sim {
 
@@ -17,35 +18,6 @@ constexpr std::array<TargetCpuInfo, 3> kTargets{{
     {TargetCpu::kNuc, "nuc", 1.0, "Intel NUC, Core i7-10710U (the paper's quadrotor computer; the reference)"},
     {TargetCpu::kRyzen, "ryzen", 0.9, "AMD Ryzen 5 3600 (the paper's ground robot computer)"},
     {TargetCpu::kXavierNx, "xavier-nx", 2.8, "NVIDIA Jetson Xavier NX, Carmel ARMv8.2 at 1.9 GHz (CPU only)"},
-}};
-
-// Reference-CPU cost of each robot stage: idle_us every step plus per_unit_us per unit of reported work.
-// Measured by `build/native/tests/bench/bench_compute_time 240` on 2026-12-05 (a field-mode mission on the
-// default world, 240 simulated s, then one ground robot on the world's map for 60 s; thread CPU time
-// divided by the calibration scale 0.645 measured in the same process; idle: the median of steps without
-// work, per unit: the mean time above it). A stage not listed (the simulator's own probes) costs nothing.
-// Re-run the benchmark after a change that makes a stage slower and paste its rows here.
-constexpr std::array<StageCost, 16> kCosts{{
-    // quadrotor
-    {"vo", 5.8, 9729.5, "frame tracked"},
-    {"pose_graph", 21.9, 19299.3, "graph solve"},
-    {"segmentation", 4.3, 212386.8, "keyframe through ErfNet (2 threads: the step's share)"},
-    {"ortho_map", 4.7, 69980.3, "keyframe fused"},
-    {"regions", 3.9, 10840.0, "regions update"},
-    // every robot
-    {"comms", 10.0, 0, "-"},
-    {"recorder", 3.4, 0, "-"},
-    {"status", 18.4, 0, "-"},
-    // ground robots
-    {"localization", 9.5, 14617.1, "scan matched"},
-    {"planner", 4.5, 1342.4, "route planned"},
-    {"drive", 4.0, 0, "-"},
-    {"tracker", 4.0, 2721.0, "scan tracked"},
-    {"mission", 7.6, 0, "-"},
-    {"targets", 3.6, 0, "-"},
-    // base station
-    {"web", 4.8, 0, "-"},
-    {"base", 0, 0, "- (the CAN driver: the simulator writes its channels)"},
 }};
 
 }  // namespace
@@ -80,11 +52,10 @@ std::string_view compute_time_name(ComputeTimeMode m) noexcept {
   return "off";
 }
 
-std::span<const StageCost> stage_costs() noexcept { return kCosts; }
-
 const StageCost* find_stage_cost(std::string_view stage) noexcept {
-  for (const auto& c : kCosts)
-    if (c.stage == stage) return &c;
+  for (const RoleDescription* role : {&ugv_role(), &uav_role(), &base_role()})
+    for (const StageSpec& s : role->stages)
+      if (s.name == stage) return &s.cost;
   return nullptr;
 }
 

@@ -21,11 +21,6 @@
 namespace ag::sim::lockstep {
 namespace {
 
-// The role stages that talk to devices; in lockstep the simulator writes their channels instead.
-bool is_simulated_driver(std::string_view stage) noexcept {
-  return stage == "base" || stage == "lidar" || stage == "gps" || stage == "camera" || stage == "autopilot";
-}
-
 // The shipped ErfNet weights: where the package installs them (segmentation.weights' shipped value), else
 // the source tree's copy for a simulator run from the build tree.
 std::string erfnet_weights_path(const std::string& shipped) {
@@ -70,8 +65,8 @@ std::vector<StageSpec> ugv_table(const RunOptions& opt) {
   std::vector<StageSpec> out;
   for (const StageSpec& st : ugv_role().stages) {
     if (!opt.ugv_goals.empty() && std::string_view(st.name) == "mission") continue;  // the runner's goals replace the mission manager's
-    // The simulator is the base (it moves the vehicle by 'wheel_command') and the LiDAR (it writes 'lidar_scan').
-    if (is_simulated_driver(st.name)) continue;
+    // The simulator is the devices (role table: `device`): it moves the vehicle by 'wheel_command' and writes 'lidar_scan'.
+    if (st.device) continue;
     out.push_back(st);
   }
   const double hz = opt.physics_hz;
@@ -418,7 +413,7 @@ Result<double> set_up_uav(Team& t, const Models& m, RoleFactory& roles, const st
   u->vo_oracle = opt.oracle("vo");
   u->labels_oracle = labels_oracle;
   for (const StageSpec& st : uav_desc.stages)
-    if (!is_simulated_driver(st.name) && !(u->vo_oracle && st.name == "vo")) t.uav_stages.push_back(st);
+    if (!st.device && !(u->vo_oracle && st.name == "vo")) t.uav_stages.push_back(st);
   if (!u->vo_oracle)
     t.uav_stages.push_back(StageSpec{"sim_vo_tap", &SimVoTapStage::make, 10.0, 90'000, 1, -1, SimVoTapStage::kParams,
                                      "simulator: counts and logs the quadrotor's own odometry"});

@@ -117,14 +117,14 @@ int main(int argc, char** argv) {
     std::printf("%-14s %8zu %8zu %10.1f %12.1f %12.2f %12.2f\n", stage.c_str(), x.idle_ns.size(), x.work_ns.size(), idle_us, per_unit_us,
                 quantile(per_step, 0.5) / 1e6, quantile(per_step, 0.99) / 1e6);
     char row[160];
-    std::snprintf(row, sizeof row, "    {\"%s\", %.1f, %.1f, ...},\n", stage.c_str(), idle_us, per_unit_us);
+    std::snprintf(row, sizeof row, "    %s: {%.1f, %.1f, \"...\"},\n", stage.c_str(), idle_us, per_unit_us);
     rows += row;
     if (jf != nullptr)
       std::fprintf(jf, "{\"bench\": \"compute_time\", \"stage\": \"%s\", \"idle_us\": %.2f, \"per_unit_us\": %.2f, \"steps\": %zu, \"working_steps\": %zu, \"scale\": %.4f}\n",
                    stage.c_str(), idle_us, per_unit_us, x.idle_ns.size() + x.work_ns.size(), x.work_ns.size(), scale);
   }
   if (jf != nullptr) std::fclose(jf);
-  std::printf("\nrows for kCosts in sim/runner/compute_time.cpp (stage, idle_us, per_unit_us):\n%s", rows.c_str());
+  std::printf("\nthe cost column of the role tables, firmware_host/*/role.cpp (stage: {idle_us, per_unit_us, unit}):\n%s", rows.c_str());
   std::printf("mission: %u of %u targets in %.0f s simulated (%.2fx real time)\n", m.value().targets_visited, m.value().targets_total, m.value().sim_s,
               m.value().realtime_factor);
   return 0;

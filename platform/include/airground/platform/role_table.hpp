@@ -16,6 +16,16 @@ namespace ag {
 
 using StageFactory = std::unique_ptr<Stage> (*)();
 
+// What a step of the stage costs on the reference CPU of platform/calibration.hpp (a NUC-class core):
+// idle_us every step, plus per_unit_us for each unit of work the step reports (Stage::add_work). The
+// simulator's lockstep executor shows the stage's outputs that much later (scaled to the target CPU);
+// `build/native/tests/bench/bench_compute_time 240` measures it and prints the rows to paste here.
+struct StageCost {
+  double idle_us{0};
+  double per_unit_us{0};
+  std::string_view unit{"-"};  // what one unit of work is
+};
+
 struct StageSpec {
   std::string_view name;   // also the config section of the stage's parameters
   StageFactory make;
@@ -25,6 +35,10 @@ struct StageSpec {
   int cpu;                  // CPU to pin the thread to, -1 = any
   std::span<const ParamSpec> params{};
   std::string_view help{};
+  StageCost cost{};
+  // A device stage (camera, LiDAR, GNSS, autopilot, CAN) talks to hardware: in the simulator's lockstep the
+  // world writes its output channels and reads its inputs, and the stage itself does not run.
+  bool device{false};
 };
 
 // The share of each thread's time the budgets may claim; the rest is headroom for jitter and drivers.

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "airground/platform/executor.hpp"
+#include "airground/platform/role_table.hpp"
 #include "airground/platform/result.hpp"
 #include "airground/platform/time.hpp"
 
@@ -37,15 +38,8 @@ enum class ComputeTimeMode { kOff, kModel, kMeasured };
 [[nodiscard]] Result<ComputeTimeMode> parse_compute_time(std::string_view name);
 [[nodiscard]] std::string_view compute_time_name(ComputeTimeMode m) noexcept;
 
-// One stage's cost on the reference CPU: idle_us for every step, plus per_unit_us for each unit of work
-// the step reported (Stage::add_work). Measured by tests/bench/bench_compute_time (docs/simulator.md).
-struct StageCost {
-  std::string_view stage;
-  double idle_us;
-  double per_unit_us;
-  std::string_view unit;
-};
-[[nodiscard]] std::span<const StageCost> stage_costs() noexcept;
+// A stage's cost on the reference CPU: the `cost` of its row in the role tables (ugv, uav, base; the
+// first row of that name), nullptr for a stage no role has (the simulator's own probes cost nothing).
 [[nodiscard]] const StageCost* find_stage_cost(std::string_view stage) noexcept;
 
 // One step a robot stage ran (bench_compute_time fits the cost table to these).
