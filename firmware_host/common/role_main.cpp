@@ -156,6 +156,9 @@ int run_role(const RoleDescription& role, int argc, char** argv) {
     log::stop_writer();
     return 1;
   }
+  for (const std::string& ch : robot.value()->channels().read_but_unwritten())
+    AG_LOG_WARN("main", "channel '%s' is read but no stage of the %s role writes it (a misspelled channel name, or a stage "
+                "missing from the role table): its readers will wait forever", ch.c_str(), rname.c_str());
   RealtimeOptions opts;
   opts.realtime_priority = cfg.get_bool("scheduler.realtime");
   opts.lock_memory = cfg.get_bool("scheduler.lock_memory");

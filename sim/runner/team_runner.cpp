@@ -244,6 +244,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   }
   if (auto st = set_up_ugvs(t, m, roles, comms_common.value(), survey_time_s); !st) return st.error();
   if (auto st = set_up_base(t, roles, comms_common.value()); !st) return st.error();
+  warn_unwritten_channels(t);
 
   const int threads = opt.threads > 0 ? opt.threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   WorkerPool pool(threads);

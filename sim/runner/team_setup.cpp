@@ -482,4 +482,16 @@ Status set_up_base(Team& t, RoleFactory& roles, const std::vector<std::string>& 
   return ok_status();
 }
 
+void warn_unwritten_channels(const Team& t) {
+  auto check = [](RoleInstance* r) {
+    if (r == nullptr) return;
+    for (const std::string& ch : r->channels().read_but_unwritten())
+      std::fprintf(stderr, "airground-sim: %s: channel '%s' is read but neither a stage nor the simulator writes it; its readers wait forever\n",
+                   r->name().c_str(), ch.c_str());
+  };
+  if (t.uav) check(t.uav->role.get());
+  for (const auto& u : t.ugvs) check(u->role.get());
+  check(t.base.get());
+}
+
 }  // namespace ag::sim::lockstep

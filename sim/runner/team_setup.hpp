@@ -74,5 +74,8 @@ Result<double> set_up_uav(Team& t, const Models& m, RoleFactory& roles, const st
 // The ground robots, lined up on the staging pad (or where the options put them).
 Status set_up_ugvs(Team& t, const Models& m, RoleFactory& roles, const std::vector<std::string>& comms_common, double survey_time_s);
 Status set_up_base(Team& t, RoleFactory& roles, const std::vector<std::string>& comms_common);
+// Prints each channel a robot reads that neither its stages nor the simulator write (after every device
+// writer is taken): a misspelled channel name, or a stage the simulator dropped without standing in for it.
+void warn_unwritten_channels(const Team& t);
 
 }  // namespace ag::sim::lockstep

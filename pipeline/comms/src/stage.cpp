@@ -190,6 +190,7 @@ Status CommsStage::init(StageContext& ctx) {
   auto out_in = ctx.channels.ring_reader<GossipPublishMsg, kGossipRing>("gossip_out");
   if (!out_in) return out_in.error();
   out_in_ = out_in.value();
+  ctx.channels.allow_unwritten("gossip_out");  // the base station publishes no records: it only relays
   auto gin = ctx.channels.ring_writer<GossipRecordMsg, kGossipRing>("gossip_in");
   if (!gin) return gin.error();
   gossip_in_ = gin.value();

@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace ag {
 namespace {
@@ -13,6 +14,26 @@ struct Odometry {
   std::int64_t sample_time_ns{0};
   double x{0}, y{0};
 };
+
+// A reader of a channel nobody writes (a misspelled name: "odometry" for "odom") would wait forever: the
+// registry names it. A tap alone (a recorder) is not waiting, and a writer taken later (the simulator's
+// devices) clears it.
+TEST(Channels, AChannelReadButNeverWrittenIsNamed) {
+  ChannelRegistry reg;
+  auto w = reg.latest_writer<Odometry>("odom");
+  auto r = reg.latest_reader<Odometry>("odometry");
+  auto ring = reg.ring_reader<Odometry, 4>("scan");
+  auto tap = reg.ring_tap<Odometry, 4>("tapped");
+  auto fine = reg.latest_reader<Odometry>("odom");
+  ASSERT_TRUE(w.ok() && r.ok() && ring.ok() && tap.ok() && fine.ok());
+  reg.seal();
+  EXPECT_EQ(reg.read_but_unwritten(), (std::vector<std::string>{"odometry", "scan"}));
+  auto scan_w = reg.ring_writer<Odometry, 4>("scan");
+  ASSERT_TRUE(scan_w.ok());
+  EXPECT_EQ(reg.read_but_unwritten(), (std::vector<std::string>{"odometry"}));
+  reg.allow_unwritten("odometry");  // an input the reader polls and some roles never write
+  EXPECT_TRUE(reg.read_but_unwritten().empty());
+}
 
 TEST(Channels, LatestChannelFansOutToEveryReader) {
   ChannelRegistry reg;

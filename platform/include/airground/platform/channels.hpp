@@ -36,6 +36,8 @@ struct ChannelBase {
   const void* tag{nullptr};
   bool has_writer{false};
   std::size_t writer_stage{kNoStage};  // index of the stage whose init() took the writer, if a stage did
+  std::size_t subscribers{0};          // readers that wait on the writer (a tap does not)
+  bool optional{false};                // read whether or not a role has a writer (allow_unwritten)
   static constexpr std::size_t kNoStage = static_cast<std::size_t>(-1);
 };
 
@@ -159,6 +161,7 @@ class ChannelRegistry {
     auto ch = find_or_add<detail::LatestChannel<T>>(name);
     if (!ch) return ch.error();
     ch.value()->readers.push_back(std::make_unique<LatestValue<T>>());
+    ++ch.value()->subscribers;
     return LatestReader<T>(ch.value()->readers.back().get());
   }
   template <typename T, std::size_t N>
@@ -205,6 +208,21 @@ class ChannelRegistry {
       for (auto* c : outputs_[index]) c->release();
   }
   [[nodiscard]] std::size_t size() const noexcept { return channels_.size(); }
+  // Channels something reads (a tap aside) but nothing writes: a misspelled name, or a stage or device
+  // missing from the role; its readers would wait forever. The binaries say so at start-up and the
+  // simulator checks every robot once it has taken the devices' writers.
+  [[nodiscard]] std::vector<std::string> read_but_unwritten() const {
+    std::vector<std::string> out;
+    for (const auto& c : channels_)
+      if (c->subscribers > 0 && !c->has_writer && !c->optional) out.push_back(c->name);
+    return out;
+  }
+  // A reader that polls an input some roles never write (the comms stage's "gossip_out" on the base
+  // station, which publishes no records) says so once it has subscribed; read_but_unwritten skips it.
+  void allow_unwritten(std::string_view name) noexcept {
+    for (auto& c : channels_)
+      if (c->name == name) c->optional = true;
+  }
 
  private:
   template <typename T, std::size_t N>
@@ -215,6 +233,7 @@ class ChannelRegistry {
     ch.value()->readers.push_back(std::make_unique<SpscRing<T, N>>());
     ch.value()->drops.push_back(std::make_unique<std::atomic<std::uint64_t>>(0));
     ch.value()->tap.push_back(tap ? 1 : 0);
+    if (!tap) ++ch.value()->subscribers;
     return RingReader<T, N>(ch.value()->readers.back().get(), ch.value()->drops.back().get());
   }
   template <typename C>
