@@ -132,6 +132,9 @@ struct Ugv {
   SimProbeStage* probe{nullptr};
   bool killed{false};
   TimeNs killed_at{-1};
+  // Steps in a row the vehicle has been stopped by an obstacle: logged when it starts and when it ends,
+  // not every physics step while a robot pushes against it.
+  std::uint64_t blocked_steps{0};
   // Robots stepped in parallel: the sampling callback's sample waits here for the end of the release time.
   UgvSample pending_sample{};
   bool has_pending_sample{false};

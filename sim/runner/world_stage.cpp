@@ -150,9 +150,16 @@ void drive(Team& t, Ugv& u, TimeNs now, double dt) {
     if (u.released && !u.held && !u.killed) u.pursuit.command(u.vehicle.pose(), v, w);
     u.vehicle.command_twist(v, w);
   }
-  if (dt > 0 && u.vehicle.step(dt, *t.world)) {  // a collision: the vehicle stopped; replan from here
-    AG_LOG_WARN("sim", "%s: collision at (%.2f, %.2f) yaw %.2f; replanning", u.name.c_str(), u.vehicle.pose().x,
-                u.vehicle.pose().y, u.vehicle.pose().yaw);
+  const bool collided = dt > 0 && u.vehicle.step(dt, *t.world);
+  if (!collided && dt > 0 && u.blocked_steps > 0) {
+    AG_LOG_INFO("sim", "%s: free again after %llu blocked steps at (%.2f, %.2f)", u.name.c_str(),
+                static_cast<unsigned long long>(u.blocked_steps), u.vehicle.pose().x, u.vehicle.pose().y);
+    u.blocked_steps = 0;
+  }
+  if (collided) {  // a collision: the vehicle stopped; replan from here
+    if (u.blocked_steps++ == 0)
+      AG_LOG_WARN("sim", "%s: collision at (%.2f, %.2f) yaw %.2f; replanning", u.name.c_str(), u.vehicle.pose().x,
+                  u.vehicle.pose().y, u.vehicle.pose().yaw);
     if (t.opt.drive_by_stages) {
       // nothing to do: the robot's own stages see it stop and go on
     } else if (u.scripted) {
