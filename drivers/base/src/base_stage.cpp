@@ -143,6 +143,7 @@ Status BaseStage::init(StageContext& ctx) {
   auto arm = ctx.channels.latest_reader<BaseArmMsg>("base_arm");
   if (!arm) return arm.error();
   arm_ = arm.value();
+  ctx.channels.allow_unwritten("base_arm");  // optional: an operator's re-arm request, when a tool sends one
   auto odom = ctx.channels.ring_writer<WheelOdometryMsg, kWheelOdometryRing>(v.text("odometry_channel"));
   if (!odom) return odom.error();
   odom_out_ = odom.value();

@@ -52,6 +52,7 @@ Status LocalizationStage::init(StageContext& ctx) {
   auto init = ctx.channels.latest_reader<InitialPoseMsg>("initial_pose");
   if (!init) return init.error();
   init_ = init.value();
+  ctx.channels.allow_unwritten("initial_pose");  // optional: an operator's tool or the simulator; else the config's guess
   auto out = ctx.channels.latest_writer<LocalizationMsg>("localization");
   if (!out) return out.error();
   out_ = out.value();
