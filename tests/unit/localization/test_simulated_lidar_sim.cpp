@@ -53,6 +53,18 @@ std::vector<Pose2> road_poses(const sim::World& w, std::size_t n) {
   return out;
 }
 
+// One revolution of the simulator's LiDAR from a robot at `truth` (sensor kMount above the ground), as
+// the localizer's points (classes kept: the labeller under test overwrites them).
+std::vector<ScanPoint> scan_at(const sim::World& w, const sim::LidarSimulator& lidar, const Pose2& truth, std::uint64_t seed) {
+  const GridGeometry& g = w.grid();
+  const double ground = w.terrain.at<float>(g.row(truth.y), g.col(truth.x));
+  std::vector<sim::LidarPoint> raw_scan;
+  lidar.scan(Pose3{truth.x, truth.y, ground + kMount, 0.0, 0.0, truth.yaw}, seed, raw_scan);
+  std::vector<ScanPoint> scan;
+  for (const sim::LidarPoint& q : raw_scan) scan.push_back(ScanPoint{q.x, q.y, q.z, q.range, q.cls, q.ring, q.col});
+  return scan;
+}
+
 struct Static {
   double err_m, yaw_err_deg, east_m;  // east_m: signed east error of the estimate
 };
@@ -92,13 +104,9 @@ TEST(SimulatedLidar, TheFilterSettlesOnTheTruePose) {
   ASSERT_GE(poses.size(), 3U);
   GroundTruthLabeller gt;
   GeometricLabeller geometric(GeometricLabelParams{}, 64, 1024);
-  std::vector<sim::LidarPoint> raw_scan;
   for (const Pose2& truth : poses) {
-    const double ground = w.terrain.at<float>(g.row(truth.y), g.col(truth.x));
-    lidar.scan(Pose3{truth.x, truth.y, ground + kMount, 0.0, 0.0, truth.yaw}, 7, raw_scan);
-    ASSERT_GT(raw_scan.size(), 20000U);
-    std::vector<ScanPoint> scan;
-    for (const sim::LidarPoint& q : raw_scan) scan.push_back(ScanPoint{q.x, q.y, q.z, q.range, q.cls, q.ring, q.col});
+    std::vector<ScanPoint> scan = scan_at(w, lidar, truth, 7);
+    ASSERT_GT(scan.size(), 20000U);
     std::vector<ScanPoint> scan2 = scan;
     const Static a = settle(truth, scan, gt, per_class, fields);
     const Static b = settle(truth, scan2, geometric, two_class, fields2);
@@ -129,16 +137,12 @@ TEST(SimulatedLidar, TheParkRoadDoesNotPullTheGeometricEstimate) {
   load_world_classes(w, before);
   load_world_classes(w, now);
   GeometricLabeller geometric(GeometricLabelParams{}, 64, 1024);
-  std::vector<sim::LidarPoint> raw_scan;
   double east_before = 0.0, east_now = 0.0;
   int n = 0;
   for (const double y : {105.0, 115.0, 125.0, 132.0, 138.0}) {
     const Pose2 truth{3.5, y, kPi / 2};
     ASSERT_EQ(w.class_at_xy(truth.x, truth.y), ClassId::kRoad) << "the park road moved: y " << y;
-    const double ground = w.terrain.at<float>(g.row(truth.y), g.col(truth.x));
-    lidar.scan(Pose3{truth.x, truth.y, ground + kMount, 0.0, 0.0, truth.yaw}, 11, raw_scan);
-    std::vector<ScanPoint> scan;
-    for (const sim::LidarPoint& q : raw_scan) scan.push_back(ScanPoint{q.x, q.y, q.z, q.range, q.cls, q.ring, q.col});
+    std::vector<ScanPoint> scan = scan_at(w, lidar, truth, 11);
     std::vector<ScanPoint> scan2 = scan;
     // long enough for the spread to fall below the faces' bins (range bins <= kFacesMaxBinM)
     const Static a = settle(truth, scan, geometric, regions, before, 60);
