@@ -75,17 +75,14 @@ ClassDistanceFields::ClassDistanceFields(const DistanceFieldParams& params, cons
   src_.resize(in * in);
   g_.resize(static_cast<std::size_t>(channels_.count()) * static_cast<std::size_t>(max_out_) * in);
   run_.resize(static_cast<std::size_t>(channels_.count()) * in);
-  env_v_.resize(in + 1);
-  env_z_.resize(in + 2);
-  env_f_.resize(in + 1);
+  envelope_.resize(in);
   recompute_all();
 }
 
 std::size_t ClassDistanceFields::memory_bytes() const noexcept {
   return sizeof(*this) + cells_.capacity() + tile_version_.capacity() * sizeof(std::uint64_t) + tile_dirty_.capacity() +
          dirty_.capacity() * sizeof(std::uint32_t) + quantise_.capacity() + src_.capacity() +
-         g_.capacity() * sizeof(std::int16_t) + run_.capacity() * sizeof(std::int16_t) + env_v_.capacity() * sizeof(std::int32_t) +
-         env_z_.capacity() * sizeof(double) + env_f_.capacity() * sizeof(std::int32_t);
+         g_.capacity() * sizeof(std::int16_t) + run_.capacity() * sizeof(std::int16_t) + envelope_.bytes();
 }
 
 std::uint64_t ClassDistanceFields::tile_version(std::int32_t tx, std::int32_t ty) const noexcept {
@@ -253,43 +250,14 @@ void ClassDistanceFields::recompute_rect(std::int32_t x0, std::int32_t y0, std::
     for (std::int32_t yo = 0; yo < oh; ++yo) {
       const std::int16_t* g = &g_[static_cast<std::size_t>(k) * plane + static_cast<std::size_t>(yo) * uiw];
       std::uint8_t* out = &cells_[(static_cast<std::size_t>(y0 + yo) * w + static_cast<std::size_t>(x0)) * kStride + static_cast<std::size_t>(k)];
-      int n = -1;
-      for (std::int32_t q = 0; q < iw; ++q) {
-        if (g[q] >= none) continue;
-        const std::int32_t fq = static_cast<std::int32_t>(g[q]) * g[q];
-        if (n < 0) {
-          n = 0;
-          env_v_[0] = q;
-          env_f_[0] = fq;
-          env_z_[0] = -std::numeric_limits<double>::infinity();
-          env_z_[1] = std::numeric_limits<double>::infinity();
-          continue;
-        }
-        double s = 0.0;
-        for (;;) {  // z[0] = -inf ends the loop at n = 0
-          const std::int32_t v = env_v_[static_cast<std::size_t>(n)];
-          s = static_cast<double>((fq + q * q) - (env_f_[static_cast<std::size_t>(n)] + v * v)) / (2.0 * (q - v));
-          if (s > env_z_[static_cast<std::size_t>(n)]) break;
-          --n;
-        }
-        ++n;
-        env_v_[static_cast<std::size_t>(n)] = q;
-        env_f_[static_cast<std::size_t>(n)] = fq;
-        env_z_[static_cast<std::size_t>(n)] = s;
-        env_z_[static_cast<std::size_t>(n) + 1] = std::numeric_limits<double>::infinity();
-      }
-      if (n < 0) {
+      const bool any = dt::squared_distance_line(
+          iw, [&](std::int32_t q) { return g[q] < none; }, [&](std::int32_t q) { return static_cast<double>(static_cast<std::int32_t>(g[q]) * g[q]); },
+          m, m + ow, envelope_, [&](std::int32_t xi, double d2) {
+            const auto i = static_cast<std::size_t>(d2);
+            out[static_cast<std::size_t>(xi - m) * kStride] = i <= max_d2 ? quantise_[i] : std::uint8_t{255};
+          });
+      if (!any)
         for (std::int32_t xo = 0; xo < ow; ++xo) out[static_cast<std::size_t>(xo) * kStride] = 255;
-        continue;
-      }
-      int e = 0;
-      for (std::int32_t xo = 0; xo < ow; ++xo) {
-        const std::int32_t xi = xo + m;
-        while (env_z_[static_cast<std::size_t>(e) + 1] < xi) ++e;
-        const std::int32_t dx = xi - env_v_[static_cast<std::size_t>(e)];
-        const auto d2 = static_cast<std::size_t>(dx * dx + env_f_[static_cast<std::size_t>(e)]);
-        out[static_cast<std::size_t>(xo) * kStride] = d2 <= max_d2 ? quantise_[d2] : std::uint8_t{255};
-      }
     }
 }
 

@@ -378,6 +378,11 @@ UpdateReport ParticleFilter::update(const ScanRenderPolar& render, const ClassDi
   std::sort(order_.begin(), order_.begin() + static_cast<std::ptrdiff_t>(n_));
   for (std::size_t k = 0; k < n_; ++k) {
     const std::size_t i = order_[k] & 0xFFFFFFFFULL;
+    if (!p_.area.contains(x_[i], y_[i])) {  // outside the mission area: not where the robot can be
+      score_[i] = -std::numeric_limits<double>::infinity();
+      ++est_.outside_area;
+      continue;
+    }
     double score = 0.0, kf = 0.0, ck = 0.0;
     yaw_[i] = wrap_angle(yaw_[i] + evaluate(x_[i], y_[i], yaw_[i], render, fields, window, score, kf, ck));
     score_[i] = score;
@@ -387,6 +392,8 @@ UpdateReport ParticleFilter::update(const ScanRenderPolar& render, const ClassDi
       rep.known_fraction = kf;
     }
   }
+  if (!std::isfinite(top))  // every particle outside the area: they keep their weights (the uniform case below)
+    for (std::size_t i = 0; i < n_; ++i) score_[i] = top = 0.0;
   double sum = 0.0;
   for (std::size_t i = 0; i < n_; ++i) {
     w_[i] *= std::exp(score_[i] - top);

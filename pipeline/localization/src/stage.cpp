@@ -24,7 +24,8 @@ Status LocalizationStage::init(StageContext& ctx) {
   const std::string where = std::string(ctx.stage_name) + ".";
   if (!(x1 > x0) || !(y1 > y0))
     return Error::make(ErrorCode::kConfig, "config error: " + where + "area_x1_m/area_y1_m must be east/north of area_x0_m/area_y0_m");
-  const LocalizerParams p = load_localizer_params(v, kMapResolutionM, kTileCells);
+  LocalizerParams p = load_localizer_params(v, kMapResolutionM, kTileCells);
+  p.filter.area = {x0, y0, x1, y1};  // the robot is inside its mission area
   if (p.filter.max_particles < p.filter.min_particles)
     return Error::make(ErrorCode::kConfig, "config error: " + where + "pf_max_particles must be >= pf_min_particles");
   if (p.filter.range_bin_max_m < p.filter.range_bin_min_m)

@@ -36,10 +36,7 @@ RegionExtractor::RegionExtractor(const RegionParams& p, const ClassTable& classe
   prev_id_.assign(n, kNoRegionId);
   tile_version_.assign(static_cast<std::size_t>(extent.tiles_x) * static_cast<std::size_t>(extent.tiles_y), 0);
   const std::size_t line = static_cast<std::size_t>(std::max(w_, h_)) + 1;
-  line_f_.assign(line, 0);
-  line_d_.assign(line, 0);
-  line_z_.assign(line + 1, 0);
-  line_v_.assign(line, 0);
+  envelope_.resize(line);
   const std::size_t cap = static_cast<std::size_t>(std::max(1, p.max_regions));
   groups_.assign(cap, Group{});
   order_.assign(cap, 0);
@@ -157,47 +154,9 @@ void RegionExtractor::open_vehicle_mask() noexcept {
   cols(tmp_.data(), veh_.data(), false);
 }
 
-// Exact squared Euclidean distance transform (Felzenszwalb & Huttenlocher), in cells.
+// Exact squared Euclidean distance transform (Felzenszwalb & Huttenlocher), in cells: the column pass
+// here, the row pass platform/distance_transform.hpp's.
 void RegionExtractor::squared_distance(const std::uint8_t* feature) noexcept {
-  auto line = [&](std::int32_t n) {
-    double* f = line_f_.data();
-    double* d = line_d_.data();
-    double* z = line_z_.data();
-    std::int32_t* v = line_v_.data();
-    std::int32_t k = 0;
-    v[0] = 0;
-    z[0] = -kBig;
-    z[1] = kBig;
-    for (std::int32_t q = 1; q < n; ++q) {
-      double s = 0;
-      for (;;) {
-        const std::int32_t p = v[k];
-        s = ((f[q] + static_cast<double>(q) * q) - (f[p] + static_cast<double>(p) * p)) / (2.0 * (q - p));
-        if (s <= z[k] && k > 0) {
-          --k;
-          continue;
-        }
-        break;
-      }
-      if (s <= z[k]) {  // k == 0 and the new parabola is below everywhere
-        v[0] = q;
-        z[0] = -kBig;
-        z[1] = kBig;
-        k = 0;
-        continue;
-      }
-      ++k;
-      v[k] = q;
-      z[k] = s;
-      z[k + 1] = kBig;
-    }
-    k = 0;
-    for (std::int32_t q = 0; q < n; ++q) {
-      while (z[k + 1] < q) ++k;
-      const double dq = q - v[k];
-      d[q] = dq * dq + f[v[k]];
-    }
-  };
   // phase 1 (Meijster): the distance to the nearest feature in the same column, by a sweep north and a
   // sweep south over whole rows (contiguous, no strided access)
   float* g = dist_.data();
@@ -221,13 +180,12 @@ void RegionExtractor::squared_distance(const std::uint8_t* feature) noexcept {
   for (std::int32_t r = 0; r < h_; ++r) {
     const float* row = g + static_cast<std::size_t>(r) * w;
     bool any = false;
-    for (std::size_t c = 0; c < w; ++c) {
-      line_f_[c] = row[c];
-      any = any || row[c] < 1e19f;
-    }
+    for (std::size_t c = 0; c < w; ++c) any = any || row[c] < 1e19f;
     if (!any) continue;  // no feature anywhere in this row's columns: stays kBig
-    line(w_);
-    for (std::int32_t c = 0; c < w_; ++c) dist_[idx(c, r)] = static_cast<float>(std::min(line_d_[static_cast<std::size_t>(c)], 1e30));
+    // Every cell is a parabola (kBig where its column has no feature); the row is read before it is written.
+    dt::squared_distance_line(
+        w_, [](std::int32_t) { return true; }, [&](std::int32_t c) { return static_cast<double>(row[c]); }, 0, w_, envelope_,
+        [&](std::int32_t c, double d2) { dist_[idx(c, r)] = static_cast<float>(std::min(d2, 1e30)); });
   }
 }
 

@@ -64,6 +64,14 @@ Roadmap::Roadmap(const RoadmapParams& params, const ClassTable& classes, const M
   vis_r_ = std::max(1, static_cast<std::int32_t>(std::floor(p_.visibility_radius_m / p_.resolution_m)));
   win_ = 2 * vis_r_ + 1;
   free_min_edt_ = static_cast<float>(p_.min_clearance_m / p_.resolution_m + 0.5);
+  // A cell's centre is at origin + (index + 0.5) * resolution: the first and one-past-last index inside.
+  auto first = [&](double v, double o, std::int32_t n) {
+    return static_cast<std::int32_t>(std::clamp(std::ceil((v - o) / p_.resolution_m - 0.5), 0.0, static_cast<double>(n)));
+  };
+  auto end = [&](double v, double o, std::int32_t n) {
+    return static_cast<std::int32_t>(std::clamp(std::floor((v - o) / p_.resolution_m - 0.5) + 1.0, 0.0, static_cast<double>(n)));
+  };
+  fence_ = {first(p_.fence.x0, ox_, w_), first(p_.fence.y0, oy_, h_), end(p_.fence.x1, ox_, w_), end(p_.fence.y1, oy_, h_)};
   for (int i = 0; i < 256; ++i) {
     const auto id = static_cast<ClassId>(i);
     const bool known = classes.valid_id(static_cast<std::uint8_t>(i));
@@ -102,8 +110,7 @@ Roadmap::Roadmap(const RoadmapParams& params, const ClassTable& classes, const M
   bucket_count_.assign(static_cast<std::size_t>(4 * (cap_cells_ + 2) + 2), 0);
   const std::int32_t m = cap_cells_ + 1;
   col_g_.assign(static_cast<std::size_t>(h_) * static_cast<std::size_t>(w_ + 2 * m + 2), 0);
-  env_v_.assign(static_cast<std::size_t>(w_ + 2 * m + 2), 0);
-  env_z_.assign(static_cast<std::size_t>(w_ + 2 * m + 3), 0.0F);
+  envelope_.resize(static_cast<std::size_t>(w_ + 2 * m + 2));
   g_.assign(cap + 2, 0.0F);
   parent_.assign(cap + 2, 0);
   stamp_.assign(cap + 2, 0);
@@ -152,10 +159,11 @@ bool Roadmap::set_tile(std::int32_t tx, std::int32_t ty, std::uint64_t version, 
   tile_version_[t] = version;
   for (int r = 0; r < p_.tile_cells; ++r)
     for (int c = 0; c < p_.tile_cells; ++c) {
-      const std::size_t k = idx(i * p_.tile_cells + c, j * p_.tile_cells + r);
+      const std::int32_t cx = i * p_.tile_cells + c, cy = j * p_.tile_cells + r;
+      const std::size_t k = idx(cx, cy);
       const std::uint8_t v = cls[static_cast<std::size_t>(r * p_.tile_cells + c)];
       cls_[k] = v;
-      trav_[k] = level_[v] != 0 ? 1 : 0;
+      trav_[k] = level_[v] != 0 && in_fence(cx, cy) ? 1 : 0;
     }
   if (tile_dirty_[t] == 0) {
     tile_dirty_[t] = 1;

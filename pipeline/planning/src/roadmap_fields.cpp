@@ -45,7 +45,7 @@ void Roadmap::recompute_closed(Rect out) noexcept {
             all = 0;
             break;
           }
-      closed_[k] = all;
+      closed_[k] = in_fence(x, y) ? all : 0;  // a hole is never closed across the fence
     }
 }
 
@@ -76,47 +76,18 @@ void Roadmap::recompute_clearance(Rect out) noexcept {
       }
     }
   }
-  // row pass
+  // row pass: every input column is a parabola (at `far` where no blocked cell is near)
+  const auto cap = static_cast<float>(cap_cells_);
   for (std::int32_t y = out.y0; y < out.y1; ++y) {
     const std::uint8_t* g = &col_g_[static_cast<std::size_t>(y - out.y0) * static_cast<std::size_t>(iw)];
-    auto f = [&](std::int32_t q) { return static_cast<float>(g[q] * g[q]); };
-    std::int32_t k = 0;
-    env_v_[0] = 0;
-    env_z_[0] = -kFar;
-    env_z_[1] = kFar;
-    for (std::int32_t q = 1; q < iw; ++q) {
-      float s = 0;
-      for (;;) {
-        const std::int32_t v = env_v_[static_cast<std::size_t>(k)];
-        s = ((f(q) + static_cast<float>(q * q)) - (f(v) + static_cast<float>(v * v))) / (2.0F * static_cast<float>(q - v));
-        if (s <= env_z_[static_cast<std::size_t>(k)] && k > 0) {
-          --k;
-          continue;
-        }
-        break;
-      }
-      if (s <= env_z_[static_cast<std::size_t>(k)]) {  // k == 0
-        env_v_[0] = q;
-        env_z_[0] = -kFar;
-        env_z_[1] = kFar;
-        continue;
-      }
-      ++k;
-      env_v_[static_cast<std::size_t>(k)] = q;
-      env_z_[static_cast<std::size_t>(k)] = s;
-      env_z_[static_cast<std::size_t>(k + 1)] = kFar;
-    }
-    k = 0;
-    const auto cap = static_cast<float>(cap_cells_);
-    for (std::int32_t q = out.x0 - ix0; q < out.x1 - ix0; ++q) {
-      while (env_z_[static_cast<std::size_t>(k + 1)] < static_cast<float>(q)) ++k;
-      const std::int32_t v = env_v_[static_cast<std::size_t>(k)];
-      const float d2 = static_cast<float>((q - v) * (q - v)) + f(v);
-      const std::size_t i = idx(q + ix0, y);
-      const float d = closed_[i] == 0 ? 0.0F : std::min(cap, std::sqrt(d2));
-      edt_[i] = d;
-      free_[i] = (closed_[i] != 0 && d >= free_min_edt_ - 1e-4F) ? 1 : 0;
-    }
+    dt::squared_distance_line(
+        iw, [](std::int32_t) { return true; }, [&](std::int32_t q) { return static_cast<float>(g[q] * g[q]); }, out.x0 - ix0,
+        out.x1 - ix0, envelope_, [&](std::int32_t q, float d2) {
+          const std::size_t i = idx(q + ix0, y);
+          const float d = closed_[i] == 0 ? 0.0F : std::min(cap, std::sqrt(d2));
+          edt_[i] = d;
+          free_[i] = (closed_[i] != 0 && d >= free_min_edt_ - 1e-4F) ? 1 : 0;
+        });
   }
 }
 

@@ -15,7 +15,12 @@ Status PlannerStage::init(StageContext& ctx) {
   const std::string where = std::string(ctx.stage_name) + ".";
   if (!(x1 > x0) || !(y1 > y0))
     return Error::make(ErrorCode::kConfig, "config error: " + where + "area_x1_m/area_y1_m must be east/north of area_x0_m/area_y0_m");
-  const RoadmapParams p = load_roadmap_params(v, kMapResolutionM, kTileCells);
+  const double margin = v.real("geofence_margin_m");
+  if (!(x1 - x0 > 2 * margin) || !(y1 - y0 > 2 * margin))
+    return Error::make(ErrorCode::kConfig, "config error: " + where + "geofence_margin_m (" + std::to_string(margin) +
+                                               " m) leaves nothing of the mission area area_* inside the geofence");
+  RoadmapParams p = load_roadmap_params(v, kMapResolutionM, kTileCells);
+  p.fence = {x0 + margin, y0 + margin, x1 - margin, y1 - margin};
   map_ = std::make_unique<Roadmap>(p, ClassTable::builtin(), extent_covering_area(x0, y0, x1, y1, kMapResolutionM, kTileCells));
   path_ = std::make_unique<PlannedPath>();
   msg_ = std::make_unique<PlannedPathMsg>();

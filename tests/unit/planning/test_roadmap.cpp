@@ -61,6 +61,38 @@ TEST(RoadmapFields, ClearanceAndFreeCellsMatchBruteForceOnASyntheticWorld) {
   EXPECT_LT(worst, 1e-3) << "clearance [m] vs brute force";
 }
 
+// The mission area is a geofence: an all-road tile fenced to [4, 28] m blocks the cells centred outside,
+// routes keep min_clearance_m inside the fence, and a goal beyond it is refused rather than driven to.
+TEST(RoadmapFields, TheGeofenceBlocksCellsOutsideTheMissionArea) {
+  RoadmapParams p;
+  p.fence = {4.0, 4.0, 28.0, 28.0};
+  Roadmap rm(p, ClassTable::builtin(), MapExtent{0, 0, 1, 1});
+  ASSERT_TRUE(rm.set_tile(0, 0, 1, road_tile()));
+  rm.rebuild();
+  EXPECT_FALSE(rm.traversable_cell(7, 30)) << "centre x 3.75 m: outside";
+  EXPECT_TRUE(rm.traversable_cell(8, 30)) << "centre x 4.25 m: inside";
+  EXPECT_TRUE(rm.traversable_cell(55, 30)) << "centre x 27.75 m: inside";
+  EXPECT_FALSE(rm.traversable_cell(56, 30)) << "centre x 28.25 m: outside";
+  EXPECT_FALSE(rm.traversable_cell(30, 7));
+  EXPECT_FALSE(rm.traversable_cell(30, 56));
+  EXPECT_FALSE(rm.free_cell(8, 30)) << "inside the fence but within min_clearance_m of it";
+  auto path = std::make_unique<PlannedPath>();
+  rm.plan({6, 6}, {6, 26}, *path);  // along the west fence
+  ASSERT_EQ(path->status, PlanStatus::kOk);
+  for (std::uint32_t i = 1; i + 1 < path->count; ++i) {  // the snapped ends aside
+    EXPECT_GE(path->points[i].x, 4.0 + p.min_clearance_m - 0.25) << "point " << i;
+    EXPECT_GE(path->points[i].y, 4.0 + p.min_clearance_m - 0.25) << "point " << i;
+    EXPECT_LE(path->points[i].y, 28.0 - p.min_clearance_m + 0.25) << "point " << i;
+  }
+  EXPECT_GE(path->min_clearance_m, p.min_clearance_m - 1e-6);
+  rm.plan({16, 16}, {1.5, 16}, *path);  // 2.5 m outside: beyond the snap radius of any free cell
+  EXPECT_EQ(path->status, PlanStatus::kGoalBlocked);
+  Roadmap open(RoadmapParams{}, ClassTable::builtin(), MapExtent{0, 0, 1, 1});
+  ASSERT_TRUE(open.set_tile(0, 0, 1, road_tile()));
+  open.rebuild();
+  EXPECT_TRUE(open.traversable_cell(7, 30)) << "no fence by default";
+}
+
 TEST(RoadmapGraph, EveryFreeCellIsSeenAndEveryEdgeIsAFreeLine) {
   const auto w = loc::test::make_world(4, 4, 5);
   auto rm = load_roadmap(w);

@@ -65,5 +65,19 @@ TEST(PlanningStages, CancelBadGoalsAndTilesOutsideTheAreaAreCounted) {
   EXPECT_EQ(rig.planner->published().status, RouteStatus::kBadEnds);
 }
 
+TEST(PlanningStages, AGeofenceMarginThatLeavesNoMissionAreaIsRefusedAtStartUp) {
+  static const std::vector<ParamSection> schema = role_schema(test::kRole);
+  Config cfg = Config::defaults(schema);
+  for (const char* s : {"planner.area_x0_m=0", "planner.area_y0_m=0", "planner.area_x1_m=30", "planner.area_y1_m=100",
+                        "planner.geofence_margin_m=15"})
+    ASSERT_TRUE(cfg.set(s).ok()) << s;
+  SimClock clock{0};
+  auto r = RoleInstance::create(test::kRole, cfg, clock, "ugv1");
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().message.find("planner.geofence_margin_m"), std::string::npos) << r.error().message;
+  ASSERT_TRUE(cfg.set("planner.geofence_margin_m=14").ok());
+  EXPECT_TRUE(RoleInstance::create(test::kRole, cfg, clock, "ugv1").ok()) << "2 m of the area left inside the fence";
+}
+
 }  // namespace
 }  // namespace ag::plan

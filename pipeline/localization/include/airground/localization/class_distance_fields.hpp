@@ -26,6 +26,7 @@
 
 #include "airground/localization/scan.hpp"
 #include "airground/platform/config.hpp"
+#include "airground/platform/distance_transform.hpp"
 
 namespace ag::loc {
 
@@ -129,9 +130,7 @@ class ClassDistanceFields {
   std::vector<std::uint8_t> src_;   // [in_row][in_col] channel bits
   std::vector<std::int16_t> g_;     // [channel][out_row][in_col] vertical distance [cells], > margin = none
   std::vector<std::int16_t> run_;   // [channel][in_col] the sweeps' run lengths [cells]
-  std::vector<std::int32_t> env_v_;
-  std::vector<double> env_z_;
-  std::vector<std::int32_t> env_f_;
+  dt::EnvelopeScratch<double> envelope_;  // the row pass (platform/distance_transform.hpp)
 };
 
 }  // namespace ag::loc

@@ -28,6 +28,7 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "airground/platform/rng.hpp"
@@ -85,6 +86,15 @@ struct ParticleFilterParams {
   double recovery_growth{1.5};       // sigma x this at each further attempt
   double recovery_sigma_xy_max_m{25.0};
   double lost_drift_per_m{0.05};     // [m/m] the last good pose's uncertainty grows with the distance since
+  // The mission area [m, map frame] (the stage: its area_*): the robot is inside it, so a particle outside
+  // has no weight. Over unmapped ground a particle's score is neutral, which beats a poor match on the
+  // map: without the area a guess near the area's edge converged onto the nothing beyond it.
+  struct Area {
+    double x0{-std::numeric_limits<double>::infinity()}, y0{-std::numeric_limits<double>::infinity()};
+    double x1{std::numeric_limits<double>::infinity()}, y1{std::numeric_limits<double>::infinity()};
+    [[nodiscard]] bool contains(double x, double y) const noexcept { return x >= x0 && x <= x1 && y >= y0 && y <= y1; }
+  };
+  Area area{};
 };
 
 inline constexpr ParamSpec kParticleFilterParamSpecs[] = {
@@ -146,6 +156,7 @@ struct FilterEstimate {
   double range_bin_m{0};               // [m] for the next render
   std::uint64_t updates{0};
   std::uint32_t recoveries{0};         // re-spreads after divergence (total)
+  std::uint64_t outside_area{0};       // particles found outside the mission area at an update (total; no weight)
 };
 
 struct UpdateReport {

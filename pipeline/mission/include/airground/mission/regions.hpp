@@ -23,6 +23,7 @@
 
 #include "airground/messages/classes.hpp"
 #include "airground/planning/roadmap.hpp"
+#include "airground/platform/distance_transform.hpp"
 
 namespace ag::mission {
 
@@ -126,8 +127,7 @@ class RegionExtractor {
   std::vector<std::int32_t> labels_, queue_;
   std::vector<std::uint32_t> prev_id_;
   std::vector<std::uint64_t> tile_version_;
-  std::vector<double> line_f_, line_d_, line_z_;
-  std::vector<std::int32_t> line_v_;
+  dt::EnvelopeScratch<double> envelope_;  // the distance transform's row pass (platform/distance_transform.hpp)
   struct Group {
     std::uint32_t cells{0};
     double sx{0}, sy{0};

@@ -8,8 +8,10 @@
 // Cells: width x height, row-major, row 0 at the SOUTH edge, cell (0, 0) at tile (tile_x0, tile_y0)'s
 // south-west corner (the ortho-map's tile order, messages.hpp). A cell is "free" when it is traversable
 // (after hole filling) and its clearance (distance from its centre to the nearest blocked cell's edge,
-// cells outside the extent being blocked) is at least min_clearance_m. Every line the planner returns
-// crosses only free cells (conservative grid traversal: a line through a cell corner tests both cells).
+// cells outside the extent being blocked) is at least min_clearance_m. Cells whose centre lies outside the
+// geofence (RoadmapParams::fence, the mission area less a margin) are blocked like an obstacle, so a route
+// also keeps min_clearance_m inside the fence. Every line the planner returns crosses only free cells
+// (conservative grid traversal: a line through a cell corner tests both cells).
 //
 // Memory is allocated in the constructor (nodes up to max_nodes); set_tile(), update(), rebuild() and
 // plan() never allocate.
@@ -17,11 +19,13 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <span>
 #include <vector>
 
 #include "airground/messages/classes.hpp"
 #include "airground/platform/config.hpp"
+#include "airground/platform/distance_transform.hpp"
 
 namespace ag::plan {
 
@@ -40,6 +44,11 @@ struct RoadmapParams {
   double clearance_penalty_cap{100.0};
   double shortcut_clearance_m{1.5}; // [m] a shortcut keeps min(this, what the replaced stretch kept)
   int max_nodes{16384};
+  struct Fence {  // [m] map frame; the default fences nothing
+    double x0{-std::numeric_limits<double>::infinity()}, y0{-std::numeric_limits<double>::infinity()};
+    double x1{std::numeric_limits<double>::infinity()}, y1{std::numeric_limits<double>::infinity()};
+  };
+  Fence fence{};  // cells centred outside it are blocked (the planner stage: its area_* less geofence_margin_m)
 };
 
 inline constexpr ParamSpec kRoadmapParamSpecs[] = {
@@ -144,6 +153,7 @@ class Roadmap {
   [[nodiscard]] double origin_y() const noexcept { return oy_; }  // [m] south edge
   [[nodiscard]] double resolution_m() const noexcept { return p_.resolution_m; }
   [[nodiscard]] bool inside(std::int32_t c, std::int32_t r) const noexcept { return c >= 0 && r >= 0 && c < w_ && r < h_; }
+  [[nodiscard]] bool in_fence(std::int32_t c, std::int32_t r) const noexcept { return c >= fence_.x0 && r >= fence_.y0 && c < fence_.x1 && r < fence_.y1; }
   [[nodiscard]] std::size_t idx(std::int32_t c, std::int32_t r) const noexcept {
     return static_cast<std::size_t>(r) * static_cast<std::size_t>(w_) + static_cast<std::size_t>(c);
   }
@@ -196,6 +206,7 @@ class Roadmap {
   RoadmapParams p_;
   MapExtent extent_;
   std::int32_t w_{0}, h_{0};
+  Rect fence_{};  // cells centred inside RoadmapParams::fence
   double ox_{0}, oy_{0};
   std::int32_t close_r_{0}, cap_cells_{0}, vis_r_{0}, win_{0};
   float free_min_edt_{0};  // [cells] EDT needed for a free cell
@@ -221,8 +232,7 @@ class Roadmap {
   // scratch
   std::vector<std::uint32_t> cand_, bucket_count_;
   std::vector<std::uint8_t> col_g_;  // column distances [cells], capped at the clearance cap + 1
-  std::vector<std::int32_t> env_v_;
-  std::vector<float> env_z_;
+  dt::EnvelopeScratch<float> envelope_;  // the clearance's row pass (platform/distance_transform.hpp)
   // search
   std::vector<float> g_;
   std::vector<std::uint32_t> parent_, stamp_, heap_;

@@ -37,6 +37,8 @@ inline constexpr ParamSpec kPlannerOwnParams[] = {
     ParamSpec::real("area_y0_m", -500.0, -1e6, 1e6, "m", "mission area: south edge"),
     ParamSpec::real("area_x1_m", 500.0, -1e6, 1e6, "m", "mission area: east edge"),
     ParamSpec::real("area_y1_m", 500.0, -1e6, 1e6, "m", "mission area: north edge"),
+    ParamSpec::real("geofence_margin_m", 1.0, 0.0, 100.0, "m",
+                    "the mission area is a geofence: routes keep min_clearance_m inside the area shrunk by this"),
     ParamSpec::integer("tiles_per_step", 2, 1, 256, "tiles", "changed map tiles folded into the roadmap per step"),
     ParamSpec::real("replan_period_s", 2.0, 0.1, 60.0, "s", "re-plan from the current pose this often while a goal is active"),
     ParamSpec::real("snap_radius_m", 2.0, 0.0, 10.0, "m", "a start or goal off the free cells snaps to one within this"),
