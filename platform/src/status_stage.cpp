@@ -14,7 +14,7 @@ Status StatusStage::init(StageContext& ctx) {
   const SectionView p = ctx.params();
   log_counters_ = p.boolean("log_counters");
   log_every_ = p.integer("log_every");
-  auto w = ctx.channels.latest_writer<SchedulerStatus>("scheduler_status");
+  auto w = ctx.channels.latest_writer(chan::kSchedulerStatus);
   if (!w) return w.error();
   out_ = w.value();
   return ok_status();

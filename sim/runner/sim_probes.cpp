@@ -27,32 +27,32 @@ void SimVoTapStage::step(TimeNs) noexcept {
 
 Status SimProbeStage::init(StageContext& ctx) {
   const SectionView p = ctx.params();
-  auto loc = ctx.channels.latest_reader<LocalizationMsg>("localization");
+  auto loc = ctx.channels.latest_reader(chan::kLocalization);
   if (!loc) return loc.error();
   loc_ = loc.value();
-  auto cmd = ctx.channels.latest_reader<WheelCommandMsg>("wheel_command");
+  auto cmd = ctx.channels.latest_reader(chan::kWheelCommand);
   if (!cmd) return cmd.error();
   cmd_ = cmd.value();
   if (p.boolean("scans")) {
-    auto r = ctx.channels.ring_reader<LidarScanMsg, kLidarRing>("lidar_scan");
+    auto r = ctx.channels.ring_reader(chan::kLidarScan);
     if (!r) return r.error();
     scans_ = r.value();
     read_scans_ = true;
   }
   if (p.boolean("odometry")) {
-    auto r = ctx.channels.ring_reader<WheelOdometryMsg, kWheelOdometryRing>("wheel_odometry");
+    auto r = ctx.channels.ring_reader(chan::kWheelOdometry);
     if (!r) return r.error();
     odom_ = r.value();
     read_odom_ = true;
   }
   if (p.boolean("tiles")) {
-    auto r = ctx.channels.ring_reader<MapTileMsg, kMapTileRing>("map_tiles");
+    auto r = ctx.channels.ring_reader(chan::kMapTiles);
     if (!r) return r.error();
     tiles_ = r.value();
     read_tiles_ = true;
   }
   if (p.boolean("initial_pose")) {
-    auto r = ctx.channels.latest_reader<InitialPoseMsg>("initial_pose");
+    auto r = ctx.channels.latest_reader(chan::kInitialPose);
     if (!r) return r.error();
     init_ = r.value();
     read_init_ = true;

@@ -4,6 +4,7 @@
 
 #include <memory>
 
+#include "airground/messages/channels.hpp"
 #include "airground/messages/drive_messages.hpp"
 #include "airground/messages/messages.hpp"
 #include "airground/platform/channels.hpp"
@@ -22,7 +23,7 @@ class SimVoTapStage final : public Stage {
   static constexpr ParamSpec kParams[] = {ParamSpec::boolean("log", true, "count and log 'visual_odometry'")};
   static std::unique_ptr<Stage> make() { return std::make_unique<SimVoTapStage>(); }
   Status init(StageContext& ctx) override {
-    auto r = ctx.channels.ring_reader<VoMsg, kVoRing>("visual_odometry");
+    auto r = ctx.channels.ring_reader(chan::kVisualOdometry);
     if (!r) return r.error();
     in_ = r.value();
     return ok_status();

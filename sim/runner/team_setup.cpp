@@ -10,6 +10,7 @@
 
 #include "airground/aerial_mapping/stages.hpp"
 #include "airground/comms/stage.hpp"
+#include "airground/messages/channels.hpp"
 #include "airground/platform/rng.hpp"
 #include "airground/sim/model_params.hpp"
 #include "airground/sim/survey.hpp"
@@ -153,19 +154,19 @@ Status set_up_ugv(Team& t, const Models& m, RoleFactory& roles, int i, const Rol
   u->role = std::move(role).value();
   u->index = i;
   ChannelRegistry& ch = u->role->channels();
-  auto scan_w = ch.ring_writer<LidarScanMsg, kLidarRing>("lidar_scan");
-  auto odom_w = ch.ring_writer<WheelOdometryMsg, kWheelOdometryRing>("wheel_odometry");
-  auto init_w = ch.latest_writer<InitialPoseMsg>("initial_pose");
+  auto scan_w = ch.ring_writer(chan::kLidarScan);
+  auto odom_w = ch.ring_writer(chan::kWheelOdometry);
+  auto init_w = ch.latest_writer(chan::kInitialPose);
   if (!scan_w) return scan_w.error();
   if (!odom_w) return odom_w.error();
   if (!init_w) return init_w.error();
   if (!opt.gossip || opt.ugv_map != UgvMapSource::kNone) {  // else the robot's comms stage writes its map_tiles
-    auto tile_w = ch.ring_writer<MapTileMsg, kMapTileRing>("map_tiles");
+    auto tile_w = ch.ring_writer(chan::kMapTiles);
     if (!tile_w) return tile_w.error();
     u->tiles_out = tile_w.value();
   }
   if (static_cast<std::size_t>(i) < opt.ugv_goals.size() && opt.ugv_goals[static_cast<std::size_t>(i)].allFinite()) {
-    auto goal_w = ch.latest_writer<GoalMsg>("goal");
+    auto goal_w = ch.latest_writer(chan::kGoal);
     if (!goal_w) return goal_w.error();
     u->goal_out = goal_w.value();
     u->goal.id = 1;
@@ -421,13 +422,13 @@ Result<double> set_up_uav(Team& t, const Models& m, RoleFactory& roles, const st
   auto role = roles.make(uav_desc, uav_role(), 0, "uav", uav_extra, "quadrotor config override");
   if (!role) return role.error();
   u->role = std::move(role).value();
-  auto cam_w = u->role->channels().ring_writer<CameraImageMsg, kCameraRing>("camera");
-  auto gps_w = u->role->channels().ring_writer<GpsMsg, kGpsRing>("gps");
+  auto cam_w = u->role->channels().ring_writer(chan::kCamera);
+  auto gps_w = u->role->channels().ring_writer(chan::kGps);
   if (!cam_w) return cam_w.error();
   if (!gps_w) return gps_w.error();
   u->camera_out = cam_w.value();
   if (u->vo_oracle) {
-    auto vo_w = u->role->channels().ring_writer<VoMsg, kVoRing>("visual_odometry");
+    auto vo_w = u->role->channels().ring_writer(chan::kVisualOdometry);
     if (!vo_w) return vo_w.error();
     u->vo_out = vo_w.value();
   } else {
@@ -435,7 +436,7 @@ Result<double> set_up_uav(Team& t, const Models& m, RoleFactory& roles, const st
       if (auto* tap = dynamic_cast<SimVoTapStage*>(slot.stage.get())) tap->uav = u.get();
   }
   u->gps_out = gps_w.value();
-  auto att_w = u->role->channels().ring_writer<AttitudeMsg, kAttitudeRing>("attitude");
+  auto att_w = u->role->channels().ring_writer(chan::kAttitude);
   if (!att_w) return att_w.error();
   u->attitude_out = att_w.value();
   u->attitude = AttitudeSimulator(m.attitude, opt.seed ^ std::uint64_t{0x61747431});

@@ -11,6 +11,7 @@
 #include "airground/drivers/can/cannelloni.hpp"
 #include "airground/drivers/can/inprocess_bus.hpp"
 #include "airground/drivers/can/socketcan_bus.hpp"
+#include "airground/messages/channels.hpp"
 #include "airground/platform/log.hpp"
 
 namespace ag::base {
@@ -137,17 +138,17 @@ Status BaseStage::init(StageContext& ctx) {
     return s;
   latch_ = gpio::EStopLatch(v.boolean("start_armed"));
 
-  auto cmd = ctx.channels.latest_reader<WheelCommandMsg>("wheel_command");
+  auto cmd = ctx.channels.latest_reader(chan::kWheelCommand);
   if (!cmd) return cmd.error();
   cmd_ = cmd.value();
-  auto arm = ctx.channels.latest_reader<BaseArmMsg>("base_arm");
+  auto arm = ctx.channels.latest_reader(chan::kBaseArm);
   if (!arm) return arm.error();
   arm_ = arm.value();
-  ctx.channels.allow_unwritten("base_arm");  // optional: an operator's re-arm request, when a tool sends one
-  auto odom = ctx.channels.ring_writer<WheelOdometryMsg, kWheelOdometryRing>(v.text("odometry_channel"));
+  ctx.channels.allow_unwritten(chan::kBaseArm);  // optional: an operator's re-arm request, when a tool sends one
+  auto odom = ctx.channels.ring_writer(chan::kWheelOdometry.with_name(v.text("odometry_channel")));
   if (!odom) return odom.error();
   odom_out_ = odom.value();
-  auto st = ctx.channels.latest_writer<BaseStatusMsg>("base_status");
+  auto st = ctx.channels.latest_writer(chan::kBaseStatus);
   if (!st) return st.error();
   status_out_ = st.value();
   return ok_status();

@@ -6,6 +6,7 @@
 #include <cstring>
 #include <limits>
 
+#include "airground/messages/channels.hpp"
 #include "airground/messages/pose_math.hpp"
 #include "airground/platform/clock.hpp"
 #include "airground/platform/log.hpp"
@@ -72,19 +73,19 @@ Status PoseGraphStage::init(StageContext& ctx) {
   graph_ = std::make_unique<PoseGraph>(p);
   clock_ = &ctx.clock;
 
-  auto cam = ctx.channels.ring_reader<CameraImageMsg, kCameraRing>("camera");
+  auto cam = ctx.channels.ring_reader(chan::kCamera);
   if (!cam) return cam.error();
   camera_ = cam.value();
-  auto vo = ctx.channels.ring_reader<VoMsg, kVoRing>("visual_odometry");
+  auto vo = ctx.channels.ring_reader(chan::kVisualOdometry);
   if (!vo) return vo.error();
   vo_ = vo.value();
-  auto gps = ctx.channels.ring_reader<GpsMsg, kGpsRing>("gps");
+  auto gps = ctx.channels.ring_reader(chan::kGps);
   if (!gps) return gps.error();
   gps_ = gps.value();
-  auto kf = ctx.channels.ring_writer<KeyframeMsg, kKeyframeRing>("keyframes");
+  auto kf = ctx.channels.ring_writer(chan::kKeyframes);
   if (!kf) return kf.error();
   keyframes_out_ = kf.value();
-  auto poses = ctx.channels.latest_writer<KeyframePosesMsg>("keyframe_poses");
+  auto poses = ctx.channels.latest_writer(chan::kKeyframePoses);
   if (!poses) return poses.error();
   poses_out_ = poses.value();
   kf_ = std::make_unique<KeyframeMsg>();
@@ -291,13 +292,13 @@ Status OrthoMapStage::init(StageContext& ctx) {
   clock_ = &ctx.clock;
   body_from_camera_ = nadir_body_from_camera();
 
-  auto kf = ctx.channels.ring_reader<KeyframeMsg, kKeyframeRing>(v.text("keyframes_channel"));
+  auto kf = ctx.channels.ring_reader(chan::kKeyframes.with_name(v.text("keyframes_channel")));
   if (!kf) return kf.error();
   keyframes_ = kf.value();
-  auto poses = ctx.channels.latest_reader<KeyframePosesMsg>("keyframe_poses");
+  auto poses = ctx.channels.latest_reader(chan::kKeyframePoses);
   if (!poses) return poses.error();
   poses_ = poses.value();
-  auto st = ctx.channels.latest_writer<MapStatusMsg>("map_status");
+  auto st = ctx.channels.latest_writer(chan::kMapStatus);
   if (!st) return st.error();
   status_out_ = st.value();
   baseline_depth_ratio_ = v.real("baseline_depth_ratio");
@@ -313,7 +314,7 @@ Status OrthoMapStage::init(StageContext& ctx) {
   min_elevation_points_ = static_cast<std::uint32_t>(std::max<std::int64_t>(1, v.integer("min_elevation_points")));
   tiles_enabled_ = std::abs(map_->params().resolution_m - kMapResolutionM) < 1e-9 && map_->params().tile_cells == kTileCells;
   if (tiles_enabled_) {
-    auto tw = ctx.channels.ring_writer<MapTileMsg, kMapTileRing>("map_tiles");
+    auto tw = ctx.channels.ring_writer(chan::kMapTiles);
     if (!tw) return tw.error();
     tiles_out_ = tw.value();
     const auto max_tiles = static_cast<std::size_t>(v.integer("max_tiles"));

@@ -1,5 +1,7 @@
 #include "airground/base_station/web_stage.hpp"
 
+#include "airground/comms/messages.hpp"
+#include "airground/messages/channels.hpp"
 #include "airground/platform/log.hpp"
 #include "web_service.hpp"
 
@@ -12,16 +14,16 @@ WebStage::~WebStage() { stop(); }
 Status WebStage::init(StageContext& ctx) {
   const SectionView p = ctx.params();
   tiles_per_step_ = static_cast<std::size_t>(p.integer("tiles_per_step"));
-  auto team = ctx.channels.latest_reader<comms::TeamPosesMsg>("team_poses");
+  auto team = ctx.channels.latest_reader(chan::kTeamPoses);
   if (!team) return team.error();
   team_ = team.value();
-  auto stats = ctx.channels.latest_reader<comms::CommsStatsMsg>("comms_stats");
+  auto stats = ctx.channels.latest_reader(chan::kCommsStats);
   if (!stats) return stats.error();
   stats_ = stats.value();
-  auto tiles = ctx.channels.ring_reader<MapTileMsg, kMapTileRing>("map_tiles");
+  auto tiles = ctx.channels.ring_reader(chan::kMapTiles);
   if (!tiles) return tiles.error();
   tiles_ = tiles.value();
-  auto recs = ctx.channels.ring_reader<comms::GossipRecordMsg, comms::kGossipRing>("gossip_in");
+  auto recs = ctx.channels.ring_reader(chan::kGossipIn);
   if (!recs) return recs.error();
   records_ = recs.value();
 

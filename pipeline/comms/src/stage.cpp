@@ -11,7 +11,9 @@
 #include <string>
 
 #include "airground/comms/bytes.hpp"
+#include "airground/comms/messages.hpp"
 #include "airground/drivers/net/udp/udp_link.hpp"
+#include "airground/messages/channels.hpp"
 #include "airground/platform/log.hpp"
 
 namespace ag::comms {
@@ -187,32 +189,32 @@ Status CommsStage::init(StageContext& ctx) {
   team_ = std::make_unique<TeamPosesMsg>();
   stats_ = std::make_unique<CommsStatsMsg>();
 
-  auto out_in = ctx.channels.ring_reader<GossipPublishMsg, kGossipRing>("gossip_out");
+  auto out_in = ctx.channels.ring_reader(chan::kGossipOut);
   if (!out_in) return out_in.error();
   out_in_ = out_in.value();
-  ctx.channels.allow_unwritten("gossip_out");  // the base station publishes no records: it only relays
-  auto gin = ctx.channels.ring_writer<GossipRecordMsg, kGossipRing>("gossip_in");
+  ctx.channels.allow_unwritten(chan::kGossipOut);  // the base station publishes no records: it only relays
+  auto gin = ctx.channels.ring_writer(chan::kGossipIn);
   if (!gin) return gin.error();
   gossip_in_ = gin.value();
   if (send_pose_) {
-    auto r = ctx.channels.latest_reader<LocalizationMsg>("localization");
+    auto r = ctx.channels.latest_reader(chan::kLocalization);
     if (!r) return r.error();
     pose_in_ = r.value();
   }
   if (send_tiles_) {
-    auto r = ctx.channels.ring_reader<MapTileMsg, kMapTileRing>("map_tiles");
+    auto r = ctx.channels.ring_reader(chan::kMapTiles);
     if (!r) return r.error();
     tiles_in_ = r.value();
   }
   if (deliver_tiles_) {
-    auto w = ctx.channels.ring_writer<MapTileMsg, kMapTileRing>("map_tiles");
+    auto w = ctx.channels.ring_writer(chan::kMapTiles);
     if (!w) return w.error();
     tiles_out_ = w.value();
   }
-  auto team = ctx.channels.latest_writer<TeamPosesMsg>("team_poses");
+  auto team = ctx.channels.latest_writer(chan::kTeamPoses);
   if (!team) return team.error();
   team_out_ = team.value();
-  auto st = ctx.channels.latest_writer<CommsStatsMsg>("comms_stats");
+  auto st = ctx.channels.latest_writer(chan::kCommsStats);
   if (!st) return st.error();
   stats_out_ = st.value();
 

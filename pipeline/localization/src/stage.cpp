@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <string>
 
+#include "airground/messages/channels.hpp"
 #include "airground/platform/log.hpp"
 
 namespace ag::loc {
@@ -41,20 +42,20 @@ Status LocalizationStage::init(StageContext& ctx) {
   loc_ = std::make_unique<SemanticLocalizer>(p, channels, seed_param != 0 ? seed_param : seed_from_name(ctx.instance));
   tiles_per_step_ = static_cast<std::size_t>(v.integer("field_tiles_per_step"));
 
-  auto scans = ctx.channels.ring_reader<LidarScanMsg, kLidarRing>("lidar_scan");
+  auto scans = ctx.channels.ring_reader(chan::kLidarScan);
   if (!scans) return scans.error();
   scans_ = scans.value();
-  auto odom = ctx.channels.ring_reader<WheelOdometryMsg, kWheelOdometryRing>("wheel_odometry");
+  auto odom = ctx.channels.ring_reader(chan::kWheelOdometry);
   if (!odom) return odom.error();
   odom_ = odom.value();
-  auto tiles = ctx.channels.ring_reader<MapTileMsg, kMapTileRing>("map_tiles");
+  auto tiles = ctx.channels.ring_reader(chan::kMapTiles);
   if (!tiles) return tiles.error();
   tiles_ = tiles.value();
-  auto init = ctx.channels.latest_reader<InitialPoseMsg>("initial_pose");
+  auto init = ctx.channels.latest_reader(chan::kInitialPose);
   if (!init) return init.error();
   init_ = init.value();
-  ctx.channels.allow_unwritten("initial_pose");  // optional: an operator's tool or the simulator; else the config's guess
-  auto out = ctx.channels.latest_writer<LocalizationMsg>("localization");
+  ctx.channels.allow_unwritten(chan::kInitialPose);  // optional: an operator's tool or the simulator; else the config's guess
+  auto out = ctx.channels.latest_writer(chan::kLocalization);
   if (!out) return out.error();
   out_ = out.value();
   msg_ = LocalizationMsg{};

@@ -7,6 +7,9 @@
 #include <cstring>
 #include <string>
 
+#include "airground/comms/messages.hpp"
+#include "airground/messages/channels.hpp"
+#include "airground/mission/messages.hpp"
 #include "airground/platform/log.hpp"
 
 namespace ag::mission {
@@ -36,13 +39,13 @@ Status RegionsStage::init(StageContext& ctx) {
   pub_ = std::make_unique<comms::GossipPublishMsg>();
   batch_ = std::make_unique<RegionBatch>();
   period_ = from_seconds(v.real("period_s"));
-  auto tiles = ctx.channels.ring_reader<MapTileMsg, kMapTileRing>("map_tiles");
+  auto tiles = ctx.channels.ring_reader(chan::kMapTiles);
   if (!tiles) return tiles.error();
   tiles_ = tiles.value();
-  auto g = ctx.channels.ring_writer<comms::GossipPublishMsg, comms::kGossipRing>("gossip_out");
+  auto g = ctx.channels.ring_writer(chan::kGossipOut);
   if (!g) return g.error();
   gossip_ = g.value();
-  auto out = ctx.channels.latest_writer<RegionsMsg>("regions");
+  auto out = ctx.channels.latest_writer(chan::kRegions);
   if (!out) return out.error();
   out_ = out.value();
   return ok_status();
@@ -167,31 +170,31 @@ Status MissionStage::init(StageContext& ctx) {
   pub_ = std::make_unique<comms::GossipPublishMsg>();
   heard_ = std::make_unique<std::array<TimeNs, 256>>();
   heard_->fill(-1);
-  auto gin = ctx.channels.ring_reader<comms::GossipRecordMsg, comms::kGossipRing>("gossip_in");
+  auto gin = ctx.channels.ring_reader(chan::kGossipIn);
   if (!gin) return gin.error();
   gossip_in_ = gin.value();
-  auto gout = ctx.channels.ring_writer<comms::GossipPublishMsg, comms::kGossipRing>("gossip_out");
+  auto gout = ctx.channels.ring_writer(chan::kGossipOut);
   if (!gout) return gout.error();
   gossip_out_ = gout.value();
-  auto team = ctx.channels.latest_reader<comms::TeamPosesMsg>("team_poses");
+  auto team = ctx.channels.latest_reader(chan::kTeamPoses);
   if (!team) return team.error();
   team_ = team.value();
-  auto cs = ctx.channels.latest_reader<comms::CommsStatsMsg>("comms_stats");
+  auto cs = ctx.channels.latest_reader(chan::kCommsStats);
   if (!cs) return cs.error();
   comms_stats_ = cs.value();
-  auto loc = ctx.channels.latest_reader<LocalizationMsg>("localization");
+  auto loc = ctx.channels.latest_reader(chan::kLocalization);
   if (!loc) return loc.error();
   loc_ = loc.value();
-  auto path = ctx.channels.latest_reader<PlannedPathMsg>("planned_path");
+  auto path = ctx.channels.latest_reader(chan::kPlannedPath);
   if (!path) return path.error();
   path_ = path.value();
-  auto goal = ctx.channels.latest_writer<GoalMsg>("goal");
+  auto goal = ctx.channels.latest_writer(chan::kGoal);
   if (!goal) return goal.error();
   goal_out_ = goal.value();
-  auto st = ctx.channels.latest_writer<MissionStatusMsg>("mission_status");
+  auto st = ctx.channels.latest_writer(chan::kMissionStatus);
   if (!st) return st.error();
   status_out_ = st.value();
-  auto obj = ctx.channels.latest_reader<ObjectsMsg>("objects");
+  auto obj = ctx.channels.latest_reader(chan::kObjects);
   if (!obj) return obj.error();
   objects_in_ = obj.value();
   objects_ = std::make_unique<ObjectsMsg>();
@@ -308,13 +311,13 @@ Status TargetsStage::init(StageContext& ctx) {
   det_ = std::make_unique<VehicleDetector>(dp);
   trk_ = std::make_unique<ObjectTracker>(tp);
   msg_ = std::make_unique<ObjectsMsg>();
-  auto sc = ctx.channels.ring_reader<LidarScanMsg, kLidarRing>("lidar_scan");
+  auto sc = ctx.channels.ring_reader(chan::kLidarScan);
   if (!sc) return sc.error();
   scans_ = sc.value();
-  auto loc = ctx.channels.latest_reader<LocalizationMsg>("localization");
+  auto loc = ctx.channels.latest_reader(chan::kLocalization);
   if (!loc) return loc.error();
   loc_ = loc.value();
-  auto out = ctx.channels.latest_writer<ObjectsMsg>("objects");
+  auto out = ctx.channels.latest_writer(chan::kObjects);
   if (!out) return out.error();
   out_ = out.value();
   return ok_status();

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <string>
 
+#include "airground/messages/channels.hpp"
 #include "airground/platform/log.hpp"
 
 namespace ag::plan {
@@ -29,16 +30,16 @@ Status PlannerStage::init(StageContext& ctx) {
   snap_ = v.real("snap_radius_m");
   plan_initialising_ = v.boolean("plan_while_initialising");
   initialising_snap_ = v.real("initialising_snap_m");
-  auto tiles = ctx.channels.ring_reader<MapTileMsg, kMapTileRing>("map_tiles");
+  auto tiles = ctx.channels.ring_reader(chan::kMapTiles);
   if (!tiles) return tiles.error();
   tiles_ = tiles.value();
-  auto loc = ctx.channels.latest_reader<LocalizationMsg>("localization");
+  auto loc = ctx.channels.latest_reader(chan::kLocalization);
   if (!loc) return loc.error();
   loc_ = loc.value();
-  auto goal = ctx.channels.latest_reader<GoalMsg>("goal");
+  auto goal = ctx.channels.latest_reader(chan::kGoal);
   if (!goal) return goal.error();
   goal_in_ = goal.value();
-  auto out = ctx.channels.latest_writer<PlannedPathMsg>("planned_path");
+  auto out = ctx.channels.latest_writer(chan::kPlannedPath);
   if (!out) return out.error();
   out_ = out.value();
   return ok_status();
@@ -146,16 +147,16 @@ Status DriveStage::init(StageContext& ctx) {
   initialising_speed_ = v.real("initialising_speed_mps");
   reflex_hold_ = from_seconds(v.real("reflex_turn_after_s"));
   steer_local_ = v.boolean("steer_to_local_goal");
-  auto lg = ctx.channels.latest_reader<LocalGoalMsg>("local_goal");
+  auto lg = ctx.channels.latest_reader(chan::kLocalGoal);
   if (!lg) return lg.error();
   local_in_ = lg.value();
-  auto p = ctx.channels.latest_reader<PlannedPathMsg>("planned_path");
+  auto p = ctx.channels.latest_reader(chan::kPlannedPath);
   if (!p) return p.error();
   path_in_ = p.value();
-  auto loc = ctx.channels.latest_reader<LocalizationMsg>("localization");
+  auto loc = ctx.channels.latest_reader(chan::kLocalization);
   if (!loc) return loc.error();
   loc_ = loc.value();
-  auto out = ctx.channels.latest_writer<WheelCommandMsg>("wheel_command");
+  auto out = ctx.channels.latest_writer(chan::kWheelCommand);
   if (!out) return out.error();
   out_ = out.value();
   return ok_status();
@@ -233,19 +234,19 @@ Status TrackerStage::init(StageContext& ctx) {
   tracker_ = std::make_unique<LocalTracker>(p);
   path_ = std::make_unique<PlannedPathMsg>();
   pts_ = std::make_unique<std::array<Point2, kMaxPathPoints>>();
-  auto sc = ctx.channels.ring_reader<LidarScanMsg, kLidarRing>("lidar_scan");
+  auto sc = ctx.channels.ring_reader(chan::kLidarScan);
   if (!sc) return sc.error();
   scans_ = sc.value();
-  auto loc = ctx.channels.latest_reader<LocalizationMsg>("localization");
+  auto loc = ctx.channels.latest_reader(chan::kLocalization);
   if (!loc) return loc.error();
   loc_ = loc.value();
-  auto pin = ctx.channels.latest_reader<PlannedPathMsg>("planned_path");
+  auto pin = ctx.channels.latest_reader(chan::kPlannedPath);
   if (!pin) return pin.error();
   path_in_ = pin.value();
-  auto cin = ctx.channels.latest_reader<WheelCommandMsg>("wheel_command");
+  auto cin = ctx.channels.latest_reader(chan::kWheelCommand);
   if (!cin) return cin.error();
   cmd_in_ = cin.value();
-  auto out = ctx.channels.latest_writer<LocalGoalMsg>("local_goal");
+  auto out = ctx.channels.latest_writer(chan::kLocalGoal);
   if (!out) return out.error();
   out_ = out.value();
   return ok_status();

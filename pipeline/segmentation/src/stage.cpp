@@ -4,6 +4,7 @@
 #include <cstring>
 #include <string>
 
+#include "airground/messages/channels.hpp"
 #include "airground/messages/classes.hpp"
 
 namespace ag::seg {
@@ -36,10 +37,10 @@ Status SegmentationStage::init(StageContext& ctx) {
     if (!net) return Error::make(ErrorCode::kConfig, "segmentation: " + net.error().message);
     net_ = std::move(net.value());
   }
-  auto in = ctx.channels.ring_reader<KeyframeMsg, kKeyframeRing>("keyframes");
+  auto in = ctx.channels.ring_reader(chan::kKeyframes);
   if (!in) return in.error();
   in_ = in.value();
-  auto out = ctx.channels.ring_writer<KeyframeMsg, kKeyframeRing>("keyframes_labelled");
+  auto out = ctx.channels.ring_writer(chan::kKeyframesLabelled);
   if (!out) return out.error();
   out_ = out.value();
   msg_ = std::make_unique<KeyframeMsg>();

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "airground/aerial_mapping/stages.hpp"
+#include "airground/messages/channels.hpp"
 #include "airground/messages/pose_math.hpp"
 #include "airground/platform/log.hpp"
 
@@ -24,13 +25,13 @@ Status VoStage::init(StageContext& ctx) {
   frames_per_step_ = static_cast<int>(v.integer("frames_per_step"));
   vo_ = std::make_unique<VisualOdometry>(p);
   clock_ = &ctx.clock;
-  auto cam = ctx.channels.ring_reader<CameraImageMsg, kCameraRing>("camera");
+  auto cam = ctx.channels.ring_reader(chan::kCamera);
   if (!cam) return cam.error();
   camera_ = cam.value();
-  auto att = ctx.channels.ring_reader<AttitudeMsg, kAttitudeRing>("attitude");
+  auto att = ctx.channels.ring_reader(chan::kAttitude);
   if (!att) return att.error();
   attitude_ = att.value();
-  auto out = ctx.channels.ring_writer<VoMsg, kVoRing>(v.text("output_channel"));
+  auto out = ctx.channels.ring_writer(chan::kVisualOdometry.with_name(v.text("output_channel")));
   if (!out) return out.error();
   out_ = out.value();
   return ok_status();

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "airground/aerial_mapping/stages.hpp"
+#include "airground/messages/channels.hpp"
 #include "airground/messages/messages.hpp"
 #include "airground/platform/clock.hpp"
 #include "airground/platform/config.hpp"
@@ -60,9 +61,9 @@ std::unique_ptr<Run> run(const Faults& f, double duration_s, const std::vector<s
     if (auto* p = dynamic_cast<const PoseGraphStage*>(slot.stage.get())) r->pg = p;
     if (auto* q = dynamic_cast<const OrthoMapStage*>(slot.stage.get())) r->om = q;
   }
-  auto cam = r->robot->channels().ring_writer<CameraImageMsg, kCameraRing>("camera");
-  auto vo = r->robot->channels().ring_writer<VoMsg, kVoRing>("visual_odometry");
-  auto gps = r->robot->channels().ring_writer<GpsMsg, kGpsRing>("gps");
+  auto cam = r->robot->channels().ring_writer(chan::kCamera);
+  auto vo = r->robot->channels().ring_writer(chan::kVisualOdometry);
+  auto gps = r->robot->channels().ring_writer(chan::kGps);
   EXPECT_TRUE(cam.ok() && vo.ok() && gps.ok());
   if (!cam.ok() || !vo.ok() || !gps.ok()) return nullptr;
   auto image = std::make_unique<CameraImageMsg>();

@@ -10,7 +10,9 @@
 #include <string>
 #include <vector>
 
+#include "airground/comms/messages.hpp"
 #include "airground/comms/stage.hpp"
+#include "airground/messages/channels.hpp"
 #include "airground/platform/role_instance.hpp"
 
 namespace ag::comms::test {
@@ -24,10 +26,10 @@ class Probe final : public Stage {
   static std::unique_ptr<Stage> make() { return std::make_unique<Probe>(); }
   Status init(StageContext& ctx) override {
     last = this;
-    if (ctx.params().boolean("read_tiles")) tiles = ctx.channels.ring_reader<MapTileMsg, kMapTileRing>("map_tiles").value();
-    records = ctx.channels.ring_reader<GossipRecordMsg, kGossipRing>("gossip_in").value();
-    team = ctx.channels.latest_reader<TeamPosesMsg>("team_poses").value();
-    stats = ctx.channels.latest_reader<CommsStatsMsg>("comms_stats").value();
+    if (ctx.params().boolean("read_tiles")) tiles = ctx.channels.ring_reader(chan::kMapTiles).value();
+    records = ctx.channels.ring_reader(chan::kGossipIn).value();
+    team = ctx.channels.latest_reader(chan::kTeamPoses).value();
+    stats = ctx.channels.latest_reader(chan::kCommsStats).value();
     return ok_status();
   }
   void step(TimeNs) noexcept override {}
@@ -73,9 +75,9 @@ struct CommsRig {
     rig->stage = dynamic_cast<CommsStage*>(rig->role->stages().front().stage.get());
     rig->probe = Probe::last;
     ChannelRegistry& ch = rig->role->channels();
-    rig->out_w = ch.ring_writer<GossipPublishMsg, kGossipRing>("gossip_out").value();
-    if (!deliver) rig->tiles_w = ch.ring_writer<MapTileMsg, kMapTileRing>("map_tiles").value();
-    rig->pose_w = ch.latest_writer<LocalizationMsg>("localization").value();
+    rig->out_w = ch.ring_writer(chan::kGossipOut).value();
+    if (!deliver) rig->tiles_w = ch.ring_writer(chan::kMapTiles).value();
+    rig->pose_w = ch.latest_writer(chan::kLocalization).value();
     return rig;
   }
   void step(TimeNs now) {

@@ -9,6 +9,7 @@
 #include "airground/drivers/base/base_stage.hpp"
 #include "airground/drivers/base/odrive_sim.hpp"
 #include "airground/drivers/can/inprocess_bus.hpp"
+#include "airground/messages/channels.hpp"
 #include "airground/planning/stages.hpp"
 #include "airground/platform/role_instance.hpp"
 
@@ -51,9 +52,9 @@ struct Rig {
     role = std::move(r).value();
     drive = dynamic_cast<plan::DriveStage*>(role->stages()[0].stage.get());
     base = dynamic_cast<BaseStage*>(role->stages()[1].stage.get());
-    path_w = role->channels().latest_writer<PlannedPathMsg>("planned_path").value();
-    loc_w = role->channels().latest_writer<LocalizationMsg>("localization").value();
-    arm_w = role->channels().latest_writer<BaseArmMsg>("base_arm").value();
+    path_w = role->channels().latest_writer(chan::kPlannedPath).value();
+    loc_w = role->channels().latest_writer(chan::kLocalization).value();
+    arm_w = role->channels().latest_writer(chan::kBaseArm).value();
   }
   ~Rig() {
     role.reset();

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "airground/localization/stage.hpp"
+#include "airground/messages/channels.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "synthetic_world.hpp"
 
@@ -50,10 +51,10 @@ struct StageRig {
     rig->role = std::move(r).value();
     rig->stage = dynamic_cast<LocalizationStage*>(rig->role->stages().front().stage.get());
     ChannelRegistry& ch = rig->role->channels();
-    rig->scan_w = ch.ring_writer<LidarScanMsg, kLidarRing>("lidar_scan").value();
-    rig->odom_w = ch.ring_writer<WheelOdometryMsg, kWheelOdometryRing>("wheel_odometry").value();
-    rig->tile_w = ch.ring_writer<MapTileMsg, kMapTileRing>("map_tiles").value();
-    rig->init_w = ch.latest_writer<InitialPoseMsg>("initial_pose").value();
+    rig->scan_w = ch.ring_writer(chan::kLidarScan).value();
+    rig->odom_w = ch.ring_writer(chan::kWheelOdometry).value();
+    rig->tile_w = ch.ring_writer(chan::kMapTiles).value();
+    rig->init_w = ch.latest_writer(chan::kInitialPose).value();
     return rig;
   }
 

@@ -8,6 +8,9 @@
 #include <string>
 #include <vector>
 
+#include "airground/comms/messages.hpp"
+#include "airground/messages/channels.hpp"
+#include "airground/mission/messages.hpp"
 #include "airground/mission/stages.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "grid_world.hpp"
@@ -18,8 +21,8 @@ namespace ag::mission::test {
 struct UavProbe final : Stage {
   static std::unique_ptr<Stage> make() { return std::make_unique<UavProbe>(); }
   Status init(StageContext& ctx) override {
-    gossip_r = ctx.channels.ring_reader<comms::GossipPublishMsg, comms::kGossipRing>("gossip_out").value();
-    regions_r = ctx.channels.latest_reader<RegionsMsg>("regions").value();
+    gossip_r = ctx.channels.ring_reader(chan::kGossipOut).value();
+    regions_r = ctx.channels.latest_reader(chan::kRegions).value();
     return ok_status();
   }
   void step(TimeNs) noexcept override {}
@@ -29,9 +32,9 @@ struct UavProbe final : Stage {
 struct UgvProbe final : Stage {
   static std::unique_ptr<Stage> make() { return std::make_unique<UgvProbe>(); }
   Status init(StageContext& ctx) override {
-    gossip_r = ctx.channels.ring_reader<comms::GossipPublishMsg, comms::kGossipRing>("gossip_out").value();
-    goal_r = ctx.channels.latest_reader<GoalMsg>("goal").value();
-    status_r = ctx.channels.latest_reader<MissionStatusMsg>("mission_status").value();
+    gossip_r = ctx.channels.ring_reader(chan::kGossipOut).value();
+    goal_r = ctx.channels.latest_reader(chan::kGoal).value();
+    status_r = ctx.channels.latest_reader(chan::kMissionStatus).value();
     return ok_status();
   }
   void step(TimeNs) noexcept override {}
@@ -74,7 +77,7 @@ struct RegionsRig {
     EXPECT_TRUE(r.ok()) << (r.ok() ? "" : r.error().message);
     role = std::move(r).value();
     stage = static_cast<RegionsStage*>(role->stages()[0].stage.get());
-    tile_w = role->channels().ring_writer<MapTileMsg, kMapTileRing>("map_tiles").value();
+    tile_w = role->channels().ring_writer(chan::kMapTiles).value();
     auto* probe = static_cast<UavProbe*>(role->stages()[1].stage.get());
     gossip_r = probe->gossip_r;
     regions_r = probe->regions_r;
@@ -116,11 +119,11 @@ struct MissionRig {
     role = std::move(r).value();
     stage = static_cast<MissionStage*>(role->stages()[0].stage.get());
     ChannelRegistry& ch = role->channels();
-    gossip_w = ch.ring_writer<comms::GossipRecordMsg, comms::kGossipRing>("gossip_in").value();
-    team_w = ch.latest_writer<comms::TeamPosesMsg>("team_poses").value();
-    loc_w = ch.latest_writer<LocalizationMsg>("localization").value();
-    path_w = ch.latest_writer<PlannedPathMsg>("planned_path").value();
-    lidar_w = ch.ring_writer<LidarScanMsg, kLidarRing>("lidar_scan").value();
+    gossip_w = ch.ring_writer(chan::kGossipIn).value();
+    team_w = ch.latest_writer(chan::kTeamPoses).value();
+    loc_w = ch.latest_writer(chan::kLocalization).value();
+    path_w = ch.latest_writer(chan::kPlannedPath).value();
+    lidar_w = ch.ring_writer(chan::kLidarScan).value();
     targets = static_cast<TargetsStage*>(role->stages()[2].stage.get());
     auto* probe = static_cast<UgvProbe*>(role->stages()[1].stage.get());
     gossip_r = probe->gossip_r;

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "airground/messages/channels.hpp"
 #include "airground/planning/stages.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "planning_world.hpp"
@@ -44,9 +45,9 @@ struct Rig {
     role = std::move(r).value();
     planner = dynamic_cast<PlannerStage*>(role->stages()[0].stage.get());
     drive = dynamic_cast<DriveStage*>(role->stages()[1].stage.get());
-    tile_w = role->channels().ring_writer<MapTileMsg, kMapTileRing>("map_tiles").value();
-    loc_w = role->channels().latest_writer<LocalizationMsg>("localization").value();
-    goal_w = role->channels().latest_writer<GoalMsg>("goal").value();
+    tile_w = role->channels().ring_writer(chan::kMapTiles).value();
+    loc_w = role->channels().latest_writer(chan::kLocalization).value();
+    goal_w = role->channels().latest_writer(chan::kGoal).value();
   }
   void push_tile(int tx, int ty, std::uint64_t version, const std::vector<std::uint8_t>& cls) {
     tile->tx = tx;

@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <memory>
 
+#include "airground/messages/channels.hpp"
 #include "airground/planning/stages.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "synthetic_scan.hpp"
@@ -47,9 +48,9 @@ struct Rig {
     role = std::move(r).value();
     tracker = dynamic_cast<TrackerStage*>(role->stages()[0].stage.get());
     drive = dynamic_cast<DriveStage*>(role->stages()[1].stage.get());
-    scan_w = role->channels().ring_writer<LidarScanMsg, kLidarRing>("lidar_scan").value();
-    loc_w = role->channels().latest_writer<LocalizationMsg>("localization").value();
-    path_w = role->channels().latest_writer<PlannedPathMsg>("planned_path").value();
+    scan_w = role->channels().ring_writer(chan::kLidarScan).value();
+    loc_w = role->channels().latest_writer(chan::kLocalization).value();
+    path_w = role->channels().latest_writer(chan::kPlannedPath).value();
     auto p = std::make_unique<PlannedPathMsg>();
     p->seq = 1;
     p->status = RouteStatus::kOk;

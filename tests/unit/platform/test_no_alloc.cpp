@@ -109,7 +109,7 @@ class FrameSink final : public Stage {
     auto r = ctx.channels.ring_reader<Frame, 8>("frames");
     if (!r) return r.error();
     ring_ = r.value();
-    auto s = ctx.channels.latest_reader<SchedulerStatus>("scheduler_status");
+    auto s = ctx.channels.latest_reader(chan::kSchedulerStatus);
     if (!s) return s.error();
     status_ = s.value();
     return ok_status();

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "airground/messages/channels.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "airground/segmentation/stage.hpp"
 
@@ -19,7 +20,7 @@ class KeyframeSink final : public Stage {
  public:
   static std::unique_ptr<Stage> make() { return std::make_unique<KeyframeSink>(); }
   Status init(StageContext& ctx) override {
-    auto r = ctx.channels.ring_reader<KeyframeMsg, kKeyframeRing>("keyframes_labelled");
+    auto r = ctx.channels.ring_reader(chan::kKeyframesLabelled);
     if (!r) return r.error();
     in_ = r.value();
     last = std::make_unique<KeyframeMsg>();
@@ -69,7 +70,7 @@ struct StageRig {
     rig->role = std::move(r).value();
     rig->stage = dynamic_cast<SegmentationStage*>(rig->role->stages()[0].stage.get());
     rig->sink = dynamic_cast<KeyframeSink*>(rig->role->stages()[1].stage.get());
-    rig->kf_w = rig->role->channels().ring_writer<KeyframeMsg, kKeyframeRing>("keyframes").value();
+    rig->kf_w = rig->role->channels().ring_writer(chan::kKeyframes).value();
     return rig;
   }
   void step(TimeNs now) {

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "airground/aerial_mapping/stages.hpp"
+#include "airground/messages/channels.hpp"
 #include "airground/messages/messages.hpp"
 #include "airground/platform/clock.hpp"
 #include "airground/platform/config.hpp"
@@ -26,7 +27,7 @@ class VoSink final : public Stage {
  public:
   static std::unique_ptr<Stage> make() { return std::make_unique<VoSink>(); }
   Status init(StageContext& ctx) override {
-    auto r = ctx.channels.ring_reader<VoMsg, kVoRing>("visual_odometry");
+    auto r = ctx.channels.ring_reader(chan::kVisualOdometry);
     if (!r) return r.error();
     in_ = r.value();
     got.reserve(4096);
@@ -90,8 +91,8 @@ struct Rig {
     for (auto& slot : robot->stages())
       if (auto* s = dynamic_cast<VoStage*>(slot.stage.get())) stage = s;
       else if (auto* k = dynamic_cast<VoSink*>(slot.stage.get())) sink = k;
-    camera = robot->channels().ring_writer<CameraImageMsg, kCameraRing>("camera").value();
-    attitude = robot->channels().ring_writer<AttitudeMsg, kAttitudeRing>("attitude").value();
+    camera = robot->channels().ring_writer(chan::kCamera).value();
+    attitude = robot->channels().ring_writer(chan::kAttitude).value();
     cam = mapping::load_camera_calibration(config);
     frame_stamps.reserve(4096);
     ex = std::make_unique<LockstepExecutor>(clock, ExecTimer::kThreadCpu);

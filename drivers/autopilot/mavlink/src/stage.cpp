@@ -5,6 +5,7 @@
 #include <string>
 
 #include "airground/drivers/autopilot/mavlink/frames.hpp"
+#include "airground/messages/channels.hpp"
 #include "airground/platform/log.hpp"
 
 namespace ag::mavlink {
@@ -22,7 +23,7 @@ const char* autopilot_name(std::uint8_t a) noexcept {
 Status AutopilotStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
   const std::string where = std::string(ctx.stage_name) + ".";
-  auto w = ctx.channels.ring_writer<AttitudeMsg, kAttitudeRing>(v.text("attitude_channel"));
+  auto w = ctx.channels.ring_writer(chan::kAttitude.with_name(v.text("attitude_channel")));
   if (!w) return w.error();
   out_ = w.value();
   const std::string& src = v.text("source");

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "airground/messages/channels.hpp"
 #include "airground/platform/log.hpp"
 
 namespace ag::camera {
@@ -96,10 +97,10 @@ Status CameraStage::init(StageContext& ctx) {
   max_frames_ = static_cast<int>(v.integer("max_frames_per_step"));
   img_ = std::make_unique<CameraImageMsg>();
   img_->cls.fill(255);  // a live camera has no labels
-  auto cw = ctx.channels.ring_writer<CameraImageMsg, kCameraRing>(v.text("camera_channel"));
+  auto cw = ctx.channels.ring_writer(chan::kCamera.with_name(v.text("camera_channel")));
   if (!cw) return cw.error();
   cam_out_ = cw.value();
-  auto vw = ctx.channels.ring_writer<VoMsg, kVoRing>(v.text("vo_channel"));
+  auto vw = ctx.channels.ring_writer(chan::kVisualOdometry.with_name(v.text("vo_channel")));
   if (!vw) return vw.error();
   vo_out_ = vw.value();
 

@@ -1,6 +1,7 @@
 // The u-blox stage: bytes to fixes to "gps".
 #include "airground/drivers/gps/ublox/stage.hpp"
 
+#include "airground/messages/channels.hpp"
 #include "airground/platform/log.hpp"
 
 #include <cmath>
@@ -42,7 +43,7 @@ void LocalEnu::forward(double lat, double lon, double h, double& e, double& n, d
 Status UbloxStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
   const std::string where = std::string(ctx.stage_name) + ".";
-  auto w = ctx.channels.ring_writer<GpsMsg, kGpsRing>(v.text("gps_channel"));
+  auto w = ctx.channels.ring_writer(chan::kGps.with_name(v.text("gps_channel")));
   if (!w) return w.error();
   out_ = w.value();
   const std::string& src = v.text("source");

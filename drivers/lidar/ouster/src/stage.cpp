@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <string>
 
+#include "airground/messages/channels.hpp"
 #include "airground/platform/log.hpp"
 
 namespace ag::ouster {
@@ -14,7 +15,7 @@ namespace ag::ouster {
 Status OusterStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
   const std::string where = std::string(ctx.stage_name) + ".";
-  auto w = ctx.channels.ring_writer<LidarScanMsg, kLidarRing>(v.text("scan_channel"));
+  auto w = ctx.channels.ring_writer(chan::kLidarScan.with_name(v.text("scan_channel")));
   if (!w) return w.error();
   out_ = w.value();
   const std::string& cls = v.text("classes");

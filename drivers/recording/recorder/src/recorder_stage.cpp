@@ -9,6 +9,7 @@
 
 #include "airground/drivers/recording/mcap/counters_json.hpp"
 #include "airground/drivers/recording/mcap/foxglove_json.hpp"
+#include "airground/messages/channels.hpp"
 #include "airground/platform/log.hpp"
 
 namespace ag::recording {
@@ -66,16 +67,16 @@ Status RecorderStage::init(StageContext& ctx) {
 
   auto& ch = ctx.channels;
   if (pose_source_ == "localization") {
-    auto r = ch.latest_reader<LocalizationMsg>("localization");
+    auto r = ch.latest_reader(chan::kLocalization);
     if (!r) return r.error();
     localization_ = r.value();
   } else if (pose_source_ == "keyframe_poses") {
-    auto r = ch.latest_reader<KeyframePosesMsg>("keyframe_poses");
+    auto r = ch.latest_reader(chan::kKeyframePoses);
     if (!r) return r.error();
     keyframe_poses_ = r.value();
   }
   if (const std::string& c = p.text("odometry_channel"); !c.empty()) {
-    auto r = ch.ring_tap<WheelOdometryMsg, kWheelOdometryRing>(c);
+    auto r = ch.ring_tap(chan::kWheelOdometry.with_name(c));
     if (!r) return r.error();
     odometry_ = r.value();
   }
@@ -86,28 +87,28 @@ Status RecorderStage::init(StageContext& ctx) {
     datum_lat_deg_ = ctx.config.get_real("gps.datum_lat_deg");
     datum_lon_deg_ = ctx.config.get_real("gps.datum_lon_deg");
     datum_height_m_ = ctx.config.get_real("gps.datum_height_m");
-    auto r = ch.ring_tap<GpsMsg, kGpsRing>(c);
+    auto r = ch.ring_tap(chan::kGps.with_name(c));
     if (!r) return r.error();
     gps_ = r.value();
   }
   if (const std::string& c = p.text("lidar_channel"); !c.empty()) {
-    auto r = ch.ring_tap<LidarScanMsg, kLidarRing>(c);
+    auto r = ch.ring_tap(chan::kLidarScan.with_name(c));
     if (!r) return r.error();
     lidar_ = r.value();
   }
   if (const std::string& c = p.text("map_tiles_channel"); !c.empty()) {
-    auto r = ch.ring_tap<MapTileMsg, kMapTileRing>(c);
+    auto r = ch.ring_tap(chan::kMapTiles.with_name(c));
     if (!r) return r.error();
     tiles_ = r.value();
   }
   if (const std::string& c = p.text("camera_channel"); !c.empty()) {
-    auto r = ch.ring_tap<CameraImageMsg, kCameraRing>(c);
+    auto r = ch.ring_tap(chan::kCamera.with_name(c));
     if (!r) return r.error();
     camera_ = r.value();
     camera_period_ = from_seconds(p.real("camera_period_s"));
   }
   if (scheduler_period_ > 0) {
-    auto r = ch.latest_reader<SchedulerStatus>("scheduler_status");
+    auto r = ch.latest_reader(chan::kSchedulerStatus);
     if (!r) return r.error();
     scheduler_ = r.value();
   }

@@ -143,9 +143,43 @@ class RingReader {
   const std::atomic<std::uint64_t>* drops_{nullptr};
 };
 
+// A channel named once with its message type (and ring size): the typed way to reach it. Constants of
+// these live beside the messages (airground/messages/channels.hpp); a name that comes from configuration
+// keeps the constant's type through with_name() (a view: use it in the call, do not keep it).
+template <typename T>
+struct LatestTopic {
+  using Message = T;
+  std::string_view name;
+  [[nodiscard]] constexpr LatestTopic with_name(std::string_view n) const noexcept { return LatestTopic{n}; }
+};
+template <typename T, std::size_t N>
+struct RingTopic {
+  using Message = T;
+  static constexpr std::size_t kCapacity = N;
+  std::string_view name;
+  [[nodiscard]] constexpr RingTopic with_name(std::string_view n) const noexcept { return RingTopic{n}; }
+};
+
 // One per robot instance. Lookups happen in init() only; the handles are what step() uses.
+// The topic overloads are the string ones with the type and ring size taken from the topic: same
+// registration, same refusals (a name used with two types is refused whichever way each side named it).
 class ChannelRegistry {
  public:
+  template <typename T>
+  Result<LatestWriter<T>> latest_writer(const LatestTopic<T>& t) { return latest_writer<T>(t.name); }
+  template <typename T>
+  Result<LatestReader<T>> latest_reader(const LatestTopic<T>& t) { return latest_reader<T>(t.name); }
+  template <typename T, std::size_t N>
+  Result<RingWriter<T, N>> ring_writer(const RingTopic<T, N>& t) { return ring_writer<T, N>(t.name); }
+  template <typename T, std::size_t N>
+  Result<RingReader<T, N>> ring_reader(const RingTopic<T, N>& t) { return ring_reader<T, N>(t.name); }
+  template <typename T, std::size_t N>
+  Result<RingReader<T, N>> ring_tap(const RingTopic<T, N>& t) { return ring_tap<T, N>(t.name); }
+  template <typename T>
+  void allow_unwritten(const LatestTopic<T>& t) noexcept { allow_unwritten(t.name); }
+  template <typename T, std::size_t N>
+  void allow_unwritten(const RingTopic<T, N>& t) noexcept { allow_unwritten(t.name); }
+
   template <typename T>
   Result<LatestWriter<T>> latest_writer(std::string_view name) {
     auto ch = find_or_add<detail::LatestChannel<T>>(name);

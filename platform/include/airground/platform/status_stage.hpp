@@ -38,6 +38,11 @@ struct SchedulerStatus {
   std::array<StageLine, kMaxStages> stages{};
 };
 
+namespace chan {
+// status stage -> the recorder (declared here, not in messages/channels.hpp: platform sees nothing above).
+inline constexpr LatestTopic<SchedulerStatus> kSchedulerStatus{"scheduler_status"};
+}  // namespace chan
+
 class StatusStage final : public Stage {
  public:
   static constexpr ParamSpec kParams[] = {

@@ -23,6 +23,7 @@
 
 #include "airground/drivers/camera/stage/camera_stage.hpp"
 #include "airground/drivers/camera/frame_stream/frame_stream.hpp"
+#include "airground/messages/channels.hpp"
 #include "airground/platform/role_instance.hpp"
 #include "fake_device.hpp"
 
@@ -136,10 +137,10 @@ class Sink final : public Stage {
  public:
   static std::unique_ptr<Stage> make() { return std::make_unique<Sink>(); }
   Status init(StageContext& ctx) override {
-    auto c = ctx.channels.ring_reader<CameraImageMsg, kCameraRing>("camera");
+    auto c = ctx.channels.ring_reader(chan::kCamera);
     if (!c) return c.error();
     cam_ = c.value();
-    auto v = ctx.channels.ring_reader<VoMsg, kVoRing>("visual_odometry");
+    auto v = ctx.channels.ring_reader(chan::kVisualOdometry);
     if (!v) return v.error();
     vo_ = v.value();
     return ok_status();

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "airground/messages/channels.hpp"
 #include "airground/messages/messages.hpp"
 #include "airground/drivers/recording/recorder/recorder_stage.hpp"
 #include "airground/platform/executor.hpp"
@@ -32,7 +33,7 @@ class OdometrySource final : public Stage {
  public:
   static std::unique_ptr<Stage> make() { return std::make_unique<OdometrySource>(); }
   Status init(StageContext& ctx) override {
-    auto w = ctx.channels.ring_writer<WheelOdometryMsg, kWheelOdometryRing>("wheel_odometry");
+    auto w = ctx.channels.ring_writer(chan::kWheelOdometry);
     if (!w) return w.error();
     out_ = w.value();
     return ok_status();
@@ -53,7 +54,7 @@ class GpsSource final : public Stage {
  public:
   static std::unique_ptr<Stage> make() { return std::make_unique<GpsSource>(); }
   Status init(StageContext& ctx) override {
-    auto w = ctx.channels.ring_writer<GpsMsg, kGpsRing>("gps");
+    auto w = ctx.channels.ring_writer(chan::kGps);
     if (!w) return w.error();
     out_ = w.value();
     return ok_status();
@@ -77,7 +78,7 @@ class LidarSource final : public Stage {
  public:
   static std::unique_ptr<Stage> make() { return std::make_unique<LidarSource>(); }
   Status init(StageContext& ctx) override {
-    auto w = ctx.channels.ring_writer<LidarScanMsg, kLidarRing>("lidar_scan");
+    auto w = ctx.channels.ring_writer(chan::kLidarScan);
     if (!w) return w.error();
     out_ = w.value();
     msg_ = std::make_unique<LidarScanMsg>();
@@ -111,7 +112,7 @@ class TileSource final : public Stage {
  public:
   static std::unique_ptr<Stage> make() { return std::make_unique<TileSource>(); }
   Status init(StageContext& ctx) override {
-    auto w = ctx.channels.ring_writer<MapTileMsg, kMapTileRing>("map_tiles");
+    auto w = ctx.channels.ring_writer(chan::kMapTiles);
     if (!w) return w.error();
     out_ = w.value();
     return ok_status();
@@ -136,7 +137,7 @@ class PoseSource final : public Stage {
  public:
   static std::unique_ptr<Stage> make() { return std::make_unique<PoseSource>(); }
   Status init(StageContext& ctx) override {
-    auto w = ctx.channels.latest_writer<LocalizationMsg>("localization");
+    auto w = ctx.channels.latest_writer(chan::kLocalization);
     if (!w) return w.error();
     out_ = w.value();
     return ok_status();
@@ -160,7 +161,7 @@ class CameraSource final : public Stage {
  public:
   static std::unique_ptr<Stage> make() { return std::make_unique<CameraSource>(); }
   Status init(StageContext& ctx) override {
-    auto w = ctx.channels.ring_writer<CameraImageMsg, kCameraRing>("camera");
+    auto w = ctx.channels.ring_writer(chan::kCamera);
     if (!w) return w.error();
     out_ = w.value();
     msg_ = std::make_unique<CameraImageMsg>();

@@ -4,9 +4,11 @@
 
 #include <array>
 #include <cstdint>
+#include <string_view>
 
 #include "airground/comms/topics.hpp"
 #include "airground/comms/wire.hpp"
+#include "airground/messages/channels.hpp"
 #include "airground/messages/geometry.hpp"
 #include "airground/platform/time.hpp"
 
@@ -84,3 +86,19 @@ struct CommsStatsMsg {
 };
 
 }  // namespace ag::comms
+
+// The comms channels, declared once (see airground/messages/channels.hpp; these live beside their
+// messages because messages/ cannot see pipeline/ types).
+namespace ag::chan {
+// regions (quadrotor), mission (ground robot) -> comms (optional there: the base station shares nothing).
+inline constexpr RingTopic<comms::GossipPublishMsg, comms::kGossipRing> kGossipOut{"gossip_out"};
+// comms -> mission, web (base station).
+inline constexpr RingTopic<comms::GossipRecordMsg, comms::kGossipRing> kGossipIn{"gossip_in"};
+// comms -> mission, web (base station).
+inline constexpr LatestTopic<comms::TeamPosesMsg> kTeamPoses{"team_poses"};
+// comms -> mission, web (base station).
+inline constexpr LatestTopic<comms::CommsStatsMsg> kCommsStats{"comms_stats"};
+
+inline constexpr std::array<std::string_view, 4> kCommsNames{kGossipOut.name, kGossipIn.name, kTeamPoses.name, kCommsStats.name};
+static_assert(names_distinct(kNames, kCommsNames), "two channels share a name");
+}  // namespace ag::chan

@@ -3,7 +3,10 @@
 
 #include <array>
 #include <cstdint>
+#include <string_view>
 
+#include "airground/comms/messages.hpp"
+#include "airground/messages/channels.hpp"
 #include "airground/mission/records.hpp"
 #include "airground/platform/time.hpp"
 
@@ -56,3 +59,17 @@ struct ObjectsMsg {
 };
 
 }  // namespace ag::mission
+
+// The mission channels, declared once (see airground/messages/channels.hpp; these live beside their
+// messages because messages/ cannot see pipeline/ types).
+namespace ag::chan {
+// regions (quadrotor) -> nobody yet (tools, tests).
+inline constexpr LatestTopic<mission::RegionsMsg> kRegions{"regions"};
+// mission (ground robot) -> nobody yet (tools, tests).
+inline constexpr LatestTopic<mission::MissionStatusMsg> kMissionStatus{"mission_status"};
+// targets (ground robot) -> mission.
+inline constexpr LatestTopic<mission::ObjectsMsg> kObjects{"objects"};
+
+inline constexpr std::array<std::string_view, 3> kMissionNames{kRegions.name, kMissionStatus.name, kObjects.name};
+static_assert(names_distinct(kNames, kCommsNames, kMissionNames), "two channels share a name");
+}  // namespace ag::chan
