@@ -150,7 +150,7 @@ int run_role(const RoleDescription& role, int argc, char** argv) {
               config_path.empty() ? "(defaults)" : config_path.c_str());
 
   MonotonicClock clock;
-  auto robot = RoleInstance::create(role, cfg, clock, instance);
+  auto robot = RoleInstance::create(role, cfg, clock, instance, StageThreads::kRealtime);
   if (!robot) {
     AG_LOG_ERROR("main", "%s", robot.error().message.c_str());
     log::stop_writer();

@@ -34,7 +34,8 @@ std::vector<ParamSection> role_schema(const RoleDescription& role) {
 }
 
 Result<std::unique_ptr<RoleInstance>> RoleInstance::create(const RoleDescription& role, const Config& config,
-                                                           const Clock& clock, std::string instance_name) {
+                                                           const Clock& clock, std::string instance_name,
+                                                           StageThreads threads) {
   std::unique_ptr<RoleInstance> r(new RoleInstance());
   r->name_ = std::move(instance_name);
   r->stages_.reserve(role.stages.size());
@@ -49,6 +50,10 @@ Result<std::unique_ptr<RoleInstance>> RoleInstance::create(const RoleDescription
     StageSlot& slot = r->stages_[i];
     r->channels_.set_initialising(i);  // the writers this stage takes are its outputs (lockstep compute time)
     StageContext ctx{config, r->channels_, clock, r->perf_, r->name_, slot.spec->name, &slot.perf->device};
+    if (threads == StageThreads::kRealtime) {
+      if (config.get_bool("scheduler.realtime")) ctx.placement.priority = slot.spec->priority;
+      if (config.get_bool("scheduler.pin_cpus")) ctx.placement.cpu = slot.spec->cpu;
+    }
     Status st = slot.stage->init(ctx);
     if (!st) {
       return Error::make(st.error().code, r->name_ + "/" + std::string(slot.spec->name) + ": init failed: " + st.error().message);

@@ -165,7 +165,7 @@ Result<std::unique_ptr<ErfNet>> ErfNet::create(const ErfNetWeights& weights, con
                 static_cast<std::size_t>(W) * static_cast<std::size_t>(opt.threads)) * sizeof(float) + plane;
   im->staging = {};
   im->classes_buf.assign(plane, 0);
-  im->pool = std::make_unique<detail::ThreadPool>(opt.threads);
+  im->pool = std::make_unique<WorkerGroup>(opt.threads, opt.placement);
   return std::unique_ptr<ErfNet>(new ErfNet(std::move(im)));
 }
 
@@ -174,7 +174,8 @@ const std::uint8_t* ErfNet::classes() const noexcept { return impl_->classes_buf
 int ErfNet::width() const noexcept { return impl_->width; }
 int ErfNet::height() const noexcept { return impl_->height; }
 int ErfNet::num_classes() const noexcept { return impl_->classes; }
-int ErfNet::threads() const noexcept { return impl_->pool->threads(); }
+int ErfNet::threads() const noexcept { return impl_->pool->size(); }
+const WorkerPlacementReport& ErfNet::placement() const noexcept { return impl_->pool->placement(); }
 KernelPath ErfNet::path() const noexcept { return impl_->path; }
 bool ErfNet::winograd() const noexcept { return impl_->winograd; }
 double ErfNet::reference_macs() const noexcept { return erfnet_macs(impl_->width, impl_->height, impl_->classes); }

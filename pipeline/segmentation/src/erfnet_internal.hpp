@@ -11,7 +11,6 @@
 
 #include "airground/segmentation/erfnet.hpp"
 #include "kernels.hpp"
-#include "thread_pool.hpp"
 
 namespace ag::seg {
 namespace detail {
@@ -102,7 +101,7 @@ struct ErfNet::Impl {
   KernelPath path{KernelPath::kPortable};
   detail::ConvRowFn conv_fn{detail::conv_row_portable};
   float norm_scale[3]{}, norm_shift[3]{};
-  std::unique_ptr<detail::ThreadPool> pool;
+  std::unique_ptr<WorkerGroup> pool;
 
   std::vector<FloatBuf> buffers;
   std::size_t bytes{0};

@@ -6,6 +6,7 @@
 
 #include "airground/messages/channels.hpp"
 #include "airground/messages/classes.hpp"
+#include "airground/platform/log.hpp"
 
 namespace ag::seg {
 
@@ -33,8 +34,12 @@ Status SegmentationStage::init(StageContext& ctx) {
     }
     const std::string k = v.text("kernel");
     const KernelPath path_choice = k == "avx2" ? KernelPath::kAvx2 : k == "neon" ? KernelPath::kNeon : k == "portable" ? KernelPath::kPortable : KernelPath::kAuto;
-    auto net = ErfNet::create(w.value(), ErfNetOptions{kImageWidth, kImageHeight, static_cast<int>(v.integer("threads")), path_choice});
+    ErfNetOptions eo{kImageWidth, kImageHeight, static_cast<int>(v.integer("threads")), path_choice};
+    eo.placement = ctx.placement;  // the workers take this stage's priority and CPU
+    auto net = ErfNet::create(w.value(), eo);
     if (!net) return Error::make(ErrorCode::kConfig, "segmentation: " + net.error().message);
+    if (!net.value()->placement().warning.empty())
+      AG_LOG_WARN("segmentation", "ErfNet %s", net.value()->placement().warning.c_str());
     net_ = std::move(net.value());
   }
   auto in = ctx.channels.ring_reader(chan::kKeyframes);

@@ -16,6 +16,7 @@
 #include "airground/platform/role_instance.hpp"
 #include "airground/platform/role_table.hpp"
 #include "airground/platform/status_stage.hpp"
+#include "airground/platform/worker_group.hpp"
 #include "roles.hpp"  // ugv_role()
 
 #include "../../common/counting_new.hpp"
@@ -168,6 +169,24 @@ TEST(NoAllocation, LockstepStepsOfTheUgvRoleAndAChannelPairAllocateNothing) {
       steps += r->perf().at(i).runs.load();
     }
   EXPECT_GT(steps, 18'000u);
+}
+
+// The caller's side of run(): the hand-out, the wake-up and the wait (workers are started before).
+TEST(NoAllocation, WorkerGroupRunsAllocateNothing) {
+  WorkerGroup g(3);
+  std::vector<int> out(256, 0);
+  const auto item = [](void* ctx, int i, int /*thread*/) noexcept { static_cast<int*>(ctx)[i] += i; };
+  std::uint64_t allocations = 0;
+  {
+    AllocationWindow w;
+    for (int rep = 0; rep < 100; ++rep) {
+      g.run(static_cast<int>(out.size()), item, out.data());
+      g.run(out.size(), [&](std::size_t j, int /*thread*/) { out[j] -= static_cast<int>(j); });
+    }
+    allocations = w.allocations();
+  }
+  EXPECT_EQ(allocations, 0u);
+  for (int v : out) EXPECT_EQ(v, 0);
 }
 
 }  // namespace

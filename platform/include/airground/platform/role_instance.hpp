@@ -23,11 +23,17 @@ struct StageSlot {
   StagePerf* perf;
 };
 
+// Which executor will run the stages. Under kRealtime each stage's context carries its row's priority and
+// CPU (as scheduler.realtime and scheduler.pin_cpus allow) for the workers it starts; under kLockstep
+// (the simulator, tests) {0, -1}: normal threads.
+enum class StageThreads { kLockstep, kRealtime };
+
 class RoleInstance {
  public:
   // Builds and initialises every stage in table order; the first failing init() is the error.
   static Result<std::unique_ptr<RoleInstance>> create(const RoleDescription& role, const Config& config,
-                                                      const Clock& clock, std::string instance_name);
+                                                      const Clock& clock, std::string instance_name,
+                                                      StageThreads threads = StageThreads::kLockstep);
   RoleInstance(const RoleInstance&) = delete;
   RoleInstance& operator=(const RoleInstance&) = delete;
   ~RoleInstance();

@@ -9,6 +9,7 @@
 #include "airground/platform/perf_counters.hpp"
 #include "airground/platform/result.hpp"
 #include "airground/platform/time.hpp"
+#include "airground/platform/worker_group.hpp"
 
 namespace ag {
 
@@ -22,6 +23,7 @@ struct StageContext {
   std::string_view instance;  // the robot this stage belongs to ("uav", "ugv1", ...)
   std::string_view stage_name;
   DeviceCounters* device{nullptr};  // this stage's own device counters (a device stage describes and fills them)
+  WorkerPlacement placement{};      // for the workers it starts: its thread's priority and CPU, when real time
 
   [[nodiscard]] SectionView params() const { return SectionView(config, stage_name); }
 };

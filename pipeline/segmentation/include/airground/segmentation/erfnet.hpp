@@ -1,7 +1,7 @@
 // ErfNet inference on the CPU, written by hand: BN folded into the convolutions at load time, one generic
 // direct-convolution micro-kernel over a channel-blocked layout (8 channels per block) with a fused
 // bias / residual / ReLU epilogue, kernels for AVX2+FMA, NEON and portable C++ chosen at run time,
-// transposed convolutions as sub-pixel convolutions, a fixed thread pool, and every buffer allocated in
+// transposed convolutions as sub-pixel convolutions, a platform WorkerGroup, and every buffer allocated in
 // create(): run() never allocates.
 #pragma once
 
@@ -11,6 +11,7 @@
 #include <string_view>
 
 #include "airground/platform/result.hpp"
+#include "airground/platform/worker_group.hpp"
 #include "airground/segmentation/weights.hpp"
 
 namespace ag::seg {
@@ -27,6 +28,7 @@ struct ErfNetOptions {
   int threads{1};           // threads that run a frame (the caller plus threads - 1 workers), 1..64
   KernelPath path{KernelPath::kAuto};
   bool winograd{true};      // the 3x1 / 1x3 convolutions by 1-D Winograd F(2,3) (2/3 of the multiplies); false: direct
+  WorkerPlacement placement{};  // the workers' priority and CPU: the calling stage's (StageContext::placement)
 };
 
 class ErfNet {
@@ -51,6 +53,8 @@ class ErfNet {
   [[nodiscard]] int height() const noexcept;
   [[nodiscard]] int num_classes() const noexcept;
   [[nodiscard]] int threads() const noexcept;
+  // What the workers applied of options.placement (a refusal leaves them on normal threads).
+  [[nodiscard]] const WorkerPlacementReport& placement() const noexcept;
   [[nodiscard]] KernelPath path() const noexcept;
   [[nodiscard]] bool winograd() const noexcept;
   // Multiply-accumulates of one frame in the reference network (what GFLOP/s figures count, x2).
