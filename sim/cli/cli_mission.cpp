@@ -43,6 +43,9 @@ const char kMissionHelp[] =
     "                           simulator's VO model instead of the quadrotor's own vo stage; metrics.json and the\n"
     "                           report list them\n"
     "  --lidar-columns C       512|1024|2048 (1024)\n"
+    "  --uav-cache DIR         record the quadrotor's mapping output into DIR the first time, replay it in later\n"
+    "                          missions with the same world, seed, altitude and quadrotor settings (the study's;\n"
+    "                          docs/simulator.md, \"Quadrotor replay\")\n"
     "  --web-port P            the base station serves its live page on http://localhost:P/ during the run\n"
     "  --pace X                hold the run to X times real time (to watch it on the page)\n"
     "  --record none|light|full  recordings (light)\n"
@@ -84,6 +87,7 @@ int mission_cmd(const Args& a) {
   o.threads = static_cast<int>(number(a, "threads", 0));
   o.parallel_robots = !a.has("serial-robots");
   o.web_port = static_cast<int>(number(a, "web-port", 0));
+  o.uav_cache = a.get("uav-cache");
   o.web_pace = number(a, "pace", 0);
   o.status_period_s = a.has("verbose") ? number(a, "verbose", 30) : 0;
   if (o.ugvs < 1 || o.ugvs > 32) usage_error("--ugvs must be 1..32");
@@ -128,6 +132,7 @@ int mission_cmd(const Args& a) {
               r.loc_error_mean_m, r.loc_error_p95_m, r.odom_only_error_mean_m, r.false_visits, r.failed_goals, static_cast<unsigned long long>(r.collisions));
   std::printf("map class accuracy %.3f; %.1f MB on air; real-time factor %.2fx; report: %s/report.md\n", r.map_class_accuracy,
               static_cast<double>(r.bytes_on_air) / 1e6, r.realtime_factor, o.out_dir.c_str());
+  if (r.uav_replay.mode != "live") std::printf("quadrotor: %s (%s)\n", r.uav_replay.mode.c_str(), r.uav_replay.file.c_str());
   return 0;
 }
 

@@ -49,6 +49,9 @@ constexpr const char* kStudyHelp =
     "  --oracle labels,vo     ablation passed to every mission; study.csv and study.md list each mission's oracles\n"
     "  --compute-time MODE    passed to every mission: model (default), measured or off (docs/simulator.md)\n"
     "  --target-cpu CPU       passed to every mission: nuc|ryzen|xavier-nx (default: the paper's computers)\n"
+    "  --uav-cache DIR|none   the quadrotor cache every mission shares (DIR/uav_cache): the first mission of a\n"
+    "                         world, seed and altitude records its quadrotor's mapping, later ones replay it\n"
+    "                         (same results, without the camera, VO, ErfNet and mapping); none: all live\n"
     "  --report-only          run nothing: write the table and plots from the missions already done\n"
     "                         (also while another study process is still running into DIR)\n"
     "  --slurm SDIR           run nothing here: write SDIR/study.sbatch, a Slurm job array with one task per\n"
@@ -75,7 +78,7 @@ struct Options {
 Options parse(int argc, char** argv) {
   static const std::set<std::string> valued = {"world", "worlds", "ugvs", "comm-range", "seeds", "first-seed", "out", "jobs", "max-duration", "altitude",
                                                "lidar-columns", "set", "set-uav", "oracle", "slurm", "cpus-per-task",
-                                               "compute-time", "target-cpu"};
+                                               "compute-time", "target-cpu", "uav-cache"};
   Options o;
   for (int i = 2; i < argc; ++i) {
     const std::string s = argv[i];
@@ -212,6 +215,11 @@ std::vector<std::string> mission_args(const Options& o, const Cell& c, const std
   if (o.has("max-duration")) {
     args.emplace_back("--max-duration");
     args.push_back(o.get("max-duration"));
+  }
+  const std::string cache = o.get("uav-cache", (fs::absolute(fs::path(o.get("out", "study"))) / "uav_cache").string());
+  if (cache != "none") {
+    args.emplace_back("--uav-cache");
+    args.push_back(cache);
   }
   for (const char* key : {"set", "set-uav", "oracle", "compute-time", "target-cpu"})
     if (o.has(key))

@@ -18,6 +18,7 @@
 #include "airground/platform/role_instance.hpp"
 #include "airground/sim/eval_scoring.hpp"
 #include "airground/sim/generator.hpp"
+#include "airground/sim/uav_replay.hpp"
 #include "mission_log.hpp"
 
 namespace ag::sim {
@@ -159,6 +160,7 @@ RunOptions team_run_options(const MissionOptions& o, const World& w, const std::
   r.uav_config.insert(r.uav_config.end(), o.uav_config.begin(), o.uav_config.end());
   r.oracles = o.oracles;
   r.compute_time = o.compute_time;
+  r.uav_cache = o.uav_cache;
   r.target_cpu = o.target_cpu;
   r.step_sampler = o.step_sampler;
   r.ugv_config = o.ugv_config;
@@ -221,6 +223,13 @@ void record_sample(MissionLog& log, const UgvSample& s) {
   log.samples[ui].push_back(x);
 }
 
+// The quadrotor's regions: its regions stage's, or the replay's when its mapping is replayed.
+const mission::RegionsMsg* quadrotor_regions(RoleInstance* uav) {
+  if (const auto* rs = find_stage<const mission::RegionsStage>(uav)) return &rs->published();
+  if (const auto* rp = find_stage<const UavReplayStage>(uav)) return &rp->published();
+  return nullptr;
+}
+
 // A status line per robot on stderr (--status-period).
 void print_status(const MissionLog& log, double t, RoleInstance* uav, std::size_t ugvs) {
   const auto* rs = find_stage<const mission::RegionsStage>(uav);
@@ -240,8 +249,8 @@ void print_status(const MissionLog& log, double t, RoleInstance* uav, std::size_
 void observe_team(MissionLog& log, const MissionOptions& o, TimeNs now, RoleInstance* uav, const std::vector<RoleInstance*>& ugvs,
                   RoleInstance* base) {
   const double t = to_seconds(now);
-  if (const auto* rs = find_stage<const mission::RegionsStage>(uav)) {
-    const mission::RegionsMsg& m = rs->published();
+  if (const mission::RegionsMsg* rm = quadrotor_regions(uav)) {
+    const mission::RegionsMsg& m = *rm;
     for (std::uint32_t k = 0; k < std::min<std::uint32_t>(m.count, static_cast<std::uint32_t>(m.regions.size())); ++k) log.regions[m.regions[k].id] = m.regions[k];
   }
   std::uint64_t bytes = 0;
@@ -294,6 +303,11 @@ void watch_mission(RunOptions& r, MissionLog& log, const MissionOptions& o) {
   };
   r.inspect = [&log](const RunInspection& in) -> Status {
     if (const auto* om = find_stage<const mapping::OrthoMapStage>(in.uav)) log.raster = om->map().raster();
+    if (const auto* rp = find_stage<const UavReplayStage>(in.uav)) {
+      auto map = rp->final_map();
+      if (!map) return map.error();
+      log.raster = std::move(map).value();
+    }
     return ok_status();
   };
 }
@@ -311,6 +325,7 @@ MissionMetrics score_run(const RunSummary& sum, const std::vector<TargetCluster>
   m.stage_overruns = sum.stage_overruns;
   m.stage_slips = sum.stage_slips;
   m.stages = sum.stages;
+  m.uav_replay = sum.uav_replay;
   m.targets_total = static_cast<std::uint32_t>(targets.size());
   m.regions_found = static_cast<std::uint32_t>(log.regions.size());
   bool all_done = true;

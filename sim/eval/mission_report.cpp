@@ -181,6 +181,9 @@ bool write_mission_metrics(const fs::path& out, const MissionOptions& o, const M
       << ", \"slips\": " << c.slips << ", \"exec_p99_ms\": " << c.exec_p99_ms << ", \"budget_ms\": " << c.budget_ms << "}";
   }
   j << "]"
+    << ",\n  \"uav\": {\"mode\": \"" << m.uav_replay.mode << "\", \"recording\": " << nlohmann::json(m.uav_replay.file).dump()
+    << ", \"recording_end_s\": " << m.uav_replay.recording_end_s << ", \"last_output_s\": " << m.uav_replay.last_output_s
+    << ", \"beyond_end_s\": " << m.uav_replay.beyond_end_s << "}"
     << ",\n  \"world\": " << nlohmann::json(o.world).dump()
     << ",\n  \"ugvs\": " << o.ugvs << ",\n  \"seed\": " << o.seed << ",\n  \"comm_range_m\": " << o.comm_range_m << ",\n  \"robots\": [";
   for (std::size_t i = 0; i < m.robots.size(); ++i) {
@@ -211,6 +214,12 @@ bool write_mission_report(const fs::path& out, const MissionOptions& o, const Mi
      << (m.completed ? "Every robot finished and returned to its start." : "The mission hit the time cap before every robot finished.")
      << " The survey was estimated at " << static_cast<int>(std::lround(m.survey_estimate_s)) << " s with its return; the cap was "
      << static_cast<int>(std::lround(m.time_cap_s)) << " s.\n\n";
+  if (m.uav_replay.mode == "replayed")
+    md << "The quadrotor's mapping was replayed from `" << m.uav_replay.file << "` (recorded live with the same key; its comms stage and flight ran live"
+       << (m.uav_replay.beyond_end_s > 0 ? ", and this mission ran " + std::to_string(static_cast<int>(m.uav_replay.beyond_end_s)) + " s past the recording's end" : std::string())
+       << ").\n\n";
+  else if (m.uav_replay.mode == "recorded")
+    md << "The quadrotor's mapping ran live and was recorded into `" << m.uav_replay.file << "` for later missions.\n\n";
   std::snprintf(line, sizeof line,
                 "| figure | value |\n|---|---|\n| targets visited | **%u of %u** |\n| regions found / visited | %u / %u |\n| mission time | %.0f s |\n"
                 "| localization error mean / p95 / max (every sample after the first good one) | %.2f / %.2f / %.2f m |\n"

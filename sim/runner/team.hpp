@@ -39,6 +39,7 @@
 #include "airground/sim/wheel_odometry.hpp"
 #include "camera_prefetch.hpp"
 #include "team_recording.hpp"
+#include "uav_recording.hpp"
 #include "worker_pool.hpp"
 
 namespace ag::sim::lockstep {
@@ -224,6 +225,11 @@ struct Team {
   TimeNs sample_period{0};
   int lidar_rings{64};
   std::unique_ptr<TeamRecording> mcap;  // recording.mcap (unless --record none)
+  // The quadrotor cache (RunOptions::uav_cache): a live quadrotor recording into it, or a replay from it.
+  std::unique_ptr<UavRecordWriter> uav_rec;
+  std::unique_ptr<UavRecordReader> uav_play;
+  UavTapStage* uav_tap{nullptr};
+  UavReplayInfo replay_info;
 };
 
 // ---- the routes of the scripted robots (team_routes.cpp)
@@ -246,6 +252,16 @@ void publish_tiles(Team& t, Ugv& u, TimeNs now);
 bool map_covers(const mapping::OrthoMap& m, const Pose2& p, double radius, double fraction);
 // Online source: the share of the cells within 3 m of a route (sampled every 2 m) that have a class.
 double route_covered(const mapping::OrthoMap& m, const std::vector<Eigen::Vector2d>& route);
+
+// ---- the quadrotor cache (team_uav_replay.cpp)
+// Opens the cache's recording for this run's key: a replay when it exists, else a recording of this run.
+Status open_uav_cache(Team& t);
+// The quadrotor's table for the cache: the tap appended (recording), or status, the replay and comms (replay).
+void plug_uav_cache(Team& t, std::vector<StageSpec>& stages);
+// After the quadrotor's role is made: hands the tap its writer, the replay its reader.
+Status attach_uav_cache(Team& t);
+// At the end: the recording finished and renamed into place, or the replay's figures.
+Status finish_uav_cache(Team& t, TimeNs ended);
 
 // ---- summary.yaml, summary.json, report.md and trajectories.png (team_report.cpp)
 Status write_reports(const Team& t, const RunSummary& s);

@@ -221,6 +221,7 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   t.opt = opt;
   t.world = world.value();
   t.out = opt.out_dir;
+  if (auto st = open_uav_cache(t); !st) return st.error();
   std::error_code ec;
   fs::create_directories(t.out / "camera", ec);
   if (ec) return Error::make(ErrorCode::kIo, "cannot create " + t.out.string() + ": " + ec.message());
@@ -296,7 +297,9 @@ Result<RunSummary> run_team(const RunOptions& opt, const ProgressFn& progress) {
   const TimeNs ended = run_until_end(t, exec, end, duration_s, progress);
   const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
 
+  if (auto st = finish_uav_cache(t, ended); !st) return st.error();
   RunSummary s;
+  s.uav_replay = t.replay_info;
   s.sim_s = to_seconds(ended);
   s.uav_route_estimate_s = survey_time_s;
   s.duration_cap_s = duration_s;

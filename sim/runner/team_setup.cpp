@@ -294,7 +294,7 @@ Status set_up_world(Team& t, const Models& m) {
   const World& w = *t.world;
   try {
     t.raycaster = std::make_shared<HeightfieldRaycaster>(w);
-    if (opt.uav) t.camera = std::make_unique<CameraRenderer>(w, m.camera, m.shading, m.sensor, t.raycaster);
+    if (opt.uav && !t.uav_play) t.camera = std::make_unique<CameraRenderer>(w, m.camera, m.shading, m.sensor, t.raycaster);
     t.camera_ae = CameraAutoExposure(m.sensor);
     if (opt.ugvs > 0) t.lidar = std::make_unique<LidarSimulator>(w, m.beams, m.lidar_noise, t.raycaster);
   } catch (const std::exception& e) {
@@ -415,13 +415,19 @@ Result<double> set_up_uav(Team& t, const Models& m, RoleFactory& roles, const st
   u->labels_oracle = labels_oracle;
   for (const StageSpec& st : uav_desc.stages)
     if (!st.device && !(u->vo_oracle && st.name == "vo")) t.uav_stages.push_back(st);
-  if (!u->vo_oracle)
+  if (!u->vo_oracle && !t.uav_play)
     t.uav_stages.push_back(StageSpec{"sim_vo_tap", &SimVoTapStage::make, 10.0, 90'000, 1, -1, SimVoTapStage::kParams,
                                      "simulator: counts and logs the quadrotor's own odometry"});
+  plug_uav_cache(t, t.uav_stages);
   uav_desc.stages = t.uav_stages;
   auto role = roles.make(uav_desc, uav_role(), 0, "uav", uav_extra, "quadrotor config override");
   if (!role) return role.error();
   u->role = std::move(role).value();
+  if (t.uav_play) {  // the replay stands in for the sensors and the mapping: nothing more to connect
+    t.uav = std::move(u);
+    if (auto st = attach_uav_cache(t); !st) return st.error();
+    return survey_time_s;
+  }
   auto cam_w = u->role->channels().ring_writer(chan::kCamera);
   auto gps_w = u->role->channels().ring_writer(chan::kGps);
   if (!cam_w) return cam_w.error();
@@ -450,6 +456,7 @@ Result<double> set_up_uav(Team& t, const Models& m, RoleFactory& roles, const st
       return Error::make(ErrorCode::kInvalidArgument, "the online map source needs the ortho-map at 0.5 m cells in 64-cell tiles (the map_tiles format)");
   }
   t.uav = std::move(u);
+  if (auto st = attach_uav_cache(t); !st) return st.error();
   return survey_time_s;
 }
 

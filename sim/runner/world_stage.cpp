@@ -273,7 +273,7 @@ void step_uav(Team& t, TimeNs now, double dt, bool log_now) {
   }
   const Pose3& p = a.vehicle.pose();
   if (t.opt.keep_uav_truth) a.truth.push_back(TruthSample{now, p});
-  publish_uav_sensors(t, a, p, now);
+  if (!t.uav_play) publish_uav_sensors(t, a, p, now);  // a replayed quadrotor's sensors feed nothing
   if (log_now) {
     if (a.truth_log) std::fprintf(a.truth_log.get(), "%.3f,%.3f,%.3f,%.3f,%.4f,%.4f,%.4f\n", to_seconds(now), p.x, p.y, p.z, p.roll, p.pitch, p.yaw);
     a.trail.emplace_back(p.x, p.y);

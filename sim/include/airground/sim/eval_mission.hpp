@@ -44,6 +44,7 @@ struct MissionOptions {
   std::vector<std::string> oracles{};  // ground truth for the robots by name (RunOptions::oracles), an ablation
   ComputeTimeMode compute_time{ComputeTimeMode::kModel};  // RunOptions::compute_time
   std::optional<TargetCpu> target_cpu{};                 // RunOptions::target_cpu (unset: the paper's computers)
+  std::string uav_cache{};         // RunOptions::uav_cache: record the quadrotor's mapping once, replay it after
   int web_port{0};                 // > 0: the base station serves its page on this port during the run
   double web_pace{0};              // > 0: hold the simulation to this many times real time (to watch it)
   std::function<void(double t_s)> during{};  // called at 5 Hz of simulated time while the mission runs (tests)
@@ -90,6 +91,7 @@ struct MissionMetrics {
   std::string compute_time{"model"};
   std::uint64_t stage_overruns{0}, stage_slips{0};
   std::vector<RunSummary::StageCounters> stages;
+  UavReplayInfo uav_replay{};  // the quadrotor: live, recorded into the cache, or replayed from it
 };
 
 Result<MissionMetrics> run_mission(const MissionOptions& options, const ProgressFn& progress = {});

@@ -150,6 +150,10 @@ struct RunOptions {
   // --- the ground robots' drivers in simulation (channels "lidar_scan", "wheel_odometry", "initial_pose",
   // "map_tiles" of every ground robot's role instance)
   UgvMapSource ugv_map{UgvMapSource::kNone};
+  // The quadrotor cache (a directory; empty: none): a mission with gossip records its quadrotor's mapping
+  // output there the first time and replays it in every later run with the same uav_replay_key (the
+  // study's missions on one world, seed and altitude), skipping the camera, VO, ErfNet and the mapping.
+  std::string uav_cache{};
   int map_tiles_per_tick{16};     // at most this many tiles pushed to one robot per physics step (and
                                   // never more than its ring takes: the rest follow on the next steps)
   double init_error_m{0};         // [m] the initial pose published at start is the truth moved this far (random direction by seed)
@@ -284,6 +288,15 @@ struct RobotSummary {
   double loc_error_max_m{-1};
 };
 
+// What the runner did with the quadrotor cache (RunOptions::uav_cache), for the summary and the report.
+struct UavReplayInfo {
+  std::string mode{"live"};   // "live" (no cache), "recorded" (live, written to the cache), "replayed"
+  std::string file{};         // the recording
+  double recording_end_s{0};  // [s] replayed: where the recording ends
+  double last_output_s{0};    // [s] ... and its last map tile or region batch
+  double beyond_end_s{0};     // [s] replayed: how long this run went on past the recording's end
+};
+
 struct RunSummary {
   double sim_s{0};
   double wall_s{0};
@@ -318,6 +331,7 @@ struct RunSummary {
   std::vector<StageCounters> stages;
   std::string compute_time{"model"};
   std::uint64_t recording_messages{0}, recording_bytes{0};  // recording.mcap (0 without one)
+  UavReplayInfo uav_replay{};  // the quadrotor cache: live, recorded or replayed
   std::vector<RobotSummary> ugvs;
 };
 
