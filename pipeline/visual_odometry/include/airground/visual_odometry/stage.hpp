@@ -5,6 +5,7 @@
 #include <array>
 #include <memory>
 
+#include "airground/messages/channels.hpp"
 #include "airground/messages/messages.hpp"
 #include "airground/platform/stage.hpp"
 #include "airground/visual_odometry/visual_odometry.hpp"
@@ -30,7 +31,7 @@ class VoStage final : public Stage {
       ParamSpec::real("attitude_max_gap_s", 0.05, 0.001, 1.0, "s", "an attitude sample further than this from a frame is not used for it"),
       ParamSpec::real("attitude_max_wait_s", 0.2, 0.0, 2.0, "s", "a frame waits this long for the attitude after it, then goes without"),
       ParamSpec::integer("frames_per_step", 2, 1, 8, "frames", "frames processed per release at most (a backlog is worked off)"),
-      ParamSpec::text("output_channel", "visual_odometry", "", "ring channel the odometry is published on (the pose graph reads visual_odometry)"),
+      ParamSpec::text("output_channel", chan::kVisualOdometry.name, "", "ring channel the odometry is published on (the pose graph reads visual_odometry)"),
   };
   static std::unique_ptr<Stage> make() { return std::make_unique<VoStage>(); }
 

@@ -19,6 +19,7 @@
 #include <memory>
 #include <span>
 
+#include "airground/messages/channels.hpp"
 #include "airground/messages/drive_messages.hpp"
 #include "airground/messages/messages.hpp"
 #include "airground/drivers/can/candump_log.hpp"
@@ -60,7 +61,7 @@ inline constexpr ParamSpec kBaseStageOwnParams[] = {
     ParamSpec::text("led_backend", "gpiod", "gpiod|fake|none", "status LED output: libgpiod, the simulator's fake line, or none"),
     ParamSpec::text("led_chip", "gpiochip0", "", "GPIO chip of the status LED"),
     ParamSpec::integer("led_line", 27, 0, 1023, "", "line offset of the status LED"),
-    ParamSpec::text("odometry_channel", "wheel_odometry", "", "ring channel the wheel odometry is published on"),
+    ParamSpec::text("odometry_channel", chan::kWheelOdometry.name, "", "ring channel the wheel odometry is published on"),
 };
 inline constexpr auto kBaseStageParamArray = detail::concat(kBaseStageOwnParams, kBaseParamSpecs);
 

@@ -12,6 +12,7 @@
 #include <span>
 #include <vector>
 
+#include "airground/messages/channels.hpp"
 #include "airground/messages/messages.hpp"
 #include "airground/drivers/autopilot/mavlink/frame_parser.hpp"
 #include "airground/drivers/autopilot/mavlink/link.hpp"
@@ -33,7 +34,7 @@ inline constexpr ParamSpec kAutopilotStageParams[] = {
     ParamSpec::real("request_hz", 50.0, 0.0, 400.0, "Hz", "ATTITUDE rate asked of the autopilot (MAV_CMD_SET_MESSAGE_INTERVAL); 0 = ask nothing"),
     ParamSpec::integer("max_bytes_per_step", 16384, 64, 65536, "B", "bytes read per step (921600 Bd is 92 kB/s: 1.8 kB per 50 Hz step)"),
     ParamSpec::real("log_every_s", 10.0, 0.0, 3600.0, "s", "log the link's counters this often; 0 = only problems"),
-    ParamSpec::text("attitude_channel", "attitude", "", "ring channel the attitude is published on"),
+    ParamSpec::text("attitude_channel", chan::kAttitude.name, "", "ring channel the attitude is published on"),
 };
 
 struct AutopilotCounters {

@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "airground/messages/channels.hpp"
 #include "airground/messages/messages.hpp"
 #include "airground/drivers/camera/frame_stream/frame_stream.hpp"
 #include "airground/drivers/camera/v4l2/camera.hpp"
@@ -32,8 +33,8 @@ inline constexpr ParamSpec kCameraStageParams[] = {
     ParamSpec::text("stamps", "record", "record|arrival",
                     "replay: keep the recorded stamps (a HIL simulator on this machine's clock) or shift them to the arrival of the first record (a recording from another boot)"),
     ParamSpec::boolean("pace", false, "replay of a file: hand records out at their recorded intervals from the first, not as fast as the rings take them"),
-    ParamSpec::text("camera_channel", "camera", "", "ring channel the images are published on"),
-    ParamSpec::text("vo_channel", "visual_odometry_recorded", "", "ring channel a frame-stream recording's own odometry is published on (the robot's vo stage writes visual_odometry)"),
+    ParamSpec::text("camera_channel", chan::kCamera.name, "", "ring channel the images are published on"),
+    ParamSpec::text("vo_channel", chan::kVisualOdometryRecorded.name, "", "ring channel a frame-stream recording's own odometry is published on (the robot's vo stage writes visual_odometry)"),
 };
 
 struct CameraStageCounters {

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "airground/messages/channels.hpp"
 #include "airground/messages/messages.hpp"
 #include "airground/drivers/gps/ublox/byte_source.hpp"
 #include "airground/drivers/gps/ublox/stream_parser.hpp"
@@ -35,7 +36,7 @@ inline constexpr ParamSpec kUbloxStageParams[] = {
     ParamSpec::real("datum_lon_deg", 0.0, -180.0, 180.0, "deg", "mission datum longitude"),
     ParamSpec::real("datum_height_m", 0.0, -1000.0, 10000.0, "m", "mission datum height above the WGS-84 ellipsoid"),
     ParamSpec::integer("max_bytes_per_step", 4096, 64, 65536, "B", "bytes read per step (115200 Bd is 11.5 kB/s)"),
-    ParamSpec::text("gps_channel", "gps", "", "ring channel the fixes are published on"),
+    ParamSpec::text("gps_channel", chan::kGps.name, "", "ring channel the fixes are published on"),
 };
 
 struct UbloxStageCounters {

@@ -8,6 +8,7 @@
 #include <span>
 #include <vector>
 
+#include "airground/messages/channels.hpp"
 #include "airground/messages/messages.hpp"
 #include "airground/drivers/lidar/ouster/frame.hpp"
 #include "airground/drivers/lidar/ouster/packet_source.hpp"
@@ -28,7 +29,7 @@ inline constexpr ParamSpec kOusterStageParams[] = {
     ParamSpec::real("mount_y_m", 0.0, -5.0, 5.0, "m", "sensor origin in the body frame, left"),
     ParamSpec::real("mount_z_m", 0.5, -5.0, 5.0, "m", "sensor origin in the body frame, up"),
     ParamSpec::real("mount_yaw_rad", 0.0, -3.15, 3.15, "rad", "sensor yaw in the body frame"),
-    ParamSpec::text("scan_channel", "lidar_scan", "", "ring channel the scans are published on"),
+    ParamSpec::text("scan_channel", chan::kLidarScan.name, "", "ring channel the scans are published on"),
     ParamSpec::text("classes", "none", "none|reflectivity",
                     "point classes: none (255), or the reflectivity byte as a class id (the simulator's HIL mode codes ground truth there)"),
 };

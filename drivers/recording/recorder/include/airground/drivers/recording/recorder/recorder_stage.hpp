@@ -12,6 +12,7 @@
 #include <utility>
 #include <vector>
 
+#include "airground/messages/channels.hpp"
 #include "airground/messages/messages.hpp"
 #include "airground/drivers/recording/mcap/counters_json.hpp"
 #include "airground/drivers/recording/recorder/mcap_rotation.hpp"
@@ -49,7 +50,7 @@ consteval std::array<ParamSpec, 14> recorder_params(std::string_view pose, std::
           ParamSpec::text("lidar_channel", lidar, "", "LiDAR revolution ring to record as point clouds; empty: none"),
           ParamSpec::integer("lidar_every", 5, 1, 1000, "scans", "record every Nth revolution"),
           ParamSpec::integer("lidar_column_stride", 4, 1, 64, "columns", "of a recorded revolution, every Nth measurement column"),
-          ParamSpec::text("map_tiles_channel", "map_tiles", "", "aerial map tile ring to record as grids; empty: none"),
+          ParamSpec::text("map_tiles_channel", chan::kMapTiles.name, "", "aerial map tile ring to record as grids; empty: none"),
           ParamSpec::real("scheduler_period_s", 10.0, 0.0, 3600.0, "s", "scheduler counters this often (0: never)"),
           ParamSpec::text("camera_channel", camera, "", "camera image ring to record (foxglove.RawImage rgb8, half size); empty: none"),
           ParamSpec::real("camera_period_s", 2.0, 0.0, 3600.0, "s", "at most one camera image this often (0: every image the recorder sees)")};
