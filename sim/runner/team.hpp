@@ -248,8 +248,9 @@ std::vector<std::pair<std::int32_t, std::int32_t>> gt_tile_order(const World& w,
 void scan_online_map(Team& t);
 // Pushes this robot's next tiles while every reader's ring has room.
 void publish_tiles(Team& t, Ugv& u, TimeNs now);
-// Online source: a robot waits at its start until the map knows most of its surroundings.
-bool map_covers(const mapping::OrthoMap& m, const Pose2& p, double radius, double fraction);
+// Online source: a robot waits at its start until the map knows `fraction` of its surroundings inside the
+// mission area (the world: ground beyond its edge is never mapped; sim/map_coverage.hpp).
+bool map_covers(const mapping::OrthoMap& m, const Pose2& p, double radius, double fraction, const GridGeometry& area);
 // Online source: the share of the cells within 3 m of a route (sampled every 2 m) that have a class.
 double route_covered(const mapping::OrthoMap& m, const std::vector<Eigen::Vector2d>& route);
 

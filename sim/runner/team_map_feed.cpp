@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "airground/sim/map_coverage.hpp"
 #include "airground/sim/world.hpp"
 #include "team.hpp"
 
@@ -112,17 +113,12 @@ void publish_tiles(Team& t, Ugv& u, TimeNs now) {
 }
 
 // Online source: a robot waits at its start until the map knows most of its surroundings.
-bool map_covers(const mapping::OrthoMap& m, const Pose2& p, double radius, double fraction) {
-  std::uint64_t known = 0, total = 0;
-  const double res = kMapResolutionM;
-  for (double dy = -radius; dy <= radius; dy += res)
-    for (double dx = -radius; dx <= radius; dx += res) {
-      if (dx * dx + dy * dy > radius * radius) continue;
-      ++total;
-      const mapping::Cell* c = m.cell_at(p.x + dx, p.y + dy);
-      if (c != nullptr && c->cls != 255) ++known;
-    }
-  return total == 0 || static_cast<double>(known) >= fraction * static_cast<double>(total);
+bool map_covers(const mapping::OrthoMap& m, const Pose2& p, double radius, double fraction, const GridGeometry& area) {
+  const auto known = [&m](double x, double y) {
+    const mapping::Cell* c = m.cell_at(x, y);
+    return c != nullptr && c->cls != 255;
+  };
+  return known_fraction(known, p.x, p.y, radius, kMapResolutionM, area) >= fraction;
 }
 
 // Online source: the share of the cells within 3 m of a route (sampled every 2 m) that have a class.

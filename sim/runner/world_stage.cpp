@@ -106,7 +106,7 @@ void publish_given(Ugv& u, TimeNs now) {
 void update_release(const Team& t, Ugv& u, TimeNs now) {
   if (!u.released && now >= u.next_wait_check) {
     u.next_wait_check += kNsPerS;
-    if (map_covers(*t.ortho, u.vehicle.pose(), t.opt.ugv_wait_map_radius_m, t.opt.ugv_wait_map_fraction) &&
+    if (map_covers(*t.ortho, u.vehicle.pose(), t.opt.ugv_wait_map_radius_m, t.opt.ugv_wait_map_fraction, t.world->grid()) &&
         (!u.scripted || t.opt.ugv_wait_map_route_fraction <= 0 || route_covered(*t.ortho, u.route) >= t.opt.ugv_wait_map_route_fraction)) {
       u.released = true;
       u.released_at = now;
