@@ -64,8 +64,7 @@ void run_robots_in_parallel(Team& t, LockstepExecutor& exec) {
   if (t.net) t.net->set_deferred(true);
   exec.set_parallel(
       [](void* user, std::size_t jobs, LockstepExecutor::JobFn job, void* job_user) {
-        const std::function<void(std::size_t)> fn = [job, job_user](std::size_t j) { job(job_user, j); };
-        static_cast<Team*>(user)->pool->run(jobs, fn);
+        static_cast<Team*>(user)->pool->run(jobs, [job, job_user](std::size_t j) { job(job_user, j); });
       },
       [](void* user) {
         Team& tm = *static_cast<Team*>(user);
