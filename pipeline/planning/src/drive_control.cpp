@@ -6,21 +6,7 @@
 
 namespace ag::plan {
 
-DriveParams load_drive_params(const SectionView& s) {
-  DriveParams p;
-  p.max_speed_mps = s.real("max_speed_mps");
-  p.max_accel_mps2 = s.real("max_accel_mps2");
-  p.max_decel_mps2 = s.real("max_decel_mps2");
-  p.max_turn_rate_radps = s.real("max_turn_rate_radps");
-  p.max_turn_accel_radps2 = s.real("max_turn_accel_radps2");
-  p.lookahead_min_m = s.real("lookahead_min_m");
-  p.lookahead_time_s = s.real("lookahead_time_s");
-  p.turn_in_place_rad = s.real("turn_in_place_rad");
-  p.goal_tolerance_m = s.real("goal_tolerance_m");
-  p.track_m = s.real("track_m");
-  p.max_wheel_speed_mps = s.real("max_wheel_speed_mps");
-  return p;
-}
+DriveParams load_drive_params(const SectionView& s) { return load_params(s, kDriveFields); }
 
 WheelSpeeds wheels_from_twist(double v, double w, double track, double max_wheel) noexcept {
   WheelSpeeds s{v - 0.5 * w * track, v + 0.5 * w * track};

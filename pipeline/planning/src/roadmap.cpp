@@ -13,21 +13,9 @@ double sq(double v) noexcept { return v * v; }
 }  // namespace
 
 RoadmapParams load_roadmap_params(const SectionView& s, double resolution_m, int tile_cells) {
-  RoadmapParams p;
+  RoadmapParams p = load_params(s, kRoadmapFields);
   p.resolution_m = resolution_m;
   p.tile_cells = tile_cells;
-  const std::string& t = s.text("traversable");
-  p.max_level = t == "free" ? Traversability::kFree : t == "costly" ? Traversability::kCostly : Traversability::kRough;
-  p.costly_factor = s.real("costly_factor");
-  p.hole_fill_radius_cells = static_cast<int>(s.integer("hole_fill_radius_cells"));
-  p.hole_fill_any_class = s.boolean("hole_fill_any_class");
-  p.min_clearance_m = s.real("min_clearance_m");
-  p.clearance_cap_m = s.real("clearance_cap_m");
-  p.visibility_radius_m = s.real("visibility_radius_m");
-  p.lambda = s.real("lambda");
-  p.clearance_gain_m = s.real("clearance_gain_m");
-  p.shortcut_clearance_m = s.real("shortcut_clearance_m");
-  p.max_nodes = static_cast<int>(s.integer("max_nodes"));
   return p;
 }
 

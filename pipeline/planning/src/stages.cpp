@@ -12,11 +12,12 @@ namespace ag::plan {
 
 Status PlannerStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
-  const double x0 = v.real("area_x0_m"), y0 = v.real("area_y0_m"), x1 = v.real("area_x1_m"), y1 = v.real("area_y1_m");
+  cfg_ = load_params(v, kPlannerFields);
+  const double x0 = cfg_.area_x0_m, y0 = cfg_.area_y0_m, x1 = cfg_.area_x1_m, y1 = cfg_.area_y1_m;
   const std::string where = std::string(ctx.stage_name) + ".";
   if (!(x1 > x0) || !(y1 > y0))
     return Error::make(ErrorCode::kConfig, "config error: " + where + "area_x1_m/area_y1_m must be east/north of area_x0_m/area_y0_m");
-  const double margin = v.real("geofence_margin_m");
+  const double margin = cfg_.geofence_margin_m;
   if (!(x1 - x0 > 2 * margin) || !(y1 - y0 > 2 * margin))
     return Error::make(ErrorCode::kConfig, "config error: " + where + "geofence_margin_m (" + std::to_string(margin) +
                                                " m) leaves nothing of the mission area area_* inside the geofence");
@@ -25,11 +26,7 @@ Status PlannerStage::init(StageContext& ctx) {
   map_ = std::make_unique<Roadmap>(p, ClassTable::builtin(), extent_covering_area(x0, y0, x1, y1, kMapResolutionM, kTileCells));
   path_ = std::make_unique<PlannedPath>();
   msg_ = std::make_unique<PlannedPathMsg>();
-  tiles_per_step_ = static_cast<std::size_t>(v.integer("tiles_per_step"));
-  replan_period_ = from_seconds(v.real("replan_period_s"));
-  snap_ = v.real("snap_radius_m");
-  plan_initialising_ = v.boolean("plan_while_initialising");
-  initialising_snap_ = v.real("initialising_snap_m");
+  replan_period_ = from_seconds(cfg_.replan_period_s);
   auto tiles = ctx.channels.ring_reader(chan::kMapTiles);
   if (!tiles) return tiles.error();
   tiles_ = tiles.value();
@@ -52,10 +49,10 @@ void PlannerStage::plan_now(TimeNs now) noexcept {
   // While the localizer converges its estimate may be metres off, even inside a building: the start
   // snaps to a free cell within twice its sigma (at most initialising_snap_m), so the robot still moves
   // (the filter converges only with motion) and the route is re-planned once it tracks.
-  double snap = snap_;
+  double snap = cfg_.snap_radius_m;
   if (pose_.status != LocalizationStatus::kTracking) {
     const double sigma = std::sqrt(std::max(0.0, std::max(pose_.covariance[0], pose_.covariance[4])));
-    snap = std::min(initialising_snap_, std::max(snap_, 2.0 * sigma));
+    snap = std::min(cfg_.initialising_snap_m, std::max(cfg_.snap_radius_m, 2.0 * sigma));
   }
   map_->plan(Point2{pose_.pose.x, pose_.pose.y}, Point2{goal_.goal.x, goal_.goal.y}, *path_, snap);
   add_work(1.0);  // one route planned (compute-time model)
@@ -105,10 +102,10 @@ void PlannerStage::step(TimeNs now) noexcept {
     }
     tiles_.pop();
   }
-  if (map_->pending_tiles() > 0 && map_->update(tiles_per_step_) > 0) map_changed_ = true;
+  if (map_->pending_tiles() > 0 && map_->update(static_cast<std::size_t>(cfg_.tiles_per_step)) > 0) map_changed_ = true;
   if (loc_.fresh()) {
     pose_ = loc_.read();
-    have_pose_ = (pose_.status == LocalizationStatus::kTracking || (plan_initialising_ && pose_.status == LocalizationStatus::kInitialising)) &&
+    have_pose_ = (pose_.status == LocalizationStatus::kTracking || (cfg_.plan_while_initialising && pose_.status == LocalizationStatus::kInitialising)) &&
                  std::isfinite(pose_.pose.x) && std::isfinite(pose_.pose.y);
   }
   if (goal_in_.fresh()) {
@@ -142,11 +139,10 @@ Status DriveStage::init(StageContext& ctx) {
   follow_ = std::make_unique<PathFollower>(load_drive_params(v));
   path_ = std::make_unique<PlannedPathMsg>();
   pts_ = std::make_unique<std::array<Point2, kMaxPathPoints>>();
-  pose_timeout_ = from_seconds(v.real("pose_timeout_s"));
-  local_timeout_ = from_seconds(v.real("local_goal_timeout_s"));
-  initialising_speed_ = v.real("initialising_speed_mps");
-  reflex_hold_ = from_seconds(v.real("reflex_turn_after_s"));
-  steer_local_ = v.boolean("steer_to_local_goal");
+  cfg_ = load_params(v, kDriveStageFields);
+  pose_timeout_ = from_seconds(cfg_.pose_timeout_s);
+  local_timeout_ = from_seconds(cfg_.local_goal_timeout_s);
+  reflex_hold_ = from_seconds(cfg_.reflex_turn_after_s);
   auto lg = ctx.channels.latest_reader(chan::kLocalGoal);
   if (!lg) return lg.error();
   local_in_ = lg.value();
@@ -185,7 +181,7 @@ void DriveStage::step(TimeNs now) noexcept {
   if (loc_.fresh()) pose_ = loc_.read();
   if (local_in_.fresh()) local_ = local_in_.read();
   const bool tracking = pose_.status == LocalizationStatus::kTracking;
-  const bool converging = pose_.status == LocalizationStatus::kInitialising && initialising_speed_ > 0;
+  const bool converging = pose_.status == LocalizationStatus::kInitialising && cfg_.initialising_speed_mps > 0;
   const bool pose_ok = (tracking || converging) && now - pose_.stamp <= pose_timeout_;
   const bool local_ok = local_.stamp > 0 && now - local_.stamp <= local_timeout_ && (local_.path_seq == path_seq_ || local_.reflex_stop);
   TwistCommand tw;
@@ -202,8 +198,8 @@ void DriveStage::step(TimeNs now) noexcept {
     reflex_since_ = -1;
     if (local_ok && local_.state == static_cast<std::uint8_t>(TrackState::kFailed)) blocked_ = true;  // until a new route
     const Point2 lg{local_.goal.x, local_.goal.y};
-    const bool steer = steer_local_ && local_ok && local_.valid && std::isfinite(lg.x) && std::isfinite(lg.y);
-    tw = (have_path_ && pose_ok && !blocked_) ? follow_->step(pose_.pose, dt, tracking ? 1e9 : initialising_speed_, steer ? &lg : nullptr)
+    const bool steer = cfg_.steer_to_local_goal && local_ok && local_.valid && std::isfinite(lg.x) && std::isfinite(lg.y);
+    tw = (have_path_ && pose_ok && !blocked_) ? follow_->step(pose_.pose, dt, tracking ? 1e9 : cfg_.initialising_speed_mps, steer ? &lg : nullptr)
                                               : follow_->stop(dt);
   }
   const DriveParams& dp = follow_->params();
@@ -220,15 +216,7 @@ void DriveStage::step(TimeNs now) noexcept {
 
 Status TrackerStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
-  LocalTrackerParams p;
-  p.obstacle_min_m = v.real("obstacle_min_m");
-  p.overhang_m = v.real("overhang_m");
-  p.min_clearance_m = v.real("min_clearance_m");
-  p.goal_distance_m = v.real("goal_distance_m");
-  p.reflex_height_m = v.real("reflex_height_m");
-  p.reflex_distance_m = v.real("reflex_distance_m");
-  p.reflex_half_width_m = v.real("reflex_half_width_m");
-  p.backup_timeout_s = v.real("backup_timeout_s");
+  const LocalTrackerParams p = load_params(v, kTrackerFields);
   if (p.overhang_m <= p.obstacle_min_m)
     return Error::make(ErrorCode::kConfig, "config error: " + std::string(ctx.stage_name) + ".overhang_m must be above obstacle_min_m");
   tracker_ = std::make_unique<LocalTracker>(p);

@@ -15,6 +15,7 @@
 #include "airground/localization/particle_filter.hpp"
 #include "airground/localization/polar_render.hpp"
 #include "airground/localization/scan_labeller.hpp"
+#include "airground/platform/param_binding.hpp"
 
 namespace ag::loc {
 
@@ -27,20 +28,10 @@ struct LocalizerParams {
   DistanceFieldParams fields;     // used by the caller's ClassDistanceFields (resolution and tiles from the map)
 };
 
-namespace detail {
-template <std::size_t... N>
-constexpr auto concat_specs(const ParamSpec (&... parts)[N]) {
-  std::array<ParamSpec, (N + ...)> out{};
-  std::size_t k = 0;
-  ((std::copy(std::begin(parts), std::end(parts), out.begin() + static_cast<std::ptrdiff_t>(k)), k += N), ...);
-  return out;
-}
-}  // namespace detail
-
 // Every parameter of the localizer, with unique keys, for one stage section of a role's YAML.
 inline constexpr auto kLocalizerParamSpecs =
-    detail::concat_specs(kOdometryGateParamSpecs, kPolarRenderParamSpecs, kParticleFilterParamSpecs, kFusedPoseParamSpecs,
-                         kGeometricLabelParamSpecs, kDistanceFieldParamSpecs);
+    param_specs(kOdometryGateParamSpecs, kPolarRenderParamSpecs, kParticleFilterParamSpecs, kFusedPoseParamSpecs,
+                kGeometricLabelParamSpecs, kDistanceFieldParamSpecs);
 // Reads them from one section (resolution and tile size of the fields come from the aerial map).
 LocalizerParams load_localizer_params(const SectionView& s, double map_resolution_m = 0.5, int map_tile_cells = 64);
 

@@ -9,6 +9,7 @@
 #include "airground/messages/geometry.hpp"
 #include "airground/planning/roadmap.hpp"
 #include "airground/platform/config.hpp"
+#include "airground/platform/param_binding.hpp"
 
 namespace ag::plan {
 
@@ -26,18 +27,18 @@ struct DriveParams {
   double max_wheel_speed_mps{1.6};  // both wheels scaled down together beyond this (curvature kept)
 };
 
-inline constexpr ParamSpec kDriveParamSpecs[] = {
-    ParamSpec::real("max_speed_mps", 1.2, 0.05, 5.0, "m/s", "top speed along the path"),
-    ParamSpec::real("max_accel_mps2", 0.8, 0.05, 5.0, "m/s^2", "linear acceleration limit"),
-    ParamSpec::real("max_decel_mps2", 1.5, 0.05, 10.0, "m/s^2", "linear deceleration limit (also for stopping at the goal)"),
-    ParamSpec::real("max_turn_rate_radps", 1.2, 0.05, 6.0, "rad/s", "angular velocity limit"),
-    ParamSpec::real("max_turn_accel_radps2", 3.0, 0.1, 30.0, "rad/s^2", "angular acceleration limit"),
-    ParamSpec::real("lookahead_min_m", 1.0, 0.1, 10.0, "m", "shortest pure-pursuit look-ahead"),
-    ParamSpec::real("lookahead_time_s", 1.2, 0.0, 10.0, "s", "look-ahead grows with speed x this"),
-    ParamSpec::real("turn_in_place_rad", 1.0, 0.1, 3.2, "rad", "heading error beyond which the robot turns on the spot"),
-    ParamSpec::real("goal_tolerance_m", 0.25, 0.05, 5.0, "m", "the goal is reached within this (nav2's xy_goal_tolerance default)"),
-    ParamSpec::real("track_m", 0.55, 0.05, 5.0, "m", "wheel separation of the base"),
-    ParamSpec::real("max_wheel_speed_mps", 1.6, 0.1, 10.0, "m/s", "wheel speed limit (both wheels scaled together)"),
+inline constexpr ParamField<DriveParams> kDriveFields[] = {
+    field::real("max_speed_mps", &DriveParams::max_speed_mps, 0.05, 5.0, "m/s", "top speed along the path"),
+    field::real("max_accel_mps2", &DriveParams::max_accel_mps2, 0.05, 5.0, "m/s^2", "linear acceleration limit"),
+    field::real("max_decel_mps2", &DriveParams::max_decel_mps2, 0.05, 10.0, "m/s^2", "linear deceleration limit (also for stopping at the goal)"),
+    field::real("max_turn_rate_radps", &DriveParams::max_turn_rate_radps, 0.05, 6.0, "rad/s", "angular velocity limit"),
+    field::real("max_turn_accel_radps2", &DriveParams::max_turn_accel_radps2, 0.1, 30.0, "rad/s^2", "angular acceleration limit"),
+    field::real("lookahead_min_m", &DriveParams::lookahead_min_m, 0.1, 10.0, "m", "shortest pure-pursuit look-ahead"),
+    field::real("lookahead_time_s", &DriveParams::lookahead_time_s, 0.0, 10.0, "s", "look-ahead grows with speed x this"),
+    field::real("turn_in_place_rad", &DriveParams::turn_in_place_rad, 0.1, 3.2, "rad", "heading error beyond which the robot turns on the spot"),
+    field::real("goal_tolerance_m", &DriveParams::goal_tolerance_m, 0.05, 5.0, "m", "the goal is reached within this (nav2's xy_goal_tolerance default)"),
+    field::real("track_m", &DriveParams::track_m, 0.05, 5.0, "m", "wheel separation of the base"),
+    field::real("max_wheel_speed_mps", &DriveParams::max_wheel_speed_mps, 0.1, 10.0, "m/s", "wheel speed limit (both wheels scaled together)"),
 };
 DriveParams load_drive_params(const SectionView& s);
 

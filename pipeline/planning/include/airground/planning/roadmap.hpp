@@ -25,6 +25,7 @@
 
 #include "airground/messages/classes.hpp"
 #include "airground/platform/config.hpp"
+#include "airground/platform/param_binding.hpp"
 #include "airground/platform/distance_transform.hpp"
 
 namespace ag::plan {
@@ -51,19 +52,21 @@ struct RoadmapParams {
   Fence fence{};  // cells centred outside it are blocked (the planner stage: its area_* less geofence_margin_m)
 };
 
-inline constexpr ParamSpec kRoadmapParamSpecs[] = {
-    ParamSpec::text("traversable", "rough", "free|rough|costly",
-                    "highest traversability level planned through (classes.yaml: free = road, rough = +dirt, costly = +grass)"),
-    ParamSpec::real("costly_factor", 4.0, 1.0, 100.0, "", "cost multiplier on cells of a costly class (grass) when allowed"),
-    ParamSpec::integer("hole_fill_radius_cells", 1, 0, 5, "cells", "morphological close of the traversable mask; 0 = off"),
-    ParamSpec::boolean("hole_fill_any_class", false, "close holes of any class (false: only unknown cells)"),
-    ParamSpec::real("min_clearance_m", 0.6, 0.0, 5.0, "m", "half the robot's width plus a margin: no path comes closer to an obstacle"),
-    ParamSpec::real("clearance_cap_m", 10.0, 2.0, 30.0, "m", "the clearance field is truncated here"),
-    ParamSpec::real("visibility_radius_m", 10.0, 2.0, 30.0, "m", "R: a node sees free cells on a free straight line within R"),
-    ParamSpec::real("lambda", 1.0, 0.01, 100.0, "1/m", "weight of an edge's length"),
-    ParamSpec::real("clearance_gain_m", 0.5, 0.0, 100.0, "m", "clearance penalty per metre = gain / (d + 0.01 m): falls as clearance d grows"),
-    ParamSpec::real("shortcut_clearance_m", 1.5, 0.0, 10.0, "m", "a shortcut keeps at least min(this, the clearance of the stretch it replaces)"),
-    ParamSpec::integer("max_nodes", 16384, 64, 1 << 20, "nodes", "roadmap capacity (allocated at start)"),
+// The roadmap's parameters (section "planner"); resolution, tile size and the fence come from the stage.
+inline constexpr ParamField<RoadmapParams> kRoadmapFields[] = {
+    field::choice<&RoadmapParams::max_level>(
+        "traversable", "free|rough|costly", {Traversability::kFree, Traversability::kRough, Traversability::kCostly},
+        "highest traversability level planned through (classes.yaml: free = road, rough = +dirt, costly = +grass)"),
+    field::real("costly_factor", &RoadmapParams::costly_factor, 1.0, 100.0, "", "cost multiplier on cells of a costly class (grass) when allowed"),
+    field::integer("hole_fill_radius_cells", &RoadmapParams::hole_fill_radius_cells, 0, 5, "cells", "morphological close of the traversable mask; 0 = off"),
+    field::boolean("hole_fill_any_class", &RoadmapParams::hole_fill_any_class, "close holes of any class (false: only unknown cells)"),
+    field::real("min_clearance_m", &RoadmapParams::min_clearance_m, 0.0, 5.0, "m", "half the robot's width plus a margin: no path comes closer to an obstacle"),
+    field::real("clearance_cap_m", &RoadmapParams::clearance_cap_m, 2.0, 30.0, "m", "the clearance field is truncated here"),
+    field::real("visibility_radius_m", &RoadmapParams::visibility_radius_m, 2.0, 30.0, "m", "R: a node sees free cells on a free straight line within R"),
+    field::real("lambda", &RoadmapParams::lambda, 0.01, 100.0, "1/m", "weight of an edge's length"),
+    field::real("clearance_gain_m", &RoadmapParams::clearance_gain_m, 0.0, 100.0, "m", "clearance penalty per metre = gain / (d + 0.01 m): falls as clearance d grows"),
+    field::real("shortcut_clearance_m", &RoadmapParams::shortcut_clearance_m, 0.0, 10.0, "m", "a shortcut keeps at least min(this, the clearance of the stretch it replaces)"),
+    field::integer("max_nodes", &RoadmapParams::max_nodes, 64, 1 << 20, "nodes", "roadmap capacity (allocated at start)"),
 };
 RoadmapParams load_roadmap_params(const SectionView& s, double resolution_m, int tile_cells);
 

@@ -18,35 +18,36 @@
 #include "airground/planning/drive_control.hpp"
 #include "airground/planning/local_tracker.hpp"
 #include "airground/planning/roadmap.hpp"
+#include "airground/platform/param_binding.hpp"
 #include "airground/platform/stage.hpp"
 
 namespace ag::plan {
 
-namespace detail {
-template <std::size_t... N>
-constexpr auto concat(const ParamSpec (&... parts)[N]) {
-  std::array<ParamSpec, (N + ...)> out{};
-  std::size_t k = 0;
-  ((std::copy(std::begin(parts), std::end(parts), out.begin() + static_cast<std::ptrdiff_t>(k)), k += N), ...);
-  return out;
-}
-}  // namespace detail
-
-inline constexpr ParamSpec kPlannerOwnParams[] = {
-    ParamSpec::real("area_x0_m", -500.0, -1e6, 1e6, "m", "mission area in the map frame: west edge (the roadmap covers it)"),
-    ParamSpec::real("area_y0_m", -500.0, -1e6, 1e6, "m", "mission area: south edge"),
-    ParamSpec::real("area_x1_m", 500.0, -1e6, 1e6, "m", "mission area: east edge"),
-    ParamSpec::real("area_y1_m", 500.0, -1e6, 1e6, "m", "mission area: north edge"),
-    ParamSpec::real("geofence_margin_m", 1.0, 0.0, 100.0, "m",
-                    "the mission area is a geofence: routes keep min_clearance_m inside the area shrunk by this"),
-    ParamSpec::integer("tiles_per_step", 2, 1, 256, "tiles", "changed map tiles folded into the roadmap per step"),
-    ParamSpec::real("replan_period_s", 2.0, 0.1, 60.0, "s", "re-plan from the current pose this often while a goal is active"),
-    ParamSpec::real("snap_radius_m", 2.0, 0.0, 10.0, "m", "a start or goal off the free cells snaps to one within this"),
-    ParamSpec::boolean("plan_while_initialising", true,
-                       "plan from the localizer's best estimate while it is still converging (it converges by driving)"),
-    ParamSpec::real("initialising_snap_m", 20.0, 0.0, 100.0, "m", "... and snap its start to a free cell within 2 sigma, at most this far"),
+// The planner's own parameters (the roadmap's follow them in the same section).
+struct PlannerSettings {
+  double area_x0_m{-500.0}, area_y0_m{-500.0}, area_x1_m{500.0}, area_y1_m{500.0};  // [m] map frame
+  double geofence_margin_m{1.0};
+  int tiles_per_step{2};
+  double replan_period_s{2.0};
+  double snap_radius_m{2.0};
+  bool plan_while_initialising{true};
+  double initialising_snap_m{20.0};
 };
-inline constexpr auto kPlannerParamArray = detail::concat(kPlannerOwnParams, kRoadmapParamSpecs);
+inline constexpr ParamField<PlannerSettings> kPlannerFields[] = {
+    field::real("area_x0_m", &PlannerSettings::area_x0_m, -1e6, 1e6, "m", "mission area in the map frame: west edge (the roadmap covers it)"),
+    field::real("area_y0_m", &PlannerSettings::area_y0_m, -1e6, 1e6, "m", "mission area: south edge"),
+    field::real("area_x1_m", &PlannerSettings::area_x1_m, -1e6, 1e6, "m", "mission area: east edge"),
+    field::real("area_y1_m", &PlannerSettings::area_y1_m, -1e6, 1e6, "m", "mission area: north edge"),
+    field::real("geofence_margin_m", &PlannerSettings::geofence_margin_m, 0.0, 100.0, "m",
+                "the mission area is a geofence: routes keep min_clearance_m inside the area shrunk by this"),
+    field::integer("tiles_per_step", &PlannerSettings::tiles_per_step, 1, 256, "tiles", "changed map tiles folded into the roadmap per step"),
+    field::real("replan_period_s", &PlannerSettings::replan_period_s, 0.1, 60.0, "s", "re-plan from the current pose this often while a goal is active"),
+    field::real("snap_radius_m", &PlannerSettings::snap_radius_m, 0.0, 10.0, "m", "a start or goal off the free cells snaps to one within this"),
+    field::boolean("plan_while_initialising", &PlannerSettings::plan_while_initialising,
+                   "plan from the localizer's best estimate while it is still converging (it converges by driving)"),
+    field::real("initialising_snap_m", &PlannerSettings::initialising_snap_m, 0.0, 100.0, "m", "... and snap its start to a free cell within 2 sigma, at most this far"),
+};
+inline constexpr auto kPlannerParamArray = param_specs(kPlannerFields, kRoadmapFields);
 
 struct PlannerCounters {
   std::uint64_t tiles_in{0}, tiles_applied{0}, tiles_outside{0}, tiles_stale{0};
@@ -74,26 +75,32 @@ class PlannerStage final : public Stage {
   LatestWriter<PlannedPathMsg> out_;
   LocalizationMsg pose_{};
   GoalMsg goal_{};
-  bool have_pose_{false}, have_goal_{false}, map_changed_{false}, plan_initialising_{true};
+  bool have_pose_{false}, have_goal_{false}, map_changed_{false};
   TimeNs goal_stamp_{-1}, last_plan_{0};
+  PlannerSettings cfg_{};
   TimeNs replan_period_{0};
-  std::size_t tiles_per_step_{2};
-  double snap_{2.0};
-  double initialising_snap_{20.0};
   std::uint32_t seq_{0};
   PlannerCounters c_;
 };
 
-inline constexpr ParamSpec kDriveOwnParams[] = {
-    ParamSpec::real("pose_timeout_s", 0.5, 0.05, 10.0, "s", "a localization older than this stops the robot"),
-    ParamSpec::real("local_goal_timeout_s", 0.3, 0.05, 5.0, "s", "a local goal older than this is ignored"),
-    ParamSpec::real("initialising_speed_mps", 0.6, 0.0, 5.0, "m/s",
-                    "top speed while the localizer is still converging (it needs motion to converge); 0 = wait for tracking"),
-    ParamSpec::boolean("steer_to_local_goal", true, "steer at the local tracker's goal (clear of what the LiDAR sees) when it has one"),
-    ParamSpec::real("reflex_turn_after_s", 1.0, 0.0, 60.0, "s",
-                    "under a reflex stop this long: turn on the spot toward the local goal (never forward); else it could stand facing a car for ever"),
+// The drive stage's own parameters (the path follower's follow them in the same section).
+struct DriveSettings {
+  double pose_timeout_s{0.5};
+  double local_goal_timeout_s{0.3};
+  double initialising_speed_mps{0.6};
+  bool steer_to_local_goal{true};
+  double reflex_turn_after_s{1.0};
 };
-inline constexpr auto kDriveParamArray = detail::concat(kDriveOwnParams, kDriveParamSpecs);
+inline constexpr ParamField<DriveSettings> kDriveStageFields[] = {
+    field::real("pose_timeout_s", &DriveSettings::pose_timeout_s, 0.05, 10.0, "s", "a localization older than this stops the robot"),
+    field::real("local_goal_timeout_s", &DriveSettings::local_goal_timeout_s, 0.05, 5.0, "s", "a local goal older than this is ignored"),
+    field::real("initialising_speed_mps", &DriveSettings::initialising_speed_mps, 0.0, 5.0, "m/s",
+                "top speed while the localizer is still converging (it needs motion to converge); 0 = wait for tracking"),
+    field::boolean("steer_to_local_goal", &DriveSettings::steer_to_local_goal, "steer at the local tracker's goal (clear of what the LiDAR sees) when it has one"),
+    field::real("reflex_turn_after_s", &DriveSettings::reflex_turn_after_s, 0.0, 60.0, "s",
+                "under a reflex stop this long: turn on the spot toward the local goal (never forward); else it could stand facing a car for ever"),
+};
+inline constexpr auto kDriveParamArray = param_specs(kDriveStageFields, kDriveFields);
 
 class DriveStage final : public Stage {
  public:
@@ -120,26 +127,26 @@ class DriveStage final : public Stage {
   bool have_path_{false}, blocked_{false};
   TimeNs last_{-1}, pose_timeout_{0}, local_timeout_{0};
   TimeNs reflex_since_{-1}, reflex_hold_{0};
-  double initialising_speed_{0.6};
-  bool steer_local_{true};
+  DriveSettings cfg_{};
   std::uint64_t reflex_stops_{0};
 };
 
-inline constexpr ParamSpec kTrackerParams[] = {
-    ParamSpec::real("obstacle_min_m", 0.2, 0.05, 2.0, "m", "returns this high above the ground plane are obstacles (a 15 cm curb is not)"),
-    ParamSpec::real("overhang_m", 2.0, 0.5, 10.0, "m", "returns higher than this above the ground are not obstacles"),
-    ParamSpec::real("min_clearance_m", 0.6, 0.0, 5.0, "m", "the local goal keeps this from obstacles"),
-    ParamSpec::real("goal_distance_m", 5.0, 1.0, 15.0, "m", "the local goal is this far along the route"),
-    ParamSpec::real("reflex_height_m", 0.25, 0.05, 2.0, "m", "a return this high right ahead stops the robot"),
-    ParamSpec::real("reflex_distance_m", 0.8, 0.1, 5.0, "m", "... within this ahead (plus speed x 0.5 s)"),
-    ParamSpec::real("reflex_half_width_m", 0.35, 0.1, 2.0, "m", "... and this of the centre line"),
-    ParamSpec::real("backup_timeout_s", 8.0, 0.5, 60.0, "s", "backing up this long without a way forward cancels the route"),
+inline constexpr ParamField<LocalTrackerParams> kTrackerFields[] = {
+    field::real("obstacle_min_m", &LocalTrackerParams::obstacle_min_m, 0.05, 2.0, "m", "returns this high above the ground plane are obstacles (a 15 cm curb is not)"),
+    field::real("overhang_m", &LocalTrackerParams::overhang_m, 0.5, 10.0, "m", "returns higher than this above the ground are not obstacles"),
+    field::real("min_clearance_m", &LocalTrackerParams::min_clearance_m, 0.0, 5.0, "m", "the local goal keeps this from obstacles"),
+    field::real("goal_distance_m", &LocalTrackerParams::goal_distance_m, 1.0, 15.0, "m", "the local goal is this far along the route"),
+    field::real("reflex_height_m", &LocalTrackerParams::reflex_height_m, 0.05, 2.0, "m", "a return this high right ahead stops the robot"),
+    field::real("reflex_distance_m", &LocalTrackerParams::reflex_distance_m, 0.1, 5.0, "m", "... within this ahead (plus speed x 0.5 s)"),
+    field::real("reflex_half_width_m", &LocalTrackerParams::reflex_half_width_m, 0.1, 2.0, "m", "... and this of the centre line"),
+    field::real("backup_timeout_s", &LocalTrackerParams::backup_timeout_s, 0.5, 60.0, "s", "backing up this long without a way forward cancels the route"),
 };
+inline constexpr auto kTrackerParamArray = param_specs(kTrackerFields);
 
 // tracker: lidar_scan + localization + planned_path -> local tracker -> "local_goal" once per scan.
 class TrackerStage final : public Stage {
  public:
-  static constexpr std::span<const ParamSpec> kParams{kTrackerParams};
+  static constexpr std::span<const ParamSpec> kParams{kTrackerParamArray};
   static std::unique_ptr<Stage> make() { return std::make_unique<TrackerStage>(); }
   Status init(StageContext& ctx) override;
   void step(TimeNs now) noexcept override;

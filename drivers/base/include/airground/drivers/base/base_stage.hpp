@@ -26,19 +26,10 @@
 #include "airground/drivers/base/diff_drive_base.hpp"
 #include "airground/drivers/gpio/estop.hpp"
 #include "airground/drivers/gpio/gpio_line.hpp"
+#include "airground/platform/param_binding.hpp"
 #include "airground/platform/stage.hpp"
 
 namespace ag::base {
-
-namespace detail {
-template <std::size_t... N>
-constexpr auto concat(const ParamSpec (&... parts)[N]) {
-  std::array<ParamSpec, (N + ...)> out{};
-  std::size_t k = 0;
-  ((std::copy(std::begin(parts), std::end(parts), out.begin() + static_cast<std::ptrdiff_t>(k)), k += N), ...);
-  return out;
-}
-}  // namespace detail
 
 // What the motor controllers send (heartbeats, encoder estimates), not the driver's own commands: what
 // a replayed log feeds back to the driver.
@@ -63,7 +54,7 @@ inline constexpr ParamSpec kBaseStageOwnParams[] = {
     ParamSpec::integer("led_line", 27, 0, 1023, "", "line offset of the status LED"),
     ParamSpec::text("odometry_channel", chan::kWheelOdometry.name, "", "ring channel the wheel odometry is published on"),
 };
-inline constexpr auto kBaseStageParamArray = detail::concat(kBaseStageOwnParams, kBaseParamSpecs);
+inline constexpr auto kBaseStageParamArray = param_specs(kBaseStageOwnParams, kBaseParamSpecs);
 
 struct BaseStageCounters {
   std::uint64_t commands_in{0};
