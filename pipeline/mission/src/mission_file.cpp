@@ -7,6 +7,10 @@
 #include <fstream>
 #include <set>
 #include <sstream>
+#include <type_traits>
+
+#include "airground/mission/stages.hpp"
+#include "airground/platform/param_binding.hpp"
 
 namespace ag::mission {
 
@@ -48,6 +52,18 @@ bool get(const Ctx& c, const YAML::Node& parent, const char* key, const std::str
     return false;
   }
   return true;
+}
+
+// A mission parameter a stage owns: its range is that stage's own spec row (type checked by T).
+template <typename T>
+bool get_stage_param(const Ctx& c, const YAML::Node& parent, std::span<const ParamSpec> rows, const char* key, T& out, Error& err) {
+  const ParamSpec* row = find_param(rows, key);
+  const ParamType want = std::is_integral_v<T> ? ParamType::kInt : ParamType::kReal;
+  if (row == nullptr || row->type != want) {
+    err = c.err(parent, std::string("parameters.") + key, "not a parameter of its stage (a build error)");
+    return false;
+  }
+  return get(c, parent, key, "parameters.", out, false, row->min, row->max, err);
 }
 
 void check_keys(const Ctx& c, const YAML::Node& n, const std::string& path, std::initializer_list<const char*> known, Error& err, bool& bad) {
@@ -224,14 +240,15 @@ Result<MissionFile> load_mission_string(std::string_view yaml, std::string_view 
     if (bad) return err;
     MissionParameters& q = f.params;
     const std::string pp = "parameters.";
-    if (!get(c, pm, "visit_radius_m", pp, q.visit_radius_m, false, 0.5, 20, err) || !get(c, pm, "max_sigma_m", pp, q.max_sigma_m, false, 0.1, 50, err) ||
-        !get(c, pm, "claim_timeout_s", pp, q.claim_timeout_s, false, 1, 3600, err) ||
-        !get(c, pm, "idle_return_s", pp, q.idle_return_s, false, 0, 36000, err) ||
-        !get(c, pm, "mission_end_s", pp, q.mission_end_s, false, 0, 360000, err) ||
-        !get(c, pm, "survey_end_s", pp, q.survey_end_s, false, 0, 360000, err) ||
-        !get(c, pm, "merge_distance_m", pp, q.merge_distance_m, false, 0.5, 100, err) ||
-        !get(c, pm, "min_region_cells", pp, q.min_region_cells, false, 1, 100000, err) ||
-        !get(c, pm, "comm_range_m", pp, q.comm_range_m, false, 0, 1e6, err))
+    const std::span<const ParamSpec> ms = MissionStage::kParams, rs = RegionsStage::kParams;
+    if (!get_stage_param(c, pm, ms, "visit_radius_m", q.visit_radius_m, err) || !get_stage_param(c, pm, ms, "max_sigma_m", q.max_sigma_m, err) ||
+        !get_stage_param(c, pm, ms, "claim_timeout_s", q.claim_timeout_s, err) ||
+        !get_stage_param(c, pm, ms, "idle_return_s", q.idle_return_s, err) ||
+        !get_stage_param(c, pm, ms, "mission_end_s", q.mission_end_s, err) ||
+        !get_stage_param(c, pm, ms, "survey_end_s", q.survey_end_s, err) ||
+        !get_stage_param(c, pm, rs, "merge_distance_m", q.merge_distance_m, err) ||
+        !get_stage_param(c, pm, rs, "min_region_cells", q.min_region_cells, err) ||
+        !get(c, pm, "comm_range_m", pp, q.comm_range_m, false, 0, 1e6, err))  // the simulator's, no stage's
       return err;
   }
 

@@ -18,27 +18,19 @@ namespace ag::mission {
 Status RegionsStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
   const std::string where = std::string(ctx.stage_name) + ".";
-  const double x0 = v.real("area_x0_m"), y0 = v.real("area_y0_m"), x1 = v.real("area_x1_m"), y1 = v.real("area_y1_m");
+  const RegionsSettings own = load_params(v, kRegionsStageFields);
+  const double x0 = own.area_x0_m, y0 = own.area_y0_m, x1 = own.area_x1_m, y1 = own.area_y1_m;
   if (!(x1 > x0) || !(y1 > y0))
     return Error::make(ErrorCode::kConfig, "config error: " + where + "area_x1_m/area_y1_m must be east/north of area_x0_m/area_y0_m");
-  RegionParams p;
+  RegionParams p = load_params(v, kRegionFields);
   p.resolution_m = kMapResolutionM;
   p.tile_cells = kTileCells;
-  p.merge_distance_m = v.real("merge_distance_m");
-  p.open_radius_cells = static_cast<int>(v.integer("open_radius_cells"));
-  p.min_region_cells = static_cast<int>(v.integer("min_region_cells"));
-  p.goal_search_radius_m = v.real("goal_search_radius_m");
-  p.min_goal_clearance_m = v.real("min_goal_clearance_m");
-  p.goal_clearance_cap_m = v.real("goal_clearance_cap_m");
-  p.reachable_min_cells = static_cast<int>(v.integer("reachable_min_cells"));
   p.max_regions = static_cast<int>(kMaxRegionsMsg);
-  const std::string& t = v.text("traversable");
-  p.max_level = t == "free" ? Traversability::kFree : t == "costly" ? Traversability::kCostly : Traversability::kRough;
   ex_ = std::make_unique<RegionExtractor>(p, ClassTable::builtin(), plan::extent_covering_area(x0, y0, x1, y1, kMapResolutionM, kTileCells));
   msg_ = std::make_unique<RegionsMsg>();
   pub_ = std::make_unique<comms::GossipPublishMsg>();
   batch_ = std::make_unique<RegionBatch>();
-  period_ = from_seconds(v.real("period_s"));
+  period_ = from_seconds(own.period_s);
   auto tiles = ctx.channels.ring_reader(chan::kMapTiles);
   if (!tiles) return tiles.error();
   tiles_ = tiles.value();
@@ -146,25 +138,8 @@ Status parse_waypoints(std::string_view text, ManagerParams& p) {
 
 Status MissionStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
-  ManagerParams p;
+  ManagerParams p = load_params(v, kManagerFields);
   p.self = static_cast<comms::RobotId>(ctx.config.get_int("robot.id"));
-  p.priority = static_cast<std::uint8_t>(v.integer("priority"));
-  p.start_x = v.real("start_x_m");
-  p.start_y = v.real("start_y_m");
-  p.visit_radius_m = v.real("visit_radius_m");
-  p.max_sigma_m = v.real("max_sigma_m");
-  p.visit_margin_m = v.real("visit_margin_m");
-  p.max_no_route = static_cast<int>(v.integer("max_no_route"));
-  p.no_progress_timeout_s = v.real("no_progress_timeout_s");
-  p.progress_min_m = v.real("progress_min_m");
-  p.retry_after_s = v.real("retry_after_s");
-  p.claim_timeout_s = v.real("claim_timeout_s");
-  p.idle_return_s = v.real("idle_return_s");
-  p.mission_end_s = v.real("mission_end_s");
-  p.survey_end_s = v.real("survey_end_s");
-  p.republish_s = v.real("republish_s");
-  p.map_growing_s = v.real("map_growing_s");
-  p.defer_s = v.real("defer_s");
   if (Status st = parse_waypoints(v.text("waypoints"), p); !st.ok()) return st;
   mgr_ = std::make_unique<MissionManager>(p);
   pub_ = std::make_unique<comms::GossipPublishMsg>();
@@ -298,16 +273,10 @@ void MissionStage::step(TimeNs now) noexcept {
 // ----------------------------------------------------------------------------------------- targets
 Status TargetsStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
-  DetectorParams dp;
-  dp.max_range_m = v.real("max_range_m");
-  dp.min_points = static_cast<int>(v.integer("min_points"));
-  dp.sigma0_m = v.real("sigma0_m");
-  dp.sigma_per_m = v.real("sigma_per_m");
-  TrackerParams tp;
-  tp.gate_chi2 = v.real("gate_chi2");
-  tp.min_detections = static_cast<std::uint16_t>(v.integer("min_detections"));
+  const DetectorParams dp = load_params(v, kDetectorFields);
+  TrackerParams tp = load_params(v, kObjectTrackerFields);
   tp.max_objects = kMaxObjectsMsg;
-  max_sigma_ = v.real("max_sigma_m");
+  cfg_ = load_params(v, kTargetsStageFields);
   det_ = std::make_unique<VehicleDetector>(dp);
   trk_ = std::make_unique<ObjectTracker>(tp);
   msg_ = std::make_unique<ObjectsMsg>();
@@ -331,7 +300,7 @@ void TargetsStage::step(TimeNs now) noexcept {
   bool changed = false;
   for (LidarScanMsg* s = scans_.front(); s != nullptr; s = scans_.front()) {
     ++c_.scans;
-    const bool usable = have_pose_ && pose_.status == LocalizationStatus::kTracking && pose_sigma_m(pose_.covariance) <= max_sigma_ &&
+    const bool usable = have_pose_ && pose_.status == LocalizationStatus::kTracking && pose_sigma_m(pose_.covariance) <= cfg_.max_sigma_m &&
                         s->labels != LabelSource::kNone;
     if (!usable) {
       ++c_.scans_skipped_pose;

@@ -3,9 +3,13 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <span>
+#include <sstream>
 #include <string>
 
 #include "airground/mission/mission_file.hpp"
+#include "airground/mission/stages.hpp"
+#include "airground/platform/param_binding.hpp"
 
 namespace ag::mission {
 namespace {
@@ -144,6 +148,31 @@ TEST(MissionFile, EveryKindOfBadFileNamesFileLineAndKey) {
   auto missing = load_mission_file("/nonexistent/m.yaml");
   ASSERT_FALSE(missing.ok());
   EXPECT_NE(missing.error().message.find("/nonexistent/m.yaml"), std::string::npos);
+}
+
+// The mission file has no ranges of its own for the stages' parameters: just past a stage row's max is
+// refused, naming the key and that row's range; the max itself is taken.
+TEST(MissionFile, StageParametersAreCheckedAgainstTheStagesOwnRows) {
+  const struct {
+    std::span<const ParamSpec> rows;
+    const char* key;
+  } owned[] = {{MissionStage::kParams, "visit_radius_m"}, {MissionStage::kParams, "claim_timeout_s"},
+               {RegionsStage::kParams, "merge_distance_m"}, {RegionsStage::kParams, "min_region_cells"}};
+  for (const auto& o : owned) {
+    const ParamSpec* row = find_param(o.rows, o.key);
+    ASSERT_NE(row, nullptr) << o.key;
+    const auto file = [&](double v) {
+      std::ostringstream s;
+      s << "parameters: {max_sigma_m: 1.0, " << o.key << ": " << v << "}";
+      return with("parameters: {visit_radius_m: 2.5, max_sigma_m: 1.0}", s.str());
+    };
+    EXPECT_TRUE(load_mission_string(file(row->max), "edge.yaml").ok()) << o.key;
+    auto f = load_mission_string(file(row->max + 1), "bad.yaml");
+    ASSERT_FALSE(f.ok()) << o.key;
+    std::ostringstream range;
+    range << "parameters." << o.key << ": " << row->max + 1 << " outside [" << row->min << ", " << row->max << "]";
+    EXPECT_NE(f.error().message.find(range.str()), std::string::npos) << f.error().message;
+  }
 }
 
 }  // namespace

@@ -35,8 +35,8 @@ struct ParamEnumTarget {
 // One parameter of the struct P: its spec row and the member it fills.
 template <class P>
 struct ParamField {
-  using Target = std::variant<double P::*, float P::*, int P::*, std::int64_t P::*, std::uint32_t P::*, bool P::*,
-                              std::string P::*, ParamEnumTarget<P>>;
+  using Target = std::variant<double P::*, float P::*, int P::*, std::int64_t P::*, std::uint8_t P::*, std::uint16_t P::*,
+                              std::uint32_t P::*, bool P::*, std::string P::*, ParamEnumTarget<P>>;
   ParamSpec spec;
   Target target;
 };
@@ -69,6 +69,13 @@ constexpr std::size_t count_choices(std::string_view choices) noexcept {
 constexpr bool param_field_ok(const ParamSpec& s) noexcept {
   if (s.type == ParamType::kText || s.type == ParamType::kBool) return true;
   return s.min <= s.max && s.default_num >= s.min && s.default_num <= s.max;
+}
+
+// The row named `key`, or nullptr: how a second reader (a mission file) takes a stage's own range.
+constexpr const ParamSpec* find_param(std::span<const ParamSpec> rows, std::string_view key) noexcept {
+  for (const ParamSpec& r : rows)
+    if (r.key == key) return &r;
+  return nullptr;
 }
 
 namespace detail {

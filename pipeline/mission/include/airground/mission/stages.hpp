@@ -23,25 +23,36 @@
 #include "airground/mission/messages.hpp"
 #include "airground/mission/regions.hpp"
 #include "airground/mission/targets.hpp"
+#include "airground/platform/param_binding.hpp"
 #include "airground/platform/stage.hpp"
 
 namespace ag::mission {
 
-inline constexpr ParamSpec kRegionsParams[] = {
-    ParamSpec::real("area_x0_m", -500.0, -1e6, 1e6, "m", "mission area in the map frame: west edge (the class grid covers it)"),
-    ParamSpec::real("area_y0_m", -500.0, -1e6, 1e6, "m", "mission area: south edge"),
-    ParamSpec::real("area_x1_m", 500.0, -1e6, 1e6, "m", "mission area: east edge"),
-    ParamSpec::real("area_y1_m", 500.0, -1e6, 1e6, "m", "mission area: north edge"),
-    ParamSpec::real("period_s", 1.0, 0.1, 600.0, "s", "re-extract the regions at most this often (and only when tiles changed)"),
-    ParamSpec::real("merge_distance_m", 12.0, 0.5, 100.0, "m", "vehicle blobs closer than this (gap) form one region"),
-    ParamSpec::integer("open_radius_cells", 1, 0, 5, "cells", "opening of the vehicle mask (removes noise cells); 0 = off"),
-    ParamSpec::integer("min_region_cells", 8, 1, 100000, "cells", "regions with fewer vehicle cells (0.5 m) are dropped"),
-    ParamSpec::real("goal_search_radius_m", 15.0, 1.0, 100.0, "m", "the goal is searched this far around the region"),
-    ParamSpec::real("min_goal_clearance_m", 0.6, 0.0, 10.0, "m", "the goal keeps this from anything not traversable"),
-    ParamSpec::real("goal_clearance_cap_m", 3.0, 0.5, 50.0, "m", "clearance beyond this does not make a goal better"),
-    ParamSpec::integer("reachable_min_cells", 1600, 1, 100000000, "cells", "a traversable component this big (or the largest) is reachable"),
-    ParamSpec::text("traversable", "rough", "free|rough|costly", "highest traversability level a goal may lie on (as the planner's)"),
+// The regions stage's own parameters (the extractor's follow them in the same section).
+struct RegionsSettings {
+  double area_x0_m{-500.0}, area_y0_m{-500.0}, area_x1_m{500.0}, area_y1_m{500.0};  // [m] map frame
+  double period_s{1.0};
 };
+inline constexpr ParamField<RegionsSettings> kRegionsStageFields[] = {
+    field::real("area_x0_m", &RegionsSettings::area_x0_m, -1e6, 1e6, "m", "mission area in the map frame: west edge (the class grid covers it)"),
+    field::real("area_y0_m", &RegionsSettings::area_y0_m, -1e6, 1e6, "m", "mission area: south edge"),
+    field::real("area_x1_m", &RegionsSettings::area_x1_m, -1e6, 1e6, "m", "mission area: east edge"),
+    field::real("area_y1_m", &RegionsSettings::area_y1_m, -1e6, 1e6, "m", "mission area: north edge"),
+    field::real("period_s", &RegionsSettings::period_s, 0.1, 600.0, "s", "re-extract the regions at most this often (and only when tiles changed)"),
+};
+inline constexpr ParamField<RegionParams> kRegionFields[] = {
+    field::real("merge_distance_m", &RegionParams::merge_distance_m, 0.5, 100.0, "m", "vehicle blobs closer than this (gap) form one region"),
+    field::integer("open_radius_cells", &RegionParams::open_radius_cells, 0, 5, "cells", "opening of the vehicle mask (removes noise cells); 0 = off"),
+    field::integer("min_region_cells", &RegionParams::min_region_cells, 1, 100000, "cells", "regions with fewer vehicle cells (0.5 m) are dropped"),
+    field::real("goal_search_radius_m", &RegionParams::goal_search_radius_m, 1.0, 100.0, "m", "the goal is searched this far around the region"),
+    field::real("min_goal_clearance_m", &RegionParams::min_goal_clearance_m, 0.0, 10.0, "m", "the goal keeps this from anything not traversable"),
+    field::real("goal_clearance_cap_m", &RegionParams::goal_clearance_cap_m, 0.5, 50.0, "m", "clearance beyond this does not make a goal better"),
+    field::integer("reachable_min_cells", &RegionParams::reachable_min_cells, 1, 100000000, "cells", "a traversable component this big (or the largest) is reachable"),
+    field::choice<&RegionParams::max_level>("traversable", "free|rough|costly",
+                                            {Traversability::kFree, Traversability::kRough, Traversability::kCostly},
+                                            "highest traversability level a goal may lie on (as the planner's)"),
+};
+inline constexpr auto kRegionsParams = param_specs(kRegionsStageFields, kRegionFields);
 
 struct RegionsCounters {
   std::uint64_t tiles_in{0}, tiles_applied{0}, tiles_rejected{0};
@@ -73,26 +84,29 @@ class RegionsStage final : public Stage {
   RegionsCounters c_;
 };
 
-inline constexpr ParamSpec kMissionParams[] = {
-    ParamSpec::integer("priority", 1, 0, 255, "", "fixed mission priority: the lower number keeps a region two robots claim"),
-    ParamSpec::real("start_x_m", 0.0, -1e6, 1e6, "m", "start pose (map frame): where the robot returns at the end"),
-    ParamSpec::real("start_y_m", 0.0, -1e6, 1e6, "m", "start pose: north"),
-    ParamSpec::real("visit_radius_m", 3.0, 0.5, 20.0, "m", "a region is visited when the robot is this close to its goal ..."),
-    ParamSpec::real("max_sigma_m", 1.5, 0.1, 50.0, "m", "... while tracking with a pose sigma (largest xy axis) below this"),
-    ParamSpec::real("visit_margin_m", 1.5, 0.0, 20.0, "m", "... and is marked only this much inside visit_radius_m (at least half of it): a pose error must not carry the mark outside"),
-    ParamSpec::integer("max_no_route", 5, 1, 1000, "plans", "failed plans in a row for the current goal: the goal failed"),
-    ParamSpec::real("no_progress_timeout_s", 90.0, 5.0, 3600.0, "s", "no progress_min_m closer for this long: the goal failed"),
-    ParamSpec::real("progress_min_m", 2.0, 0.1, 50.0, "m", "what counts as progress"),
-    ParamSpec::real("retry_after_s", 120.0, 0.0, 36000.0, "s", "a region this robot failed is not chosen by it again for this long"),
-    ParamSpec::real("claim_timeout_s", 20.0, 1.0, 3600.0, "s", "a robot not heard this long: its claim is void, others take over"),
-    ParamSpec::real("idle_return_s", 60.0, 0.0, 36000.0, "s", "nothing left and no new region or map tile this long: return to the start"),
-    ParamSpec::real("mission_end_s", 0.0, 0.0, 360000.0, "s", "> 0: return to the start this long after start-up regardless"),
-    ParamSpec::real("survey_end_s", 0.0, 0.0, 360000.0, "s", "> 0: the quadrotor's survey ends about this long after start-up: until then wait for regions, idle_return_s counts from then"),
-    ParamSpec::real("republish_s", 2.0, 0.1, 600.0, "s", "own claim and visited records are re-sent this often"),
-    ParamSpec::real("map_growing_s", 20.0, 0.0, 3600.0, "s", "no route within this of the last map tile is not a failure (the way may not be mapped yet) ..."),
-    ParamSpec::real("defer_s", 20.0, 0.0, 3600.0, "s", "... the region is dropped and not chosen by this robot again for this long"),
+inline constexpr ParamField<ManagerParams> kManagerFields[] = {
+    field::integer("priority", &ManagerParams::priority, 0, 255, "", "fixed mission priority: the lower number keeps a region two robots claim"),
+    field::real("start_x_m", &ManagerParams::start_x, -1e6, 1e6, "m", "start pose (map frame): where the robot returns at the end"),
+    field::real("start_y_m", &ManagerParams::start_y, -1e6, 1e6, "m", "start pose: north"),
+    field::real("visit_radius_m", &ManagerParams::visit_radius_m, 0.5, 20.0, "m", "a region is visited when the robot is this close to its goal ..."),
+    field::real("max_sigma_m", &ManagerParams::max_sigma_m, 0.1, 50.0, "m", "... while tracking with a pose sigma (largest xy axis) below this"),
+    field::real("visit_margin_m", &ManagerParams::visit_margin_m, 0.0, 20.0, "m", "... and is marked only this much inside visit_radius_m (at least half of it): a pose error must not carry the mark outside"),
+    field::integer("max_no_route", &ManagerParams::max_no_route, 1, 1000, "plans", "failed plans in a row for the current goal: the goal failed"),
+    field::real("no_progress_timeout_s", &ManagerParams::no_progress_timeout_s, 5.0, 3600.0, "s", "no progress_min_m closer for this long: the goal failed"),
+    field::real("progress_min_m", &ManagerParams::progress_min_m, 0.1, 50.0, "m", "what counts as progress"),
+    field::real("retry_after_s", &ManagerParams::retry_after_s, 0.0, 36000.0, "s", "a region this robot failed is not chosen by it again for this long"),
+    field::real("claim_timeout_s", &ManagerParams::claim_timeout_s, 1.0, 3600.0, "s", "a robot not heard this long: its claim is void, others take over"),
+    field::real("idle_return_s", &ManagerParams::idle_return_s, 0.0, 36000.0, "s", "nothing left and no new region or map tile this long: return to the start"),
+    field::real("mission_end_s", &ManagerParams::mission_end_s, 0.0, 360000.0, "s", "> 0: return to the start this long after start-up regardless"),
+    field::real("survey_end_s", &ManagerParams::survey_end_s, 0.0, 360000.0, "s", "> 0: the quadrotor's survey ends about this long after start-up: until then wait for regions, idle_return_s counts from then"),
+    field::real("republish_s", &ManagerParams::republish_s, 0.1, 600.0, "s", "own claim and visited records are re-sent this often"),
+    field::real("map_growing_s", &ManagerParams::map_growing_s, 0.0, 3600.0, "s", "no route within this of the last map tile is not a failure (the way may not be mapped yet) ..."),
+    field::real("defer_s", &ManagerParams::defer_s, 0.0, 3600.0, "s", "... the region is dropped and not chosen by this robot again for this long"),
+};
+inline constexpr ParamSpec kMissionWaypointsParam[] = {  // parsed into waypoint_x/_y by parse_waypoints()
     ParamSpec::text("waypoints", "", "", "waypoints mission: 'x,y;x,y;...' [m, map frame] driven in order, then back to start; empty = regions"),
 };
+inline constexpr auto kMissionParams = param_specs(kManagerFields, kMissionWaypointsParam);
 
 // Parses "x,y;x,y;..." (at most kMaxWaypoints) into p; an error names the item.
 Status parse_waypoints(std::string_view text, ManagerParams& p);
@@ -132,15 +146,24 @@ class MissionStage final : public Stage {
   MissionCounters c_;
 };
 
-inline constexpr ParamSpec kTargetsParams[] = {
-    ParamSpec::real("max_range_m", 40.0, 5.0, 120.0, "m", "vehicle returns farther than this are not detected"),
-    ParamSpec::integer("min_points", 15, 3, 100000, "points", "a cluster of vehicle returns needs this many points"),
-    ParamSpec::real("sigma0_m", 0.3, 0.01, 10.0, "m", "detection sigma at 0 m (grows by sigma_per_m)"),
-    ParamSpec::real("sigma_per_m", 0.01, 0.0, 1.0, "m/m", "detection sigma growth per metre of range"),
-    ParamSpec::real("gate_chi2", 9.21, 1.0, 100.0, "", "association gate on the squared Mahalanobis distance (9.21: 99 %, 2 dof)"),
-    ParamSpec::integer("min_detections", 3, 1, 1000, "", "an object is shared after this many detections"),
-    ParamSpec::real("max_sigma_m", 1.5, 0.1, 50.0, "m", "scans taken with a pose sigma above this are not used"),
+// The targets stage's own parameter (the detector's and the tracker's come first in the section).
+struct TargetsSettings {
+  double max_sigma_m{1.5};
 };
+inline constexpr ParamField<DetectorParams> kDetectorFields[] = {
+    field::real("max_range_m", &DetectorParams::max_range_m, 5.0, 120.0, "m", "vehicle returns farther than this are not detected"),
+    field::integer("min_points", &DetectorParams::min_points, 3, 100000, "points", "a cluster of vehicle returns needs this many points"),
+    field::real("sigma0_m", &DetectorParams::sigma0_m, 0.01, 10.0, "m", "detection sigma at 0 m (grows by sigma_per_m)"),
+    field::real("sigma_per_m", &DetectorParams::sigma_per_m, 0.0, 1.0, "m/m", "detection sigma growth per metre of range"),
+};
+inline constexpr ParamField<TrackerParams> kObjectTrackerFields[] = {
+    field::real("gate_chi2", &TrackerParams::gate_chi2, 1.0, 100.0, "", "association gate on the squared Mahalanobis distance (9.21: 99 %, 2 dof)"),
+    field::integer("min_detections", &TrackerParams::min_detections, 1, 1000, "", "an object is shared after this many detections"),
+};
+inline constexpr ParamField<TargetsSettings> kTargetsStageFields[] = {
+    field::real("max_sigma_m", &TargetsSettings::max_sigma_m, 0.1, 50.0, "m", "scans taken with a pose sigma above this are not used"),
+};
+inline constexpr auto kTargetsParams = param_specs(kDetectorFields, kObjectTrackerFields, kTargetsStageFields);
 
 struct TargetsCounters {
   std::uint64_t scans{0}, scans_skipped_pose{0}, detections{0};
@@ -164,7 +187,7 @@ class TargetsStage final : public Stage {
   LatestWriter<ObjectsMsg> out_;
   LocalizationMsg pose_{};
   bool have_pose_{false};
-  double max_sigma_{1.5};
+  TargetsSettings cfg_{};
   TargetsCounters c_;
 };
 
