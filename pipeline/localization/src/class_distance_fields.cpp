@@ -14,12 +14,9 @@ constexpr std::uint64_t kNeverSet = std::numeric_limits<std::uint64_t>::max();
 }  // namespace
 
 DistanceFieldParams load_distance_field_params(const SectionView& s, double resolution_m, int tile_cells) {
-  DistanceFieldParams p;
+  DistanceFieldParams p = load_params(s, kDistanceFieldFields);
   p.resolution_m = resolution_m;
   p.tile_cells = tile_cells;
-  p.truncation_m = s.real("field_truncation_m");
-  p.unknown_is_source = s.boolean("field_unknown_is_source");
-  p.obstacle_faces = s.boolean("field_obstacle_faces");
   return p;
 }
 

@@ -17,21 +17,11 @@ Pose2 between(const Pose2& a, const Pose2& c) noexcept {
 }
 
 OdometryGateParams load_odometry_gate_params(const SectionView& s) {
-  OdometryGateParams p;
-  p.standstill_speed_mps = s.real("gate_standstill_speed_mps");
-  p.standstill_yaw_rate_rad_s = s.real("gate_standstill_yaw_rate_rad_s");
-  p.max_gap_s = s.real("gate_max_gap_s");
-  return p;
+  return load_params(s, kOdometryGateFields);
 }
 
 FusedPoseParams load_fused_pose_params(const SectionView& s) {
-  FusedPoseParams p;
-  p.correction_time_s = s.real("fused_correction_time_s");
-  p.jump_threshold_m = s.real("fused_jump_threshold_m");
-  p.jump_threshold_rad = s.real("fused_jump_threshold_rad");
-  p.odom_sigma_per_m = s.real("fused_odom_sigma_per_m");
-  p.odom_sigma_yaw_per_m = s.real("fused_odom_sigma_yaw_per_m");
-  return p;
+  return load_params(s, kFusedPoseFields);
 }
 
 Pose2 OdometryGate::feed(const Pose2& odom, TimeNs stamp) noexcept {

@@ -55,44 +55,7 @@ std::size_t next_pow2(std::size_t v) noexcept {
 }  // namespace
 
 ParticleFilterParams load_particle_filter_params(const SectionView& s) {
-  ParticleFilterParams p;
-  p.min_particles = static_cast<int>(s.integer("pf_min_particles"));
-  p.max_particles = static_cast<int>(s.integer("pf_max_particles"));
-  p.kld_epsilon = s.real("pf_kld_epsilon");
-  p.kld_z = s.real("pf_kld_z");
-  p.kld_bin_xy_m = s.real("pf_kld_bin_xy_m");
-  p.kld_bin_yaw_rad = s.real("pf_kld_bin_yaw_rad");
-  p.motion_sigma_xy_per_m = s.real("pf_motion_sigma_xy_per_m");
-  p.motion_sigma_yaw_per_m = s.real("pf_motion_sigma_yaw_per_m");
-  p.motion_sigma_yaw_per_rad = s.real("pf_motion_sigma_yaw_per_rad");
-  p.motion_sigma_xy_min_m = s.real("pf_motion_sigma_xy_min_m");
-  p.update_min_distance_m = s.real("pf_update_min_distance_m");
-  p.update_min_turn_rad = s.real("pf_update_min_turn_rad");
-  p.yaw_window_bins = static_cast<int>(s.integer("pf_yaw_window_bins"));
-  p.yaw_window_bins_tracking = static_cast<int>(s.integer("pf_yaw_window_bins_tracking"));
-  p.gamma_m = s.real("pf_gamma_m");
-  p.weight_exponent = s.real("pf_weight_exponent");
-  p.uniform_mix = s.real("pf_uniform_mix");
-  p.resample_ess_ratio = s.real("pf_resample_ess_ratio");
-  p.unknown_mode = s.text("pf_unknown_mode") == "fixed" ? UnknownCost::kFixed : UnknownCost::kMask;
-  p.unknown_cost_m = s.real("pf_unknown_cost_m");
-  p.min_known_fraction = s.real("pf_min_known_fraction");
-  p.range_bin_min_m = s.real("pf_range_bin_min_m");
-  p.range_bin_max_m = s.real("pf_range_bin_max_m");
-  p.range_bin_per_spread = s.real("pf_range_bin_per_spread");
-  p.converged_spread_m = s.real("pf_converged_spread_m");
-  p.converged_updates = static_cast<int>(s.integer("pf_converged_updates"));
-  p.lost_spread_m = s.real("pf_lost_spread_m");
-  p.lost_cost_ratio = s.real("pf_lost_cost_ratio");
-  p.lost_cost_min_m = s.real("pf_lost_cost_min_m");
-  p.lost_updates = static_cast<int>(s.integer("pf_lost_updates"));
-  p.recovery_retry_updates = static_cast<int>(s.integer("pf_recovery_retry_updates"));
-  p.recovery_sigma_xy_m = s.real("pf_recovery_sigma_xy_m");
-  p.recovery_sigma_yaw_rad = s.real("pf_recovery_sigma_yaw_rad");
-  p.recovery_growth = s.real("pf_recovery_growth");
-  p.recovery_sigma_xy_max_m = s.real("pf_recovery_sigma_xy_max_m");
-  p.lost_drift_per_m = s.real("pf_lost_drift_per_m");
-  return p;
+  return load_params(s, kParticleFilterFields);
 }
 
 // ------------------------------------------------------------------------------------------- set-up

@@ -19,14 +19,7 @@ constexpr double kMinGroundAdvance = 0.15;  // [m]
 }  // namespace
 
 GeometricLabelParams load_geometric_label_params(const SectionView& s) {
-  GeometricLabelParams p;
-  p.sensor_height_m = s.real("label_sensor_height_m");
-  p.max_ground_slope_deg = s.real("label_max_ground_slope_deg");
-  p.obstacle_height_m = s.real("label_obstacle_height_m");
-  p.min_step_m = s.real("label_min_step_m");
-  p.max_roughness_m = s.real("label_max_roughness_m");
-  p.max_range_m = s.real("label_max_range_m");
-  return p;
+  return load_params(s, kGeometricLabelFields);
 }
 
 GroundTruthLabeller::GroundTruthLabeller(const ClassTable& table) {

@@ -26,6 +26,7 @@
 
 #include "airground/localization/scan.hpp"
 #include "airground/platform/config.hpp"
+#include "airground/platform/param_binding.hpp"
 #include "airground/platform/distance_transform.hpp"
 
 namespace ag::loc {
@@ -40,13 +41,13 @@ struct DistanceFieldParams {
   bool obstacle_faces{true};    // geometric labels: obstacle points match the faces of the map's obstacle regions
 };
 
-inline constexpr ParamSpec kDistanceFieldParamSpecs[] = {
-    ParamSpec::real("field_truncation_m", 25.0, 1.0, 60.0, "m", "distances are clamped here (their code: 50 px)"),
-    ParamSpec::boolean("field_unknown_is_source", true, "unknown cells count as sources (optimistic distances near the unknown)"),
-    ParamSpec::boolean("field_obstacle_faces", true,
-                       "geometric labels: an obstacle point matches the edge of the map's obstacle regions (walls, vehicles, "
+inline constexpr ParamField<DistanceFieldParams> kDistanceFieldFields[] = {
+    field::real("field_truncation_m", &DistanceFieldParams::truncation_m, 1.0, 60.0, "m", "distances are clamped here (their code: 50 px)"),
+    field::boolean("field_unknown_is_source", &DistanceFieldParams::unknown_is_source, "unknown cells count as sources (optimistic distances near the unknown)"),
+    field::boolean("field_obstacle_faces", &DistanceFieldParams::obstacle_faces, "geometric labels: an obstacle point matches the edge of the map's obstacle regions (walls, vehicles, "
                        "crowns down to the ground), not their inside; false where the LiDAR sees trunks deep under wide crowns"),
 };
+inline constexpr auto kDistanceFieldParamSpecs = param_specs(kDistanceFieldFields);
 // resolution_m and tile_cells come from the aerial map, not from here.
 DistanceFieldParams load_distance_field_params(const SectionView& s, double resolution_m, int tile_cells);
 

@@ -11,6 +11,7 @@
 #include "airground/messages/messages.hpp"
 #include "airground/localization/particle_filter.hpp"
 #include "airground/platform/config.hpp"
+#include "airground/platform/param_binding.hpp"
 #include "airground/platform/time.hpp"
 
 namespace ag::loc {
@@ -25,11 +26,12 @@ struct OdometryGateParams {
   double max_gap_s{1.0};                 // [s] a longer gap between samples is not judged (taken as motion)
 };
 
-inline constexpr ParamSpec kOdometryGateParamSpecs[] = {
-    ParamSpec::real("gate_standstill_speed_mps", 0.05, 0.0, 1.0, "m/s", "slower than this ..."),
-    ParamSpec::real("gate_standstill_yaw_rate_rad_s", 0.03, 0.0, 1.0, "rad/s", "... and turning slower: standing still, the increment is dropped"),
-    ParamSpec::real("gate_max_gap_s", 1.0, 0.01, 60.0, "s", "longer gaps between odometry samples are taken as motion"),
+inline constexpr ParamField<OdometryGateParams> kOdometryGateFields[] = {
+    field::real("gate_standstill_speed_mps", &OdometryGateParams::standstill_speed_mps, 0.0, 1.0, "m/s", "slower than this ..."),
+    field::real("gate_standstill_yaw_rate_rad_s", &OdometryGateParams::standstill_yaw_rate_rad_s, 0.0, 1.0, "rad/s", "... and turning slower: standing still, the increment is dropped"),
+    field::real("gate_max_gap_s", &OdometryGateParams::max_gap_s, 0.01, 60.0, "s", "longer gaps between odometry samples are taken as motion"),
 };
+inline constexpr auto kOdometryGateParamSpecs = param_specs(kOdometryGateFields);
 OdometryGateParams load_odometry_gate_params(const SectionView& s);
 
 // Turns the odometry's cumulative pose into increments, dropping those of a robot standing still (slow
@@ -68,13 +70,14 @@ struct FusedPoseParams {
   double odom_sigma_yaw_per_m{0.003};  // [rad/m]
 };
 
-inline constexpr ParamSpec kFusedPoseParamSpecs[] = {
-    ParamSpec::real("fused_correction_time_s", 0.3, 0.0, 60.0, "s", "time constant of easing onto a new estimate (wheel-odometry yaw jitters: 0.3 s measured best)"),
-    ParamSpec::real("fused_jump_threshold_m", 4.0, 0.0, 100.0, "m", "larger corrections are applied at once"),
-    ParamSpec::real("fused_jump_threshold_rad", 0.35, 0.0, 3.2, "rad", "larger yaw corrections are applied at once"),
-    ParamSpec::real("fused_odom_sigma_per_m", 0.03, 0.0, 1.0, "m/m", "position uncertainty per metre since the estimate"),
-    ParamSpec::real("fused_odom_sigma_yaw_per_m", 0.003, 0.0, 0.1, "rad/m", "yaw uncertainty per metre since the estimate"),
+inline constexpr ParamField<FusedPoseParams> kFusedPoseFields[] = {
+    field::real("fused_correction_time_s", &FusedPoseParams::correction_time_s, 0.0, 60.0, "s", "time constant of easing onto a new estimate (wheel-odometry yaw jitters: 0.3 s measured best)"),
+    field::real("fused_jump_threshold_m", &FusedPoseParams::jump_threshold_m, 0.0, 100.0, "m", "larger corrections are applied at once"),
+    field::real("fused_jump_threshold_rad", &FusedPoseParams::jump_threshold_rad, 0.0, 3.2, "rad", "larger yaw corrections are applied at once"),
+    field::real("fused_odom_sigma_per_m", &FusedPoseParams::odom_sigma_per_m, 0.0, 1.0, "m/m", "position uncertainty per metre since the estimate"),
+    field::real("fused_odom_sigma_yaw_per_m", &FusedPoseParams::odom_sigma_yaw_per_m, 0.0, 0.1, "rad/m", "yaw uncertainty per metre since the estimate"),
 };
+inline constexpr auto kFusedPoseParamSpecs = param_specs(kFusedPoseFields);
 FusedPoseParams load_fused_pose_params(const SectionView& s);
 
 struct FusedPoseSample {

@@ -36,6 +36,7 @@
 #include "airground/localization/class_distance_fields.hpp"
 #include "airground/localization/polar_render.hpp"
 #include "airground/platform/config.hpp"
+#include "airground/platform/param_binding.hpp"
 
 namespace ag::loc {
 
@@ -97,44 +98,45 @@ struct ParticleFilterParams {
   Area area{};
 };
 
-inline constexpr ParamSpec kParticleFilterParamSpecs[] = {
-    ParamSpec::integer("pf_min_particles", 300, 10, 100000, "particles", "fewest particles (their later code: 300)"),
-    ParamSpec::integer("pf_max_particles", 4000, 10, 100000, "particles", "most particles, preallocated (paper: 20000)"),
-    ParamSpec::real("pf_kld_epsilon", 0.05, 0.001, 1.0, "", "KLD sampling: bound on the KL divergence"),
-    ParamSpec::real("pf_kld_z", 2.33, 0.5, 5.0, "", "KLD sampling: standard-normal quantile"),
-    ParamSpec::real("pf_kld_bin_xy_m", 1.0, 0.05, 10.0, "m", "KLD histogram bin, position"),
-    ParamSpec::real("pf_kld_bin_yaw_rad", 0.175, 0.01, 1.0, "rad", "KLD histogram bin, yaw"),
-    ParamSpec::real("pf_motion_sigma_xy_per_m", 0.15, 0.0, 2.0, "m/m", "position noise per metre travelled (theirs: 0.15 m per step)"),
-    ParamSpec::real("pf_motion_sigma_yaw_per_m", 0.004, 0.0, 0.5, "rad/m", "yaw noise per metre travelled (theirs: 0.004 rad per step)"),
-    ParamSpec::real("pf_motion_sigma_yaw_per_rad", 0.05, 0.0, 1.0, "rad/rad", "yaw noise per radian turned"),
-    ParamSpec::real("pf_motion_sigma_xy_min_m", 0.05, 0.0, 2.0, "m", "floor of the position noise of a moving update"),
-    ParamSpec::real("pf_update_min_distance_m", 0.5, 0.01, 20.0, "m", "update once moved this far"),
-    ParamSpec::real("pf_update_min_turn_rad", 0.15, 0.01, 3.14, "rad", "... or turned this much"),
-    ParamSpec::integer("pf_yaw_window_bins", 2, 0, 20, "bins", "yaw shifts tried each side of a particle's yaw"),
-    ParamSpec::integer("pf_yaw_window_bins_tracking", 1, 0, 20, "bins", "... once converged"),
-    ParamSpec::real("pf_gamma_m", 0.3, 0.01, 10.0, "m", "weight = 1 / (cost + gamma)^exponent (theirs: 0.2-0.7)"),
-    ParamSpec::real("pf_weight_exponent", 2.0, 0.1, 10.0, "", "sharpens the weight (theirs: 1)"),
-    ParamSpec::real("pf_uniform_mix", 0.01, 0.0, 0.5, "", "fraction of uniform weight mixed in"),
-    ParamSpec::real("pf_resample_ess_ratio", 0.5, 0.0, 1.0, "", "resample below this effective sample size ratio"),
-    ParamSpec::text("pf_unknown_mode", "mask", "mask|fixed", "unknown aerial cells: masked out, or a fixed cost (paper)"),
-    ParamSpec::real("pf_unknown_cost_m", 1.0, 0.0, 60.0, "m", "fixed: cost of a bin on an unknown cell (1 m measured best)"),
-    ParamSpec::real("pf_min_known_fraction", 0.25, 0.0, 1.0, "", "a particle's cost judges convergence and divergence only with this share known"),
-    ParamSpec::real("pf_range_bin_min_m", 1.0, 0.1, 10.0, "m", "smallest range bin (paper: 0.5; 1.0 measured better on partial maps)"),
-    ParamSpec::real("pf_range_bin_max_m", 4.0, 0.1, 20.0, "m", "largest range bin (paper: 4)"),
-    ParamSpec::real("pf_range_bin_per_spread", 1.5, 0.0, 10.0, "", "range bin = this x spread, clamped"),
-    ParamSpec::real("pf_converged_spread_m", 2.5, 0.1, 50.0, "m", "publish once the spread stays below this (paper: 2.5)"),
-    ParamSpec::integer("pf_converged_updates", 3, 1, 1000, "updates", "... for this many updates"),
-    ParamSpec::real("pf_lost_spread_m", 8.0, 0.5, 200.0, "m", "lost when the spread exceeds this"),
-    ParamSpec::real("pf_lost_cost_ratio", 2.0, 1.0, 100.0, "", "... or the best cost exceeds this x its running level"),
-    ParamSpec::real("pf_lost_cost_min_m", 1.0, 0.0, 60.0, "m", "... and this"),
-    ParamSpec::integer("pf_lost_updates", 6, 1, 1000, "updates", "... for this many updates in a row"),
-    ParamSpec::integer("pf_recovery_retry_updates", 40, 1, 100000, "updates", "not converged this long after a re-spread: re-spread wider"),
-    ParamSpec::real("pf_recovery_sigma_xy_m", 6.0, 0.1, 200.0, "m", "re-spread around the last good pose, first attempt"),
-    ParamSpec::real("pf_recovery_sigma_yaw_rad", 0.3, 0.0, 3.14, "rad", "re-spread yaw sigma"),
-    ParamSpec::real("pf_recovery_growth", 1.5, 1.0, 10.0, "", "sigma x this at each further attempt"),
-    ParamSpec::real("pf_recovery_sigma_xy_max_m", 25.0, 0.1, 500.0, "m", "largest re-spread sigma"),
-    ParamSpec::real("pf_lost_drift_per_m", 0.05, 0.0, 1.0, "m/m", "last good pose uncertainty per metre since"),
+inline constexpr ParamField<ParticleFilterParams> kParticleFilterFields[] = {
+    field::integer("pf_min_particles", &ParticleFilterParams::min_particles, 10, 100000, "particles", "fewest particles (their later code: 300)"),
+    field::integer("pf_max_particles", &ParticleFilterParams::max_particles, 10, 100000, "particles", "most particles, preallocated (paper: 20000)"),
+    field::real("pf_kld_epsilon", &ParticleFilterParams::kld_epsilon, 0.001, 1.0, "", "KLD sampling: bound on the KL divergence"),
+    field::real("pf_kld_z", &ParticleFilterParams::kld_z, 0.5, 5.0, "", "KLD sampling: standard-normal quantile"),
+    field::real("pf_kld_bin_xy_m", &ParticleFilterParams::kld_bin_xy_m, 0.05, 10.0, "m", "KLD histogram bin, position"),
+    field::real("pf_kld_bin_yaw_rad", &ParticleFilterParams::kld_bin_yaw_rad, 0.01, 1.0, "rad", "KLD histogram bin, yaw"),
+    field::real("pf_motion_sigma_xy_per_m", &ParticleFilterParams::motion_sigma_xy_per_m, 0.0, 2.0, "m/m", "position noise per metre travelled (theirs: 0.15 m per step)"),
+    field::real("pf_motion_sigma_yaw_per_m", &ParticleFilterParams::motion_sigma_yaw_per_m, 0.0, 0.5, "rad/m", "yaw noise per metre travelled (theirs: 0.004 rad per step)"),
+    field::real("pf_motion_sigma_yaw_per_rad", &ParticleFilterParams::motion_sigma_yaw_per_rad, 0.0, 1.0, "rad/rad", "yaw noise per radian turned"),
+    field::real("pf_motion_sigma_xy_min_m", &ParticleFilterParams::motion_sigma_xy_min_m, 0.0, 2.0, "m", "floor of the position noise of a moving update"),
+    field::real("pf_update_min_distance_m", &ParticleFilterParams::update_min_distance_m, 0.01, 20.0, "m", "update once moved this far"),
+    field::real("pf_update_min_turn_rad", &ParticleFilterParams::update_min_turn_rad, 0.01, 3.14, "rad", "... or turned this much"),
+    field::integer("pf_yaw_window_bins", &ParticleFilterParams::yaw_window_bins, 0, 20, "bins", "yaw shifts tried each side of a particle's yaw"),
+    field::integer("pf_yaw_window_bins_tracking", &ParticleFilterParams::yaw_window_bins_tracking, 0, 20, "bins", "... once converged"),
+    field::real("pf_gamma_m", &ParticleFilterParams::gamma_m, 0.01, 10.0, "m", "weight = 1 / (cost + gamma)^exponent (theirs: 0.2-0.7)"),
+    field::real("pf_weight_exponent", &ParticleFilterParams::weight_exponent, 0.1, 10.0, "", "sharpens the weight (theirs: 1)"),
+    field::real("pf_uniform_mix", &ParticleFilterParams::uniform_mix, 0.0, 0.5, "", "fraction of uniform weight mixed in"),
+    field::real("pf_resample_ess_ratio", &ParticleFilterParams::resample_ess_ratio, 0.0, 1.0, "", "resample below this effective sample size ratio"),
+    field::choice<&ParticleFilterParams::unknown_mode>("pf_unknown_mode", "mask|fixed", {UnknownCost::kMask, UnknownCost::kFixed}, "unknown aerial cells: masked out, or a fixed cost (paper)"),
+    field::real("pf_unknown_cost_m", &ParticleFilterParams::unknown_cost_m, 0.0, 60.0, "m", "fixed: cost of a bin on an unknown cell (1 m measured best)"),
+    field::real("pf_min_known_fraction", &ParticleFilterParams::min_known_fraction, 0.0, 1.0, "", "a particle's cost judges convergence and divergence only with this share known"),
+    field::real("pf_range_bin_min_m", &ParticleFilterParams::range_bin_min_m, 0.1, 10.0, "m", "smallest range bin (paper: 0.5; 1.0 measured better on partial maps)"),
+    field::real("pf_range_bin_max_m", &ParticleFilterParams::range_bin_max_m, 0.1, 20.0, "m", "largest range bin (paper: 4)"),
+    field::real("pf_range_bin_per_spread", &ParticleFilterParams::range_bin_per_spread, 0.0, 10.0, "", "range bin = this x spread, clamped"),
+    field::real("pf_converged_spread_m", &ParticleFilterParams::converged_spread_m, 0.1, 50.0, "m", "publish once the spread stays below this (paper: 2.5)"),
+    field::integer("pf_converged_updates", &ParticleFilterParams::converged_updates, 1, 1000, "updates", "... for this many updates"),
+    field::real("pf_lost_spread_m", &ParticleFilterParams::lost_spread_m, 0.5, 200.0, "m", "lost when the spread exceeds this"),
+    field::real("pf_lost_cost_ratio", &ParticleFilterParams::lost_cost_ratio, 1.0, 100.0, "", "... or the best cost exceeds this x its running level"),
+    field::real("pf_lost_cost_min_m", &ParticleFilterParams::lost_cost_min_m, 0.0, 60.0, "m", "... and this"),
+    field::integer("pf_lost_updates", &ParticleFilterParams::lost_updates, 1, 1000, "updates", "... for this many updates in a row"),
+    field::integer("pf_recovery_retry_updates", &ParticleFilterParams::recovery_retry_updates, 1, 100000, "updates", "not converged this long after a re-spread: re-spread wider"),
+    field::real("pf_recovery_sigma_xy_m", &ParticleFilterParams::recovery_sigma_xy_m, 0.1, 200.0, "m", "re-spread around the last good pose, first attempt"),
+    field::real("pf_recovery_sigma_yaw_rad", &ParticleFilterParams::recovery_sigma_yaw_rad, 0.0, 3.14, "rad", "re-spread yaw sigma"),
+    field::real("pf_recovery_growth", &ParticleFilterParams::recovery_growth, 1.0, 10.0, "", "sigma x this at each further attempt"),
+    field::real("pf_recovery_sigma_xy_max_m", &ParticleFilterParams::recovery_sigma_xy_max_m, 0.1, 500.0, "m", "largest re-spread sigma"),
+    field::real("pf_lost_drift_per_m", &ParticleFilterParams::lost_drift_per_m, 0.0, 1.0, "m/m", "last good pose uncertainty per metre since"),
 };
+inline constexpr auto kParticleFilterParamSpecs = param_specs(kParticleFilterFields);
 ParticleFilterParams load_particle_filter_params(const SectionView& s);
 
 enum class FilterStatus : std::uint8_t {

@@ -11,6 +11,7 @@
 
 #include "airground/localization/scan.hpp"
 #include "airground/platform/config.hpp"
+#include "airground/platform/param_binding.hpp"
 
 namespace ag::loc {
 
@@ -45,14 +46,15 @@ struct GeometricLabelParams {
   double max_range_m{100.0};          // [m] returns beyond this are left unknown (255)
 };
 
-inline constexpr ParamSpec kGeometricLabelParamSpecs[] = {
-    ParamSpec::real("label_sensor_height_m", 0.7, 0.0, 10.0, "m", "LiDAR origin above the ground under the robot"),
-    ParamSpec::real("label_max_ground_slope_deg", 20.0, 1.0, 89.0, "deg", "steeper between vertical neighbours: obstacle"),
-    ParamSpec::real("label_obstacle_height_m", 0.35, 0.05, 5.0, "m", "this far above the column's ground: obstacle"),
-    ParamSpec::real("label_min_step_m", 0.04, 0.0, 1.0, "m", "height steps below this are noise, never a gradient"),
-    ParamSpec::real("label_max_roughness_m", 0.2, 0.01, 2.0, "m", "flat: height difference to the horizontal neighbours"),
-    ParamSpec::real("label_max_range_m", 100.0, 1.0, 300.0, "m", "returns beyond this stay unknown"),
+inline constexpr ParamField<GeometricLabelParams> kGeometricLabelFields[] = {
+    field::real("label_sensor_height_m", &GeometricLabelParams::sensor_height_m, 0.0, 10.0, "m", "LiDAR origin above the ground under the robot"),
+    field::real("label_max_ground_slope_deg", &GeometricLabelParams::max_ground_slope_deg, 1.0, 89.0, "deg", "steeper between vertical neighbours: obstacle"),
+    field::real("label_obstacle_height_m", &GeometricLabelParams::obstacle_height_m, 0.05, 5.0, "m", "this far above the column's ground: obstacle"),
+    field::real("label_min_step_m", &GeometricLabelParams::min_step_m, 0.0, 1.0, "m", "height steps below this are noise, never a gradient"),
+    field::real("label_max_roughness_m", &GeometricLabelParams::max_roughness_m, 0.01, 2.0, "m", "flat: height difference to the horizontal neighbours"),
+    field::real("label_max_range_m", &GeometricLabelParams::max_range_m, 1.0, 300.0, "m", "returns beyond this stay unknown"),
 };
+inline constexpr auto kGeometricLabelParamSpecs = param_specs(kGeometricLabelFields);
 GeometricLabelParams load_geometric_label_params(const SectionView& s);
 
 // Per column, from the lowest ring up: a point is an obstacle when it rises more than max_ground_slope

@@ -30,8 +30,8 @@ struct LocalizerParams {
 
 // Every parameter of the localizer, with unique keys, for one stage section of a role's YAML.
 inline constexpr auto kLocalizerParamSpecs =
-    param_specs(kOdometryGateParamSpecs, kPolarRenderParamSpecs, kParticleFilterParamSpecs, kFusedPoseParamSpecs,
-                kGeometricLabelParamSpecs, kDistanceFieldParamSpecs);
+    param_specs(kOdometryGateFields, kPolarRenderParamSpecs, kParticleFilterFields, kFusedPoseFields,
+                kGeometricLabelFields, kDistanceFieldFields);
 // Reads them from one section (resolution and tile size of the fields come from the aerial map).
 LocalizerParams load_localizer_params(const SectionView& s, double map_resolution_m = 0.5, int map_tile_cells = 64);
 

@@ -54,8 +54,8 @@ inline constexpr ParamSpec kLocalizationStageOwnParams[] = {
 };
 // The stage's section: its own keys, then every localizer parameter.
 inline constexpr auto kLocalizationStageParams =
-    param_specs(kLocalizationStageOwnParams, kOdometryGateParamSpecs, kPolarRenderParamSpecs, kParticleFilterParamSpecs,
-                kFusedPoseParamSpecs, kGeometricLabelParamSpecs, kDistanceFieldParamSpecs);
+    param_specs(kLocalizationStageOwnParams, kOdometryGateFields, kPolarRenderParamSpecs, kParticleFilterFields,
+                kFusedPoseFields, kGeometricLabelFields, kDistanceFieldFields);
 
 class LocalizationStage final : public Stage {
  public:
