@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <cstring>
 #include <string_view>
+#include <vector>
 
 #include "airground/messages/channels.hpp"
 #include "airground/sim/runner.hpp"
@@ -43,8 +44,8 @@ class KeyHash {
   void file(const char* path) noexcept {
     std::FILE* f = std::fopen(path, "rb");
     if (f == nullptr) return;
-    static std::uint8_t buf[1 << 16];
-    for (std::size_t n; (n = std::fread(buf, 1, sizeof buf, f)) > 0;) bytes(buf, n);
+    std::vector<std::uint8_t> buf(1 << 16);  // not static: two runs in one process may hash at once
+    for (std::size_t n; (n = std::fread(buf.data(), 1, buf.size(), f)) > 0;) bytes(buf.data(), n);
     std::fclose(f);
   }
   [[nodiscard]] std::uint64_t get() const noexcept { return h_; }

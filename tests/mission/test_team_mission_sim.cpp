@@ -21,6 +21,7 @@
 
 #include "airground/sim/eval_mission.hpp"
 #include "airground/sim/generator.hpp"
+#include "mission_world.hpp"
 
 namespace ag::sim {
 namespace {
@@ -68,16 +69,9 @@ struct MissionRun {
   static void run() {
     const fs::path root = out_root();
     fs::create_directories(root);
-    GeneratorOptions g;
-    g.seed = 7;
-    g.size_m = 200;
-    g.targets = 3;
-    std::vector<TargetCluster> targets;
-    auto w = generate_world(g, &targets);
-    ASSERT_TRUE(w.ok()) << w.error().message;
     const fs::path world_dir = root / "world";
-    ASSERT_TRUE(save_world(w.value(), world_dir.string()).ok());
-    ASSERT_TRUE(save_targets(targets, w.value().header.staging, world_dir.string()).ok());
+    const std::string saved = test::save_mission_world(world_dir.string());
+    ASSERT_TRUE(saved.empty()) << saved;
 
     MissionOptions o;
     o.world = world_dir.string();

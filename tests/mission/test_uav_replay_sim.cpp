@@ -15,6 +15,7 @@
 
 #include "airground/sim/eval_mission.hpp"
 #include "airground/sim/generator.hpp"
+#include "mission_world.hpp"
 
 namespace ag::sim {
 namespace {
@@ -70,15 +71,8 @@ TEST(UavReplay, AReplayedMissionEqualsTheLiveOneItWasRecordedFrom) {
   const fs::path root = out_root();
   fs::remove_all(root);
   fs::create_directories(root);
-  GeneratorOptions g;
-  g.seed = 7;
-  g.size_m = 200;
-  g.targets = 3;
-  std::vector<TargetCluster> targets;
-  auto w = generate_world(g, &targets);
-  ASSERT_TRUE(w.ok()) << w.error().message;
-  ASSERT_TRUE(save_world(w.value(), (root / "world").string()).ok());
-  ASSERT_TRUE(save_targets(targets, w.value().header.staging, (root / "world").string()).ok());
+  const std::string saved = test::save_mission_world((root / "world").string());
+  ASSERT_TRUE(saved.empty()) << saved;
   const fs::path cache = root / "cache";
 
   auto live = run_mission(options(root, "live", cache));
