@@ -18,6 +18,7 @@
 #include "hil_run.hpp"
 #include "roles.hpp"
 #include "sensor_labels_check.hpp"
+#include "team_setup.hpp"
 
 namespace ag::sim::hil {
 namespace {
@@ -38,12 +39,6 @@ Result<std::uint16_t> free_port(int type) {
   return static_cast<std::uint16_t>(ntohs(a.sin_port));
 }
 
-// The shipped ErfNet weights where the package installs them, else the source tree's copy.
-std::string hil_erfnet_weights() {
-  const std::string installed = "/usr/share/airground/erfnet_c7.agw";
-  std::error_code ec;
-  return fs::exists(installed, ec) ? installed : std::string(AG_SOURCE_DIR) + "/config/erfnet/erfnet_c7.agw";
-}
 
 Result<pid_t> spawn(const std::vector<std::string>& argv, const fs::path& log) {
   const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
@@ -183,7 +178,7 @@ Status write_uav_yaml(Run& run) {
            // robot's own VO runs beside it on the same frames, on a channel nobody reads.
            {"camera.vo_channel", "visual_odometry"}, {"vo.output_channel", "visual_odometry_own"},
            // ErfNet with the shipped weights (the source tree's copy when not installed), or the frames' true classes.
-           {"segmentation.labels", run.labels_oracle ? "gt" : "erfnet"}, {"segmentation.weights", hil_erfnet_weights()},
+           {"segmentation.labels", run.labels_oracle ? "gt" : "erfnet"}, {"segmentation.weights", lockstep::erfnet_weights_path()},
            {"comms.send_map_tiles", "true"},
            {"regions.area_x0_m", num(a.x0)}, {"regions.area_y0_m", num(a.y0)}, {"regions.area_x1_m", num(a.x1)}, {"regions.area_y1_m", num(a.y1)},
            {"regions.merge_distance_m", num(mp.merge_distance_m)}, {"regions.min_region_cells", std::to_string(mp.min_region_cells)}})

@@ -22,14 +22,6 @@
 namespace ag::sim::lockstep {
 namespace {
 
-// The shipped ErfNet weights: where the package installs them (segmentation.weights' shipped value), else
-// the source tree's copy for a simulator run from the build tree.
-std::string erfnet_weights_path(const std::string& shipped) {
-  std::error_code ec;
-  if (fs::exists(shipped, ec)) return shipped;
-  return std::string(AG_SOURCE_DIR) + "/config/erfnet/erfnet_c7.agw";
-}
-
 // Optional model overrides from --config-dir: <dir>/<name> when it exists. The file holds the model's
 // mapping either at the top level or under its section name (as `airground-sim config` writes it).
 template <typename T, typename Loader>
@@ -210,6 +202,12 @@ Status set_up_ugv(Team& t, const Models& m, RoleFactory& roles, int i, const Rol
 }
 
 }  // namespace
+
+std::string erfnet_weights_path(const std::string& shipped) {
+  std::error_code ec;
+  if (fs::exists(shipped, ec)) return shipped;
+  return std::string(AG_SOURCE_DIR) + "/config/erfnet/erfnet_c7.agw";
+}
 
 Status check_options(const RunOptions& opt) {
   if (opt.ugvs < 0 || opt.ugvs > 32) return Error::make(ErrorCode::kInvalidArgument, "--ugvs must be 0..32");

@@ -30,6 +30,11 @@ struct Models {
   OusterBeamModel beams;
 };
 
+// The ErfNet weights a simulated quadrotor loads: `shipped` (segmentation.weights in uav.yaml, where the
+// package installs them) when that file exists, else the source tree's copy for a run from the build tree.
+inline constexpr const char* kShippedErfnetWeights = "/usr/share/airground/erfnet_c7.agw";
+std::string erfnet_weights_path(const std::string& shipped = kShippedErfnetWeights);
+
 // Options that cannot make a run: the first one, named.
 Status check_options(const RunOptions& opt);
 Result<Models> load_models(const RunOptions& opt);

@@ -9,6 +9,7 @@
 #include "airground/messages/channels.hpp"
 #include "airground/sim/runner.hpp"
 #include "airground/sim/world.hpp"
+#include "team_setup.hpp"
 #include "uav_recording.hpp"
 
 namespace ag::sim {
@@ -89,7 +90,11 @@ std::uint64_t uav_replay_key(const RunOptions& o, const World& w) {
   h.value(o.uav_return_home);
   h.value(o.gossip);  // whether comms reads map_tiles: the ortho-map's ring room
   h.text(o.config_dir);
-  for (const std::string& kv : o.uav_config) h.text(kv);
+  h.file(lockstep::erfnet_weights_path().c_str());  // new weights make new recordings
+  for (const std::string& kv : o.uav_config) {
+    h.text(kv);
+    if (kv.rfind("segmentation.weights=", 0) == 0) h.file(kv.substr(kv.find('=') + 1).c_str());
+  }
   h.text(o.oracles_json());
   h.value(static_cast<int>(o.compute_time));
   h.value(static_cast<int>(o.target_of("uav")));
