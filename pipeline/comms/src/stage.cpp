@@ -104,30 +104,30 @@ bool CommsStage::decode_pose(std::span<const std::uint8_t> in, TeamPose& out) no
 }
 
 Status CommsStage::init(StageContext& ctx) {
-  const SectionView v = ctx.params();
+  const CommsSettings cfg = load_params(ctx.params(), kCommsStageFields);
   const std::string where = "config error: " + std::string(ctx.stage_name) + ".";
   self_ = static_cast<RobotId>(ctx.config.get_int("robot.id"));
-  send_pose_ = v.boolean("send_pose");
-  send_tiles_ = v.boolean("send_map_tiles");
-  deliver_tiles_ = v.boolean("deliver_map_tiles");
+  send_pose_ = cfg.send_pose;
+  send_tiles_ = cfg.send_map_tiles;
+  deliver_tiles_ = cfg.deliver_map_tiles;
   if (send_tiles_ && deliver_tiles_)
     return Error::make(ErrorCode::kConfig, where + "send_map_tiles and deliver_map_tiles: a robot either makes the map or receives it, not both");
-  tiles_per_step_ = static_cast<std::size_t>(v.integer("tiles_per_step"));
-  pose_period_ = from_seconds(v.real("pose_period_s"));
+  tiles_per_step_ = static_cast<std::size_t>(cfg.tiles_per_step);
+  pose_period_ = from_seconds(cfg.pose_period_s);
 
   StoreLimits lim;
-  lim.max_records = static_cast<std::size_t>(v.integer("max_records"));
-  lim.arena_bytes = static_cast<std::size_t>(v.real("store_mb") * 1024.0 * 1024.0);
+  lim.max_records = static_cast<std::size_t>(cfg.max_records);
+  lim.arena_bytes = static_cast<std::size_t>(cfg.store_mb * 1024.0 * 1024.0);
   lim.max_payload_bytes = std::max<std::size_t>(TileCodec::max_payload_bytes(), kGossipPayloadMax);
   store_ = std::make_unique<RecordStore>(lim);
 
   std::uint32_t min_epoch = 1;
-  if (v.boolean("epoch_from_clock")) {
+  if (cfg.epoch_from_clock) {
     const std::time_t t = std::time(nullptr);
     if (t > 1577836800) min_epoch = static_cast<std::uint32_t>(t - 1577836800);  // seconds since 2020
   }
   std::uint32_t epoch = min_epoch;
-  const std::string& journal_path = v.text("journal");
+  const std::string& journal_path = cfg.journal;
   if (!journal_path.empty()) {
     auto j = Journal::open(journal_path, *store_, min_epoch, report_);
     if (!j) return j.error();
@@ -140,32 +140,32 @@ Status CommsStage::init(StageContext& ctx) {
                 report_.records_loaded, report_.bytes, epoch);
   }
 
-  const std::string& transport = v.text("transport");
+  const std::string& transport = cfg.transport;
   TeamKey key{};
   if (transport != "none") {
-    auto k = TeamKey::load_file(v.text("key_file"));
+    auto k = TeamKey::load_file(cfg.key_file);
     if (!k) return Error::make(k.error().code, where + "key_file: " + k.error().message);
     key = k.value();
     struct stat st{};
-    if (::stat(v.text("key_file").c_str(), &st) == 0 && (st.st_mode & S_IROTH) != 0)
+    if (::stat(cfg.key_file.c_str(), &st) == 0 && (st.st_mode & S_IROTH) != 0)
       AG_LOG_WARN("comms", "team key %s is readable by every user: chmod o-r it (anyone holding it can speak for the team)",
-                  v.text("key_file").c_str());
+                  cfg.key_file.c_str());
   }
   GossipParams gp;
   gp.self = self_;
-  gp.mtu_bytes = static_cast<std::size_t>(v.integer("mtu_bytes"));
-  gp.digest_period_s = v.real("digest_period_s");
-  gp.budget_bytes_per_s = v.real("budget_bytes_per_s");
-  gp.broadcast_budget_bytes_per_s = v.real("broadcast_budget_bytes_per_s");
-  gp.peer_timeout_s = v.real("peer_timeout_s");
+  gp.mtu_bytes = static_cast<std::size_t>(cfg.mtu_bytes);
+  gp.digest_period_s = cfg.digest_period_s;
+  gp.budget_bytes_per_s = cfg.budget_bytes_per_s;
+  gp.broadcast_budget_bytes_per_s = cfg.broadcast_budget_bytes_per_s;
+  gp.peer_timeout_s = cfg.peer_timeout_s;
   gp.seed = 0x636F6D6DULL + self_;
   if (transport == "udp") {
     net::UdpLinkConfig uc;
-    uc.bind_address = v.text("bind");
-    uc.port = static_cast<std::uint16_t>(v.integer("port"));
-    uc.broadcast_address = v.text("broadcast");
-    uc.peers = split_commas(v.text("peers"));
-    uc.device = v.text("device");
+    uc.bind_address = cfg.bind;
+    uc.port = cfg.port;
+    uc.broadcast_address = cfg.broadcast;
+    uc.peers = split_commas(cfg.peers);
+    uc.device = cfg.device;
     uc.mtu = gp.mtu_bytes;
     auto link = net::UdpLink::open(uc);
     if (!link) return Error::make(link.error().code, std::string(ctx.stage_name) + ": " + link.error().message);

@@ -19,6 +19,7 @@
 #include "airground/comms/messages.hpp"
 #include "airground/comms/tile_codec.hpp"
 #include "airground/messages/messages.hpp"
+#include "airground/platform/param_binding.hpp"
 #include "airground/platform/stage.hpp"
 
 namespace ag::comms {
@@ -28,30 +29,53 @@ namespace ag::comms {
 void register_inproc_link(std::string_view instance, DatagramLink* link);
 DatagramLink* find_inproc_link(std::string_view instance);
 
-inline constexpr ParamSpec kCommsStageParams[] = {
-    ParamSpec::text("transport", "none", "udp|inproc|none",
-                    "udp: the IP mesh; inproc: a link the simulator registered; none: store and journal only"),
-    ParamSpec::text("key_file", "/etc/airground/team.key", "", "the team key: 64 hex digits (e.g. od -An -tx1 -v -N32 /dev/urandom | tr -d ' \\n')"),
-    ParamSpec::text("journal", "", "", "the store's journal file; empty = memory only (a restart forgets)"),
-    ParamSpec::boolean("epoch_from_clock", true, "boot epoch >= wall-clock seconds (a robot that lost its disk still writes newer records); off for repeatable simulations"),
-    ParamSpec::text("bind", "0.0.0.0", "", "udp: IPv4 address to bind"),
-    ParamSpec::integer("port", 47100, 1, 65535, "", "udp: the team's gossip port"),
-    ParamSpec::text("broadcast", "255.255.255.255", "", "udp: broadcast address for digests; empty = none"),
-    ParamSpec::text("peers", "", "", "udp: comma-separated a.b.c.d[:port] unicast peers that also get digests (routed meshes)"),
-    ParamSpec::text("device", "", "", "udp: network interface to bind to (SO_BINDTODEVICE); empty = any"),
-    ParamSpec::integer("mtu_bytes", 1200, 256, 65507, "B", "largest datagram (path MTU less IP/UDP headers)"),
-    ParamSpec::real("digest_period_s", 1.0, 0.05, 60.0, "s", "between digest broadcasts"),
-    ParamSpec::real("budget_bytes_per_s", 100000.0, 1000.0, 1e9, "B/s", "per peer link: have-lists and records"),
-    ParamSpec::real("broadcast_budget_bytes_per_s", 8000.0, 100.0, 1e9, "B/s", "digests"),
-    ParamSpec::real("peer_timeout_s", 5.0, 0.1, 3600.0, "s", "silence after which a peer's send queue is dropped"),
-    ParamSpec::integer("max_records", 8192, 16, 1'000'000, "records", "keys (robot, topic) the store holds"),
-    ParamSpec::real("store_mb", 32.0, 0.1, 4096.0, "MiB", "payload memory of the store"),
-    ParamSpec::real("pose_period_s", 1.0, 0.05, 60.0, "s", "send_pose: how often the pose is shared"),
-    ParamSpec::boolean("send_pose", false, "share the 'localization' pose (ground robots)"),
-    ParamSpec::boolean("send_map_tiles", false, "share the tiles on 'map_tiles' (the quadrotor)"),
-    ParamSpec::boolean("deliver_map_tiles", false, "write the team's tiles to 'map_tiles' (ground robots)"),
-    ParamSpec::integer("tiles_per_step", 8, 1, 1024, "tiles", "map tiles encoded or decoded per step"),
+// The stage's parameters as read (store_mb and the periods are converted in init()).
+struct CommsSettings {
+  std::string transport{"none"};
+  std::string key_file{"/etc/airground/team.key"};
+  std::string journal;
+  bool epoch_from_clock{true};
+  std::string bind{"0.0.0.0"};
+  std::uint16_t port{47100};
+  std::string broadcast{"255.255.255.255"};
+  std::string peers;  // comma-separated
+  std::string device;
+  int mtu_bytes{1200};                          // [B]
+  double digest_period_s{1.0};                  // [s]
+  double budget_bytes_per_s{100000.0};          // [B/s]
+  double broadcast_budget_bytes_per_s{8000.0};  // [B/s]
+  double peer_timeout_s{5.0};                   // [s]
+  int max_records{8192};
+  double store_mb{32.0};  // [MiB]
+  double pose_period_s{1.0};  // [s]
+  bool send_pose{false}, send_map_tiles{false}, deliver_map_tiles{false};
+  int tiles_per_step{8};
 };
+inline constexpr ParamField<CommsSettings> kCommsStageFields[] = {
+    field::text("transport", &CommsSettings::transport, "none", "udp|inproc|none",
+                "udp: the IP mesh; inproc: a link the simulator registered; none: store and journal only"),
+    field::text("key_file", &CommsSettings::key_file, "/etc/airground/team.key", "", "the team key: 64 hex digits (e.g. od -An -tx1 -v -N32 /dev/urandom | tr -d ' \\n')"),
+    field::text("journal", &CommsSettings::journal, "", "", "the store's journal file; empty = memory only (a restart forgets)"),
+    field::boolean("epoch_from_clock", &CommsSettings::epoch_from_clock, "boot epoch >= wall-clock seconds (a robot that lost its disk still writes newer records); off for repeatable simulations"),
+    field::text("bind", &CommsSettings::bind, "0.0.0.0", "", "udp: IPv4 address to bind"),
+    field::integer("port", &CommsSettings::port, 1, 65535, "", "udp: the team's gossip port"),
+    field::text("broadcast", &CommsSettings::broadcast, "255.255.255.255", "", "udp: broadcast address for digests; empty = none"),
+    field::text("peers", &CommsSettings::peers, "", "", "udp: comma-separated a.b.c.d[:port] unicast peers that also get digests (routed meshes)"),
+    field::text("device", &CommsSettings::device, "", "", "udp: network interface to bind to (SO_BINDTODEVICE); empty = any"),
+    field::integer("mtu_bytes", &CommsSettings::mtu_bytes, 256, 65507, "B", "largest datagram (path MTU less IP/UDP headers)"),
+    field::real("digest_period_s", &CommsSettings::digest_period_s, 0.05, 60.0, "s", "between digest broadcasts"),
+    field::real("budget_bytes_per_s", &CommsSettings::budget_bytes_per_s, 1000.0, 1e9, "B/s", "per peer link: have-lists and records"),
+    field::real("broadcast_budget_bytes_per_s", &CommsSettings::broadcast_budget_bytes_per_s, 100.0, 1e9, "B/s", "digests"),
+    field::real("peer_timeout_s", &CommsSettings::peer_timeout_s, 0.1, 3600.0, "s", "silence after which a peer's send queue is dropped"),
+    field::integer("max_records", &CommsSettings::max_records, 16, 1'000'000, "records", "keys (robot, topic) the store holds"),
+    field::real("store_mb", &CommsSettings::store_mb, 0.1, 4096.0, "MiB", "payload memory of the store"),
+    field::real("pose_period_s", &CommsSettings::pose_period_s, 0.05, 60.0, "s", "send_pose: how often the pose is shared"),
+    field::boolean("send_pose", &CommsSettings::send_pose, "share the 'localization' pose (ground robots)"),
+    field::boolean("send_map_tiles", &CommsSettings::send_map_tiles, "share the tiles on 'map_tiles' (the quadrotor)"),
+    field::boolean("deliver_map_tiles", &CommsSettings::deliver_map_tiles, "write the team's tiles to 'map_tiles' (ground robots)"),
+    field::integer("tiles_per_step", &CommsSettings::tiles_per_step, 1, 1024, "tiles", "map tiles encoded or decoded per step"),
+};
+inline constexpr auto kCommsStageParams = param_specs(kCommsStageFields);
 
 class CommsStage final : public Stage {
  public:
