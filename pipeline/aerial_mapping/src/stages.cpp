@@ -30,18 +30,13 @@ double cpu_ms_since(TimeNs t0) noexcept { return static_cast<double>(thread_cpu_
 
 PinholeCamera load_camera_calibration(const Config& config) {
   const SectionView v(config, "camera_calibration");
-  PinholeCamera c;
+  PinholeCamera c = load_params(v, kCameraIntrinsicsFields);
+  load_params(v, std::span<const ParamField<PinholeCamera>>(kCameraTangentialFields), c);
+  const NadirDistortion d = load_params(v, kNadirDistortionFields);
+  c.k1 = d.k1;
+  c.k2 = d.k2;
   c.width = kImageWidth;
   c.height = kImageHeight;
-  c.fx = v.real("fx");
-  c.fy = v.real("fy");
-  c.cx = v.real("cx");
-  c.cy = v.real("cy");
-  c.k1 = v.real("k1");
-  c.k2 = v.real("k2");
-  c.p1 = v.real("p1");
-  c.p2 = v.real("p2");
-  c.k3 = v.real("k3");
   return c;
 }
 
@@ -50,26 +45,14 @@ PinholeCamera load_camera_calibration(const Config& config) {
 
 Status PoseGraphStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
-  PoseGraphParams p;
-  p.solve_every_frames = static_cast<int>(v.integer("solve_every_frames"));
-  p.window_frames = static_cast<int>(v.integer("window_frames"));
-  p.max_iterations = static_cast<int>(v.integer("max_iterations"));
-  p.between_sigma_m = v.real("between_sigma_m");
-  p.between_sigma_rad = v.real("between_sigma_rad");
-  p.gravity_sigma_rad = v.real("gravity_sigma_rad");
-  p.gps_sigma_m = v.real("gps_sigma_m");
-  p.gps_sigma_per_gap_s = v.real("gps_sigma_per_gap_s");
-  p.gps_max_interpolation_s = v.real("gps_max_interpolation_s");
-  p.gps_robust_sigmas = v.real("gps_robust_sigmas");
-  p.gps_gate_sigmas = v.real("gps_gate_sigmas");
-  p.gps_gate_floor_m = v.real("gps_gate_floor_m");
-  p.min_gps_fixes = static_cast<int>(v.integer("min_gps_fixes"));
-  p.min_gps_baseline_m = v.real("min_gps_baseline_m");
-  p.scale_knot_s = v.real("scale_knot_s");
-  p.scale_drift_per_sqrt_s = v.real("scale_drift_per_sqrt_s");
-  keyframe_distance_m_ = v.real("keyframe_distance_m");
-  segment_settle_m_ = v.real("segment_settle_m");
-  max_image_wait_s_ = v.real("max_image_wait_s");
+  PoseGraphParams p = load_params(v, kPoseGraphSolveFields);
+  load_params(v, std::span<const ParamField<PoseGraphParams>>(kPoseGraphFactorFields), p);
+  PoseGraphStageSettings own = load_params(v, kPoseGraphStageFields);
+  load_params(v, std::span<const ParamField<PoseGraphStageSettings>>(kPoseGraphBetweenRotationFields), own);
+  p.between_sigma_rad = own.between_sigma_rad;
+  keyframe_distance_m_ = own.keyframe_distance_m;
+  segment_settle_m_ = own.segment_settle_m;
+  max_image_wait_s_ = own.max_image_wait_s;
   graph_ = std::make_unique<PoseGraph>(p);
   clock_ = &ctx.clock;
 
@@ -251,48 +234,24 @@ void PoseGraphStage::step(TimeNs now) noexcept {
 
 Status OrthoMapStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
-  StereoParams sp;
-  sp.min_disparity = static_cast<int>(v.integer("min_disparity"));
-  sp.num_disparities = static_cast<int>(v.integer("num_disparities"));
-  sp.block_size = static_cast<int>(v.integer("block_size"));
-  sp.prefilter_cap = static_cast<int>(v.integer("prefilter_cap"));
-  sp.texture_threshold = static_cast<int>(v.integer("texture_threshold"));
-  sp.uniqueness_ratio = static_cast<int>(v.integer("uniqueness_ratio"));
-  sp.speckle_window = static_cast<int>(v.integer("speckle_window"));
-  sp.speckle_range = static_cast<int>(v.integer("speckle_range"));
-  sp.border_dilate_px = static_cast<int>(v.integer("border_dilate_px"));
-  sp.lr_max_diff = static_cast<int>(v.integer("lr_max_diff"));
-  sp.edge_margin_px = static_cast<int>(v.integer("edge_margin_px"));
-  sp.edge_jump_px = static_cast<int>(v.integer("edge_jump_px"));
-  sp.min_depth_m = v.real("min_depth_m");
-  sp.max_depth_m = v.real("max_depth_m");
-  sp.min_baseline_m = v.real("min_baseline_m");
+  StereoParams sp = load_params(v, kStereoMinDisparityFields);
+  load_params(v, std::span<const ParamField<StereoParams>>(kStereoFields), sp);
+  OrthoMapStageSettings own = load_params(v, kStereoRangeFields);
+  load_params(v, std::span<const ParamField<OrthoMapStageSettings>>(kStereoPairingFields), own);
+  load_params(v, std::span<const ParamField<OrthoMapStageSettings>>(kOrthoMapStageFields), own);
+  sp.num_disparities = own.num_disparities;
   if (sp.num_disparities % 16 != 0)
     return Error::make(ErrorCode::kConfig, "config error: ortho_map.num_disparities must be a multiple of 16");
   if (sp.block_size % 2 == 0) return Error::make(ErrorCode::kConfig, "config error: ortho_map.block_size must be odd");
-  OrthoMapParams mp;
-  mp.resolution_m = v.real("resolution_m");
-  mp.tile_cells = static_cast<int>(v.integer("tile_cells"));
-  mp.elevation_gate_m = v.real("elevation_gate_m");
-  mp.min_points = static_cast<int>(v.integer("min_points"));
-  mp.class_consistent_elevation = v.boolean("class_consistent_elevation");
-  mp.min_keyframe_points = static_cast<int>(v.integer("min_keyframe_points"));
-  mp.ground_check_m = v.real("ground_check_m");
-  mp.ground_window_cells = static_cast<int>(v.integer("ground_window_cells"));
-  mp.raised_min_height_m = v.real("raised_min_height_m");
-  mp.min_elevation_points = static_cast<int>(v.integer("min_elevation_points"));
-  mp.window_keyframes = static_cast<int>(v.integer("window_keyframes"));
-  mp.rebuild_translation_m = v.real("rebuild_translation_m");
-  mp.rebuild_rotation_rad = v.real("rebuild_rotation_rad");
-  mp.rescale_depth = v.boolean("rescale_depth");
-  mp.max_tiles = static_cast<std::size_t>(v.integer("max_tiles"));
+  OrthoMapParams mp = load_params(v, kOrthoMapFields);
+  mp.max_tiles = static_cast<std::size_t>(own.max_tiles);
   const PinholeCamera cam = load_camera_calibration(ctx.config);
   stereo_ = std::make_unique<DenseStereo>(cam, sp);
   map_ = std::make_unique<OrthoMap>(mp);
   clock_ = &ctx.clock;
   body_from_camera_ = nadir_body_from_camera();
 
-  auto kf = ctx.channels.ring_reader(chan::kKeyframes.with_name(v.text("keyframes_channel")));
+  auto kf = ctx.channels.ring_reader(chan::kKeyframes.with_name(own.keyframes_channel));
   if (!kf) return kf.error();
   keyframes_ = kf.value();
   auto poses = ctx.channels.latest_reader(chan::kKeyframePoses);
@@ -301,8 +260,8 @@ Status OrthoMapStage::init(StageContext& ctx) {
   auto st = ctx.channels.latest_writer(chan::kMapStatus);
   if (!st) return st.error();
   status_out_ = st.value();
-  baseline_depth_ratio_ = v.real("baseline_depth_ratio");
-  const auto history = static_cast<std::size_t>(v.integer("pair_history"));
+  baseline_depth_ratio_ = own.baseline_depth_ratio;
+  const auto history = static_cast<std::size_t>(own.pair_history);
   history_.clear();
   for (std::size_t i = 0; i < history; ++i) history_.push_back(std::make_unique<KeyframeMsg>());
   depth_scratch_.reserve(kImagePixels / kDepthSampleStride + 1);
@@ -310,14 +269,14 @@ Status OrthoMapStage::init(StageContext& ctx) {
   corrections_.reserve(KeyframePosesMsg::kCapacity);
   // Changed tiles on "map_tiles" (the gossip's and the regions stage's input), in the 0.5 m / 64-cell
   // format of MapTileMsg; a map of another cell or tile size is not published (logged).
-  tiles_per_step_ = static_cast<std::size_t>(v.integer("tiles_per_step"));
-  min_elevation_points_ = static_cast<std::uint32_t>(std::max<std::int64_t>(1, v.integer("min_elevation_points")));
+  tiles_per_step_ = static_cast<std::size_t>(own.tiles_per_step);
+  min_elevation_points_ = static_cast<std::uint32_t>(std::max(1, mp.min_elevation_points));
   tiles_enabled_ = std::abs(map_->params().resolution_m - kMapResolutionM) < 1e-9 && map_->params().tile_cells == kTileCells;
   if (tiles_enabled_) {
     auto tw = ctx.channels.ring_writer(chan::kMapTiles);
     if (!tw) return tw.error();
     tiles_out_ = tw.value();
-    const auto max_tiles = static_cast<std::size_t>(v.integer("max_tiles"));
+    const std::size_t max_tiles = mp.max_tiles;
     std::size_t cap = 16;
     while (cap < 2 * max_tiles) cap <<= 1;
     slots_.assign(cap, TileSlot{});

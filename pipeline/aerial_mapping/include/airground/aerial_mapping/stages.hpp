@@ -8,6 +8,7 @@
 #include <array>
 #include <memory>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "airground/aerial_mapping/ortho_map.hpp"
@@ -15,23 +16,33 @@
 #include "airground/aerial_mapping/stereo.hpp"
 #include "airground/messages/messages.hpp"
 #include "airground/platform/config.hpp"
+#include "airground/platform/param_binding.hpp"
 #include "airground/platform/stage.hpp"
 
 namespace ag::mapping {
 
 // Role-wide section "camera_calibration": the nadir camera at the 640x400 the mapper works at.
 // Defaults: the simulator's 1280x800 camera (fx 967, k1 -0.05, k2 0.01) resampled to 640x400.
-inline constexpr ParamSpec kCameraCalibrationParams[] = {
-    ParamSpec::real("fx", 483.5, 1.0, 1e5, "px", "focal length x at 640x400"),
-    ParamSpec::real("fy", 483.5, 1.0, 1e5, "px", "focal length y at 640x400"),
-    ParamSpec::real("cx", 319.5, 0.0, 640.0, "px", "principal point x (pixel centres at integers)"),
-    ParamSpec::real("cy", 199.5, 0.0, 400.0, "px", "principal point y"),
-    ParamSpec::real("k1", -0.05, -5.0, 5.0, "", "radial distortion r^2 (OpenCV model)"),
-    ParamSpec::real("k2", 0.01, -5.0, 5.0, "", "radial distortion r^4"),
-    ParamSpec::real("p1", 0.0, -1.0, 1.0, "", "tangential distortion"),
-    ParamSpec::real("p2", 0.0, -1.0, 1.0, "", "tangential distortion"),
-    ParamSpec::real("k3", 0.0, -5.0, 5.0, "", "radial distortion r^6"),
+// PinholeCamera's own k1, k2 are a lens without distortion; the section's are the simulator's.
+struct NadirDistortion {
+  double k1{-0.05}, k2{0.01};
 };
+inline constexpr ParamField<PinholeCamera> kCameraIntrinsicsFields[] = {
+    field::real("fx", &PinholeCamera::fx, 1.0, 1e5, "px", "focal length x at 640x400"),
+    field::real("fy", &PinholeCamera::fy, 1.0, 1e5, "px", "focal length y at 640x400"),
+    field::real("cx", &PinholeCamera::cx, 0.0, 640.0, "px", "principal point x (pixel centres at integers)"),
+    field::real("cy", &PinholeCamera::cy, 0.0, 400.0, "px", "principal point y"),
+};
+inline constexpr ParamField<NadirDistortion> kNadirDistortionFields[] = {
+    field::real("k1", &NadirDistortion::k1, -5.0, 5.0, "", "radial distortion r^2 (OpenCV model)"),
+    field::real("k2", &NadirDistortion::k2, -5.0, 5.0, "", "radial distortion r^4"),
+};
+inline constexpr ParamField<PinholeCamera> kCameraTangentialFields[] = {
+    field::real("p1", &PinholeCamera::p1, -1.0, 1.0, "", "tangential distortion"),
+    field::real("p2", &PinholeCamera::p2, -1.0, 1.0, "", "tangential distortion"),
+    field::real("k3", &PinholeCamera::k3, -5.0, 5.0, "", "radial distortion r^6"),
+};
+inline constexpr auto kCameraCalibrationParams = param_specs(kCameraIntrinsicsFields, kNadirDistortionFields, kCameraTangentialFields);
 PinholeCamera load_camera_calibration(const Config& config);
 
 struct PoseGraphStageCounters {
@@ -45,30 +56,47 @@ struct PoseGraphStageCounters {
   std::uint64_t gps_no_fix{0};
 };
 
+// The pose_graph stage's own parameters; between_sigma_rad is the stage's (PoseGraphParams keeps ASOOM's 0.05).
+struct PoseGraphStageSettings {
+  double keyframe_distance_m{2.0};  // [m]
+  double segment_settle_m{15.0};    // [m]
+  double max_image_wait_s{1.0};     // [s]
+  double between_sigma_rad{0.005};  // [rad]
+};
+inline constexpr ParamField<PoseGraphStageSettings> kPoseGraphStageFields[] = {
+    field::real("keyframe_distance_m", &PoseGraphStageSettings::keyframe_distance_m, 0.2, 50.0, "m", "a new keyframe once the optimised position moved this far (ASOOM: 2 m)"),
+    field::real("segment_settle_m", &PoseGraphStageSettings::segment_settle_m, 0.0, 1000.0, "m",
+                "after a tracking loss, no keyframes until GPS saw the new odometry segment travel this far (its scale is a guess until then); 0 = off"),
+    field::real("max_image_wait_s", &PoseGraphStageSettings::max_image_wait_s, 0.05, 10.0, "s", "an image waits this long for the odometry after it, then is dropped (counted)"),
+};
+inline constexpr ParamField<PoseGraphParams> kPoseGraphSolveFields[] = {
+    field::integer("solve_every_frames", &PoseGraphParams::solve_every_frames, 1, 1000, "frames", "re-solve the graph after this many frames (ASOOM: ~30)"),
+    field::integer("window_frames", &PoseGraphParams::window_frames, 0, 100000, "frames", "free nodes per solve, older ones held constant; 0 = all"),
+    field::integer("max_iterations", &PoseGraphParams::max_iterations, 1, 500, "iterations", "Levenberg-Marquardt iterations per solve"),
+    field::real("between_sigma_m", &PoseGraphParams::between_sigma_m, 1e-4, 10.0, "m", "odometry between-factor sigma, translation (ASOOM: 0.05)"),
+};
+inline constexpr ParamField<PoseGraphStageSettings> kPoseGraphBetweenRotationFields[] = {
+    field::real("between_sigma_rad", &PoseGraphStageSettings::between_sigma_rad, 1e-5, 1.0, "rad", "odometry between-factor sigma, rotation (ASOOM: 0.05; 0.005 measured: yaw rms 0.033 -> 0.004 rad)"),
+};
+inline constexpr ParamField<PoseGraphParams> kPoseGraphFactorFields[] = {
+    field::real("gravity_sigma_rad", &PoseGraphParams::gravity_sigma_rad, 0.0, 1.0, "rad", "roll/pitch from the gravity-aligned odometry; 0 = off"),
+    field::real("gps_sigma_m", &PoseGraphParams::gps_sigma_m, 0.01, 100.0, "m", "GPS factor sigma at zero interpolation gap (ASOOM: 0.5)"),
+    field::real("gps_sigma_per_gap_s", &PoseGraphParams::gps_sigma_per_gap_s, 0.0, 100.0, "m/s", "added to the sigma per second of interpolation gap (ASOOM: 0.5)"),
+    field::real("gps_max_interpolation_s", &PoseGraphParams::gps_max_interpolation_s, 0.05, 60.0, "s", "fixes further apart are not interpolated between"),
+    field::real("gps_robust_sigmas", &PoseGraphParams::gps_robust_sigmas, 0.1, 100.0, "", "Cauchy loss scale on GPS residuals, in sigmas"),
+    field::real("gps_gate_sigmas", &PoseGraphParams::gps_gate_sigmas, 1.0, 1000.0, "", "once initialised, fixes further than this many sigmas are rejected"),
+    field::real("gps_gate_floor_m", &PoseGraphParams::gps_gate_floor_m, 0.0, 1000.0, "m", "... but never fixes closer than this"),
+    field::integer("min_gps_fixes", &PoseGraphParams::min_gps_fixes, 2, 1000, "fixes", "GPS fixes a segment needs before it is georeferenced"),
+    field::real("min_gps_baseline_m", &PoseGraphParams::min_gps_baseline_m, 0.0, 1000.0, "m", "spread those fixes need (scale and yaw need motion)"),
+    field::real("scale_knot_s", &PoseGraphParams::scale_knot_s, 0.0, 600.0, "s", "a log-scale knot of the odometry every this many seconds; 0 = one scale per segment (ASOOM)"),
+    field::real("scale_drift_per_sqrt_s", &PoseGraphParams::scale_drift_per_sqrt_s, 0.0, 1.0, "1/sqrt(s)", "random walk allowed to the odometry's log-scale between knots"),
+};
+inline constexpr auto kPoseGraphStageParams =
+    param_specs(kPoseGraphStageFields, kPoseGraphSolveFields, kPoseGraphBetweenRotationFields, kPoseGraphFactorFields);
+
 class PoseGraphStage final : public Stage {
  public:
-  static constexpr ParamSpec kParams[] = {
-      ParamSpec::real("keyframe_distance_m", 2.0, 0.2, 50.0, "m", "a new keyframe once the optimised position moved this far (ASOOM: 2 m)"),
-      ParamSpec::real("segment_settle_m", 15.0, 0.0, 1000.0, "m",
-                      "after a tracking loss, no keyframes until GPS saw the new odometry segment travel this far (its scale is a guess until then); 0 = off"),
-      ParamSpec::real("max_image_wait_s", 1.0, 0.05, 10.0, "s", "an image waits this long for the odometry after it, then is dropped (counted)"),
-      ParamSpec::integer("solve_every_frames", 30, 1, 1000, "frames", "re-solve the graph after this many frames (ASOOM: ~30)"),
-      ParamSpec::integer("window_frames", 600, 0, 100000, "frames", "free nodes per solve, older ones held constant; 0 = all"),
-      ParamSpec::integer("max_iterations", 30, 1, 500, "iterations", "Levenberg-Marquardt iterations per solve"),
-      ParamSpec::real("between_sigma_m", 0.05, 1e-4, 10.0, "m", "odometry between-factor sigma, translation (ASOOM: 0.05)"),
-      ParamSpec::real("between_sigma_rad", 0.005, 1e-5, 1.0, "rad", "odometry between-factor sigma, rotation (ASOOM: 0.05; 0.005 measured: yaw rms 0.033 -> 0.004 rad)"),
-      ParamSpec::real("gravity_sigma_rad", 0.02, 0.0, 1.0, "rad", "roll/pitch from the gravity-aligned odometry; 0 = off"),
-      ParamSpec::real("gps_sigma_m", 0.5, 0.01, 100.0, "m", "GPS factor sigma at zero interpolation gap (ASOOM: 0.5)"),
-      ParamSpec::real("gps_sigma_per_gap_s", 0.5, 0.0, 100.0, "m/s", "added to the sigma per second of interpolation gap (ASOOM: 0.5)"),
-      ParamSpec::real("gps_max_interpolation_s", 1.0, 0.05, 60.0, "s", "fixes further apart are not interpolated between"),
-      ParamSpec::real("gps_robust_sigmas", 2.0, 0.1, 100.0, "", "Cauchy loss scale on GPS residuals, in sigmas"),
-      ParamSpec::real("gps_gate_sigmas", 6.0, 1.0, 1000.0, "", "once initialised, fixes further than this many sigmas are rejected"),
-      ParamSpec::real("gps_gate_floor_m", 5.0, 0.0, 1000.0, "m", "... but never fixes closer than this"),
-      ParamSpec::integer("min_gps_fixes", 3, 2, 1000, "fixes", "GPS fixes a segment needs before it is georeferenced"),
-      ParamSpec::real("min_gps_baseline_m", 4.0, 0.0, 1000.0, "m", "spread those fixes need (scale and yaw need motion)"),
-      ParamSpec::real("scale_knot_s", 2.0, 0.0, 600.0, "s", "a log-scale knot of the odometry every this many seconds; 0 = one scale per segment (ASOOM)"),
-      ParamSpec::real("scale_drift_per_sqrt_s", 0.002, 0.0, 1.0, "1/sqrt(s)", "random walk allowed to the odometry's log-scale between knots"),
-  };
+  static constexpr std::span<const ParamSpec> kParams{kPoseGraphStageParams};
   static std::unique_ptr<Stage> make() { return std::make_unique<PoseGraphStage>(); }
 
   Status init(StageContext& ctx) override;
@@ -131,45 +159,69 @@ struct OrthoMapStageCounters {
   double ground_depth_m{0};       // [m] median depth of the last matched pair's points
 };
 
+// The ortho_map stage's own parameters; num_disparities is the stage's (StereoParams keeps 112, a 2 m
+// baseline's); max_tiles is read here since OrthoMapParams holds it as a size_t.
+struct OrthoMapStageSettings {
+  int num_disparities{160};        // [px]
+  double baseline_depth_ratio{0.18};
+  int pair_history{8};             // [keyframes]
+  int max_tiles{16384};            // [tiles]
+  std::string keyframes_channel{"keyframes"};
+  int tiles_per_step{16};          // [tiles]
+};
+inline constexpr ParamField<StereoParams> kStereoMinDisparityFields[] = {
+    field::integer("min_disparity", &StereoParams::min_disparity, 0, 256, "px", "block matching: smallest disparity (ASOOM: 1)"),
+};
+inline constexpr ParamField<OrthoMapStageSettings> kStereoRangeFields[] = {
+    field::integer("num_disparities", &OrthoMapStageSettings::num_disparities, 16, 256, "px", "block matching: disparity range, multiple of 16 (160: a 30 m roof at 50 m flight with a 6 m baseline)"),
+};
+inline constexpr ParamField<StereoParams> kStereoFields[] = {
+    field::integer("block_size", &StereoParams::block_size, 5, 31, "px", "block matching: odd SAD window (ASOOM: 9)"),
+    field::integer("prefilter_cap", &StereoParams::prefilter_cap, 1, 63, "", "block matching: x-Sobel prefilter clip"),
+    field::integer("texture_threshold", &StereoParams::texture_threshold, 0, 10000, "", "block matching: minimum block texture"),
+    field::integer("uniqueness_ratio", &StereoParams::uniqueness_ratio, 0, 100, "%", "block matching: margin of the best match over the others"),
+    field::integer("speckle_window", &StereoParams::speckle_window, 0, 10000, "px", "speckle filter region size; 0 = off"),
+    field::integer("speckle_range", &StereoParams::speckle_range, 0, 64, "px", "speckle filter disparity step"),
+    field::integer("border_dilate_px", &StereoParams::border_dilate_px, 0, 64, "px", "invalid rectification border grown by this"),
+    field::integer("lr_max_diff", &StereoParams::lr_max_diff, -1, 64, "px", "left-right check: drop disparities the other view contradicts by more (-1 = off)"),
+    field::integer("edge_margin_px", &StereoParams::edge_margin_px, 0, 64, "px", "depth-edge guard: window around each disparity (0 = off)"),
+    field::integer("edge_jump_px", &StereoParams::edge_jump_px, 0, 1000, "px", "depth-edge guard: drop disparities this far above the window's smallest"),
+    field::real("min_depth_m", &StereoParams::min_depth_m, 0.1, 1000.0, "m", "points nearer are dropped (ASOOM: 1)"),
+    field::real("max_depth_m", &StereoParams::max_depth_m, 1.0, 10000.0, "m", "points further are dropped (ASOOM: 150)"),
+    field::real("min_baseline_m", &StereoParams::min_baseline_m, 0.01, 100.0, "m", "keyframe pairs closer than this are not matched"),
+};
+inline constexpr ParamField<OrthoMapStageSettings> kStereoPairingFields[] = {
+    field::real("baseline_depth_ratio", &OrthoMapStageSettings::baseline_depth_ratio, 0.0, 1.0, "", "pair each keyframe with the earlier one whose baseline is nearest this x the ground depth (0 = the previous keyframe, ASOOM)"),
+    field::integer("pair_history", &OrthoMapStageSettings::pair_history, 1, 32, "keyframes", "earlier keyframes kept as stereo partners"),
+};
+inline constexpr ParamField<OrthoMapParams> kOrthoMapFields[] = {
+    field::real("resolution_m", &OrthoMapParams::resolution_m, 0.05, 10.0, "m", "map cell size"),
+    field::integer("tile_cells", &OrthoMapParams::tile_cells, 8, 1024, "cells", "tile edge"),
+    field::real("elevation_gate_m", &OrthoMapParams::elevation_gate_m, 0.05, 100.0, "m", "colour/class accepted only this close to the cell's mean elevation (ASOOM: 1)"),
+    field::integer("min_points", &OrthoMapParams::min_points, 1, 10000, "points", "points a cell needs before it takes a class"),
+    field::boolean("class_consistent_elevation", &OrthoMapParams::class_consistent_elevation, "a cell's height from its points of the same kind (raised: tree, building, vehicle; or flat) as its class"),
+    field::integer("min_keyframe_points", &OrthoMapParams::min_keyframe_points, 1, 1000, "points", "one keyframe's points in a cell below this are dropped"),
+    field::real("ground_check_m", &OrthoMapParams::ground_check_m, 0.0, 100.0, "m", "flat-class points further than this from the local ground are dropped (0 = off)"),
+    field::integer("ground_window_cells", &OrthoMapParams::ground_window_cells, 0, 32, "cells", "half-width of the window whose flat-class median is the local ground"),
+    field::real("raised_min_height_m", &OrthoMapParams::raised_min_height_m, 0.0, 100.0, "m", "tree/building/vehicle points lower than this above the local ground are dropped"),
+    field::integer("min_elevation_points", &OrthoMapParams::min_elevation_points, 1, 100000, "points", "a cell reports an elevation once it has this many points (else unknown)"),
+    field::integer("window_keyframes", &OrthoMapParams::window_keyframes, 2, 512, "keyframes", "keyframes kept re-binnable after pose-graph corrections"),
+    field::real("rebuild_translation_m", &OrthoMapParams::rebuild_translation_m, 0.0, 100.0, "m", "a keyframe moved further than this is re-binned (ASOOM: 2)"),
+    field::real("rebuild_rotation_rad", &OrthoMapParams::rebuild_rotation_rad, 0.0, 3.2, "rad", "... or turned more than this (ASOOM: 0.1)"),
+    field::boolean("rescale_depth", &OrthoMapParams::rescale_depth, "re-scale a keyframe's stereo depth by its baseline as the pose graph corrects it (off: ASOOM)"),
+};
+inline constexpr ParamField<OrthoMapStageSettings> kOrthoMapStageFields[] = {
+    field::integer("max_tiles", &OrthoMapStageSettings::max_tiles, 1, 1000000, "tiles", "map size limit; points beyond are refused (counted)"),
+    field::text("keyframes_channel", &OrthoMapStageSettings::keyframes_channel, "keyframes", "keyframes|keyframes_labelled",
+                "keyframes from pose_graph directly (their camera classes), or relabelled by the segmentation stage"),
+    field::integer("tiles_per_step", &OrthoMapStageSettings::tiles_per_step, 1, 1024, "tiles", "changed tiles published on 'map_tiles' per step (the rest follow)"),
+};
+inline constexpr auto kOrthoMapStageParams = param_specs(kStereoMinDisparityFields, kStereoRangeFields, kStereoFields, kStereoPairingFields,
+                                                         kOrthoMapFields, kOrthoMapStageFields);
+
 class OrthoMapStage final : public Stage {
  public:
-  static constexpr ParamSpec kParams[] = {
-      ParamSpec::integer("min_disparity", 1, 0, 256, "px", "block matching: smallest disparity (ASOOM: 1)"),
-      ParamSpec::integer("num_disparities", 160, 16, 256, "px", "block matching: disparity range, multiple of 16 (160: a 30 m roof at 50 m flight with a 6 m baseline)"),
-      ParamSpec::integer("block_size", 9, 5, 31, "px", "block matching: odd SAD window (ASOOM: 9)"),
-      ParamSpec::integer("prefilter_cap", 31, 1, 63, "", "block matching: x-Sobel prefilter clip"),
-      ParamSpec::integer("texture_threshold", 10, 0, 10000, "", "block matching: minimum block texture"),
-      ParamSpec::integer("uniqueness_ratio", 10, 0, 100, "%", "block matching: margin of the best match over the others"),
-      ParamSpec::integer("speckle_window", 100, 0, 10000, "px", "speckle filter region size; 0 = off"),
-      ParamSpec::integer("speckle_range", 2, 0, 64, "px", "speckle filter disparity step"),
-      ParamSpec::integer("border_dilate_px", 5, 0, 64, "px", "invalid rectification border grown by this"),
-      ParamSpec::integer("lr_max_diff", 1, -1, 64, "px", "left-right check: drop disparities the other view contradicts by more (-1 = off)"),
-      ParamSpec::integer("edge_margin_px", 4, 0, 64, "px", "depth-edge guard: window around each disparity (0 = off)"),
-      ParamSpec::integer("edge_jump_px", 1, 0, 1000, "px", "depth-edge guard: drop disparities this far above the window's smallest"),
-      ParamSpec::real("min_depth_m", 1.0, 0.1, 1000.0, "m", "points nearer are dropped (ASOOM: 1)"),
-      ParamSpec::real("max_depth_m", 150.0, 1.0, 10000.0, "m", "points further are dropped (ASOOM: 150)"),
-      ParamSpec::real("min_baseline_m", 0.5, 0.01, 100.0, "m", "keyframe pairs closer than this are not matched"),
-      ParamSpec::real("baseline_depth_ratio", 0.18, 0.0, 1.0, "", "pair each keyframe with the earlier one whose baseline is nearest this x the ground depth (0 = the previous keyframe, ASOOM)"),
-      ParamSpec::integer("pair_history", 8, 1, 32, "keyframes", "earlier keyframes kept as stereo partners"),
-      ParamSpec::real("resolution_m", 0.5, 0.05, 10.0, "m", "map cell size"),
-      ParamSpec::integer("tile_cells", 64, 8, 1024, "cells", "tile edge"),
-      ParamSpec::real("elevation_gate_m", 1.0, 0.05, 100.0, "m", "colour/class accepted only this close to the cell's mean elevation (ASOOM: 1)"),
-      ParamSpec::integer("min_points", 4, 1, 10000, "points", "points a cell needs before it takes a class"),
-      ParamSpec::boolean("class_consistent_elevation", true, "a cell's height from its points of the same kind (raised: tree, building, vehicle; or flat) as its class"),
-      ParamSpec::integer("min_keyframe_points", 3, 1, 1000, "points", "one keyframe's points in a cell below this are dropped"),
-      ParamSpec::real("ground_check_m", 1.0, 0.0, 100.0, "m", "flat-class points further than this from the local ground are dropped (0 = off)"),
-      ParamSpec::integer("ground_window_cells", 3, 0, 32, "cells", "half-width of the window whose flat-class median is the local ground"),
-      ParamSpec::real("raised_min_height_m", 0.3, 0.0, 100.0, "m", "tree/building/vehicle points lower than this above the local ground are dropped"),
-      ParamSpec::integer("min_elevation_points", 32, 1, 100000, "points", "a cell reports an elevation once it has this many points (else unknown)"),
-      ParamSpec::integer("window_keyframes", 256, 2, 512, "keyframes", "keyframes kept re-binnable after pose-graph corrections"),
-      ParamSpec::real("rebuild_translation_m", 0.2, 0.0, 100.0, "m", "a keyframe moved further than this is re-binned (ASOOM: 2)"),
-      ParamSpec::real("rebuild_rotation_rad", 0.005, 0.0, 3.2, "rad", "... or turned more than this (ASOOM: 0.1)"),
-      ParamSpec::boolean("rescale_depth", true, "re-scale a keyframe's stereo depth by its baseline as the pose graph corrects it (off: ASOOM)"),
-      ParamSpec::integer("max_tiles", 16384, 1, 1000000, "tiles", "map size limit; points beyond are refused (counted)"),
-      ParamSpec::text("keyframes_channel", "keyframes", "keyframes|keyframes_labelled",
-                      "keyframes from pose_graph directly (their camera classes), or relabelled by the segmentation stage"),
-      ParamSpec::integer("tiles_per_step", 16, 1, 1024, "tiles", "changed tiles published on 'map_tiles' per step (the rest follow)"),
-  };
+  static constexpr std::span<const ParamSpec> kParams{kOrthoMapStageParams};
   static std::unique_ptr<Stage> make() { return std::make_unique<OrthoMapStage>(); }
 
   Status init(StageContext& ctx) override;
