@@ -11,10 +11,10 @@
 namespace ag::seg {
 
 Status SegmentationStage::init(StageContext& ctx) {
-  const SectionView v = ctx.params();
+  const SegmentationSettings cfg = load_params(ctx.params(), kSegmentationStageFields);
   clock_ = &ctx.clock;
-  if (v.text("labels") == "erfnet") {
-    const std::string path = v.text("weights");
+  if (cfg.labels == "erfnet") {
+    const std::string& path = cfg.weights;
     auto w = load_weights(path);
     if (!w) return Error::make(ErrorCode::kConfig, "segmentation.weights: " + w.error().message);
     const WeightsHeader& h = w.value().header;
@@ -32,9 +32,7 @@ Status SegmentationStage::init(StageContext& ctx) {
         class_of_logit_[i] = static_cast<std::uint8_t>(i);
       }
     }
-    const std::string k = v.text("kernel");
-    const KernelPath path_choice = k == "avx2" ? KernelPath::kAvx2 : k == "neon" ? KernelPath::kNeon : k == "portable" ? KernelPath::kPortable : KernelPath::kAuto;
-    ErfNetOptions eo{kImageWidth, kImageHeight, static_cast<int>(v.integer("threads")), path_choice};
+    ErfNetOptions eo{kImageWidth, kImageHeight, cfg.threads, cfg.kernel};
     eo.placement = ctx.placement;  // the workers take this stage's priority and CPU
     auto net = ErfNet::create(w.value(), eo);
     if (!net) return Error::make(ErrorCode::kConfig, "segmentation: " + net.error().message);

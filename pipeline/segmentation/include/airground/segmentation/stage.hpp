@@ -9,9 +9,11 @@
 #include <cstdint>
 #include <memory>
 #include <span>
+#include <string>
 
 #include "airground/messages/messages.hpp"
 #include "airground/platform/config.hpp"
+#include "airground/platform/param_binding.hpp"
 #include "airground/platform/stage.hpp"
 #include "airground/segmentation/erfnet.hpp"
 
@@ -24,13 +26,22 @@ struct SegmentationStageCounters {
   std::uint64_t dropped_busy{0};  // the mapper's ring was full
 };
 
-inline constexpr ParamSpec kSegmentationStageParams[] = {
-    ParamSpec::text("labels", "gt", "gt|erfnet", "keyframe classes: the camera driver's (simulator ground truth) or ErfNet's"),
-    ParamSpec::text("weights", "/usr/share/airground/erfnet_c7.agw", "",
-                    "ErfNet weights file (docs/segmentation.md), used when labels = erfnet"),
-    ParamSpec::integer("threads", 2, 1, 16, "threads", "threads that run one ErfNet frame (the stage's plus workers)"),
-    ParamSpec::text("kernel", "auto", "auto|avx2|neon|portable", "ErfNet kernel path (auto: the fastest this CPU has)"),
+struct SegmentationSettings {
+  std::string labels{"gt"};  // gt|erfnet
+  std::string weights{"/usr/share/airground/erfnet_c7.agw"};
+  int threads{2};
+  KernelPath kernel{KernelPath::kAuto};
 };
+inline constexpr ParamField<SegmentationSettings> kSegmentationStageFields[] = {
+    field::text("labels", &SegmentationSettings::labels, "gt", "gt|erfnet", "keyframe classes: the camera driver's (simulator ground truth) or ErfNet's"),
+    field::text("weights", &SegmentationSettings::weights, "/usr/share/airground/erfnet_c7.agw", "",
+                "ErfNet weights file (docs/segmentation.md), used when labels = erfnet"),
+    field::integer("threads", &SegmentationSettings::threads, 1, 16, "threads", "threads that run one ErfNet frame (the stage's plus workers)"),
+    field::choice<&SegmentationSettings::kernel>("kernel", "auto|avx2|neon|portable",
+                                                 {KernelPath::kAuto, KernelPath::kAvx2, KernelPath::kNeon, KernelPath::kPortable},
+                                                 "ErfNet kernel path (auto: the fastest this CPU has)"),
+};
+inline constexpr auto kSegmentationStageParams = param_specs(kSegmentationStageFields);
 
 class SegmentationStage final : public Stage {
  public:
