@@ -12,17 +12,12 @@ namespace ag::vo {
 
 Status VoStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
-  VoParams p;
+  VoParams p = load_params(v, kVoFields);
   p.camera = mapping::load_camera_calibration(ctx.config);
-  p.max_features = static_cast<int>(v.integer("max_features"));
-  p.keyframe_parallax_px = v.real("keyframe_parallax_px");
-  p.window_keyframes = static_cast<int>(v.integer("window_keyframes"));
-  p.min_pose_inliers = static_cast<int>(v.integer("min_pose_inliers"));
-  p.max_reprojection_px = v.real("max_reprojection_px");
-  p.gravity_sigma_rad = v.real("gravity_sigma_rad");
-  max_gap_ = static_cast<TimeNs>(v.real("attitude_max_gap_s") * 1e9);
-  max_wait_ = static_cast<TimeNs>(v.real("attitude_max_wait_s") * 1e9);
-  frames_per_step_ = static_cast<int>(v.integer("frames_per_step"));
+  const VoStageSettings own = load_params(v, kVoStageFields);
+  max_gap_ = static_cast<TimeNs>(own.attitude_max_gap_s * 1e9);
+  max_wait_ = static_cast<TimeNs>(own.attitude_max_wait_s * 1e9);
+  frames_per_step_ = own.frames_per_step;
   vo_ = std::make_unique<VisualOdometry>(p);
   clock_ = &ctx.clock;
   auto cam = ctx.channels.ring_reader(chan::kCamera);
@@ -31,7 +26,7 @@ Status VoStage::init(StageContext& ctx) {
   auto att = ctx.channels.ring_reader(chan::kAttitude);
   if (!att) return att.error();
   attitude_ = att.value();
-  auto out = ctx.channels.ring_writer(chan::kVisualOdometry.with_name(v.text("output_channel")));
+  auto out = ctx.channels.ring_writer(chan::kVisualOdometry.with_name(own.output_channel));
   if (!out) return out.error();
   out_ = out.value();
   return ok_status();

@@ -4,9 +4,12 @@
 
 #include <array>
 #include <memory>
+#include <span>
+#include <string>
 
 #include "airground/messages/channels.hpp"
 #include "airground/messages/messages.hpp"
+#include "airground/platform/param_binding.hpp"
 #include "airground/platform/stage.hpp"
 #include "airground/visual_odometry/visual_odometry.hpp"
 
@@ -19,20 +22,32 @@ struct VoStageCounters {
   std::uint64_t attitude_samples{0};
 };
 
+inline constexpr ParamField<VoParams> kVoFields[] = {
+    field::integer("max_features", &VoParams::max_features, 50, 1000, "corners", "tracked corners at most (one per cell of a 20x12 grid)"),
+    field::real("keyframe_parallax_px", &VoParams::keyframe_parallax_px, 4.0, 200.0, "px", "median image motion that makes a new keyframe (24 px: 2 m at 40 m)"),
+    field::integer("window_keyframes", &VoParams::window_keyframes, 3, 12, "keyframes", "keyframes in the bundle-adjusted window (the oldest two fixed)"),
+    field::integer("min_pose_inliers", &VoParams::min_pose_inliers, 6, 500, "points", "fewer map points agreeing on a frame's pose: tracking lost, a new segment"),
+    field::real("max_reprojection_px", &VoParams::max_reprojection_px, 0.3, 10.0, "px", "inlier threshold of the pose and of new map points"),
+    field::real("gravity_sigma_rad", &VoParams::gravity_sigma_rad, 0.0, 1.0, "rad", "the autopilot's up direction as a prior on each pose; 0 = vision only"),
+};
+// The stage's own parameters (the attitude waits are converted to TimeNs in init()).
+struct VoStageSettings {
+  double attitude_max_gap_s{0.05};  // [s]
+  double attitude_max_wait_s{0.2};  // [s]
+  int frames_per_step{2};
+  std::string output_channel{chan::kVisualOdometry.name};
+};
+inline constexpr ParamField<VoStageSettings> kVoStageFields[] = {
+    field::real("attitude_max_gap_s", &VoStageSettings::attitude_max_gap_s, 0.001, 1.0, "s", "an attitude sample further than this from a frame is not used for it"),
+    field::real("attitude_max_wait_s", &VoStageSettings::attitude_max_wait_s, 0.0, 2.0, "s", "a frame waits this long for the attitude after it, then goes without"),
+    field::integer("frames_per_step", &VoStageSettings::frames_per_step, 1, 8, "frames", "frames processed per release at most (a backlog is worked off)"),
+    field::text("output_channel", &VoStageSettings::output_channel, chan::kVisualOdometry.name, "", "ring channel the odometry is published on (the pose graph reads visual_odometry)"),
+};
+inline constexpr auto kVoStageParams = param_specs(kVoFields, kVoStageFields);
+
 class VoStage final : public Stage {
  public:
-  static constexpr ParamSpec kParams[] = {
-      ParamSpec::integer("max_features", 240, 50, 1000, "corners", "tracked corners at most (one per cell of a 20x12 grid)"),
-      ParamSpec::real("keyframe_parallax_px", 24.0, 4.0, 200.0, "px", "median image motion that makes a new keyframe (24 px: 2 m at 40 m)"),
-      ParamSpec::integer("window_keyframes", 7, 3, 12, "keyframes", "keyframes in the bundle-adjusted window (the oldest two fixed)"),
-      ParamSpec::integer("min_pose_inliers", 20, 6, 500, "points", "fewer map points agreeing on a frame's pose: tracking lost, a new segment"),
-      ParamSpec::real("max_reprojection_px", 2.0, 0.3, 10.0, "px", "inlier threshold of the pose and of new map points"),
-      ParamSpec::real("gravity_sigma_rad", 0.005, 0.0, 1.0, "rad", "the autopilot's up direction as a prior on each pose; 0 = vision only"),
-      ParamSpec::real("attitude_max_gap_s", 0.05, 0.001, 1.0, "s", "an attitude sample further than this from a frame is not used for it"),
-      ParamSpec::real("attitude_max_wait_s", 0.2, 0.0, 2.0, "s", "a frame waits this long for the attitude after it, then goes without"),
-      ParamSpec::integer("frames_per_step", 2, 1, 8, "frames", "frames processed per release at most (a backlog is worked off)"),
-      ParamSpec::text("output_channel", chan::kVisualOdometry.name, "", "ring channel the odometry is published on (the pose graph reads visual_odometry)"),
-  };
+  static constexpr std::span<const ParamSpec> kParams{kVoStageParams};
   static std::unique_ptr<Stage> make() { return std::make_unique<VoStage>(); }
 
   Status init(StageContext& ctx) override;
