@@ -12,8 +12,8 @@ WebStage::WebStage() = default;
 WebStage::~WebStage() { stop(); }
 
 Status WebStage::init(StageContext& ctx) {
-  const SectionView p = ctx.params();
-  tiles_per_step_ = static_cast<std::size_t>(p.integer("tiles_per_step"));
+  const WebSettings cfg = load_params(ctx.params(), kWebStageFields);
+  tiles_per_step_ = static_cast<std::size_t>(cfg.tiles_per_step);
   auto team = ctx.channels.latest_reader(chan::kTeamPoses);
   if (!team) return team.error();
   team_ = team.value();
@@ -34,19 +34,19 @@ Status WebStage::init(StageContext& ctx) {
   model_->now = ctx.clock.now();
 
   WebServiceParams sp;
-  sp.log_path = p.text("log_path");
-  sp.push_hz = p.real("push_hz");
-  sp.client_buffer_bytes = static_cast<std::size_t>(p.integer("client_buffer_kb")) * 1024;
-  sp.foxglove = p.boolean("foxglove");
+  sp.log_path = cfg.log_path;
+  sp.push_hz = cfg.push_hz;
+  sp.client_buffer_bytes = static_cast<std::size_t>(cfg.client_buffer_kb) * 1024;
+  sp.foxglove = cfg.foxglove;
   service_ = std::make_unique<WebService>(sp, *snapshot_, *tiles_to_server_, *log_to_server_, ctx.clock.now());
   if (auto st = service_->open_log(); !st) return st.error();
 
   net::http::HttpServerParams hp;
-  hp.bind = p.text("bind");
-  hp.port = static_cast<int>(p.integer("port"));
-  hp.max_clients = static_cast<std::size_t>(p.integer("max_clients"));
+  hp.bind = cfg.bind;
+  hp.port = cfg.port;
+  hp.max_clients = static_cast<std::size_t>(cfg.max_clients);
   hp.client_buffer_bytes = sp.client_buffer_bytes;
-  hp.slow_client_s = p.real("slow_client_s");
+  hp.slow_client_s = cfg.slow_client_s;
   hp.name = std::string(ctx.stage_name);
   auto srv = net::http::HttpServer::start(hp, *service_);
   if (!srv) return srv.error();

@@ -10,6 +10,7 @@
 
 #include <memory>
 #include <span>
+#include <string>
 
 #include "airground/base_station/model.hpp"
 #include "airground/comms/messages.hpp"
@@ -17,22 +18,36 @@
 #include "airground/drivers/net/http/server.hpp"
 #include "airground/platform/config.hpp"
 #include "airground/platform/latest_value.hpp"
+#include "airground/platform/param_binding.hpp"
 #include "airground/platform/spsc_ring.hpp"
 #include "airground/platform/stage.hpp"
 
 namespace ag::base_station {
 
-inline constexpr ParamSpec kWebStageParams[] = {
-    ParamSpec::integer("port", 8080, 0, 65535, "", "TCP port of the live page (http://<base>:<port>/) and its WebSocket; 0 = any free port"),
-    ParamSpec::text("bind", "0.0.0.0", "", "IPv4 address to listen on (127.0.0.1 = this machine only)"),
-    ParamSpec::integer("max_clients", 8, 1, 1024, "connections", "browsers and API clients at once; more get 503"),
-    ParamSpec::text("log_path", "", "", "mission log, JSON lines (every record received); empty = none"),
-    ParamSpec::real("push_hz", 4.0, 0.2, 50.0, "Hz", "state updates sent to each browser"),
-    ParamSpec::integer("client_buffer_kb", 4096, 64, 1 << 20, "KiB", "output held per client; a client that lets it fill is dropped"),
-    ParamSpec::real("slow_client_s", 5.0, 0.5, 600.0, "s", "a client whose output has not drained for this long is dropped"),
-    ParamSpec::integer("tiles_per_step", 16, 1, 64, "tiles", "map tiles handed to the server per step"),
-    ParamSpec::boolean("foxglove", true, "live Foxglove connection on the same port: WebSocket subprotocol foxglove.websocket.v1 (ws://<base>:<port>/)"),
+// The web stage's parameters as read (the buffer's KiB are converted in init()).
+struct WebSettings {
+  int port{8080};
+  std::string bind{"0.0.0.0"};
+  int max_clients{8};
+  std::string log_path;
+  double push_hz{4.0};            // [Hz]
+  int client_buffer_kb{4096};     // [KiB]
+  double slow_client_s{5.0};      // [s]
+  int tiles_per_step{16};
+  bool foxglove{true};
 };
+inline constexpr ParamField<WebSettings> kWebStageFields[] = {
+    field::integer("port", &WebSettings::port, 0, 65535, "", "TCP port of the live page (http://<base>:<port>/) and its WebSocket; 0 = any free port"),
+    field::text("bind", &WebSettings::bind, "0.0.0.0", "", "IPv4 address to listen on (127.0.0.1 = this machine only)"),
+    field::integer("max_clients", &WebSettings::max_clients, 1, 1024, "connections", "browsers and API clients at once; more get 503"),
+    field::text("log_path", &WebSettings::log_path, "", "", "mission log, JSON lines (every record received); empty = none"),
+    field::real("push_hz", &WebSettings::push_hz, 0.2, 50.0, "Hz", "state updates sent to each browser"),
+    field::integer("client_buffer_kb", &WebSettings::client_buffer_kb, 64, 1 << 20, "KiB", "output held per client; a client that lets it fill is dropped"),
+    field::real("slow_client_s", &WebSettings::slow_client_s, 0.5, 600.0, "s", "a client whose output has not drained for this long is dropped"),
+    field::integer("tiles_per_step", &WebSettings::tiles_per_step, 1, 64, "tiles", "map tiles handed to the server per step"),
+    field::boolean("foxglove", &WebSettings::foxglove, "live Foxglove connection on the same port: WebSocket subprotocol foxglove.websocket.v1 (ws://<base>:<port>/)"),
+};
+inline constexpr auto kWebStageParams = param_specs(kWebStageFields);
 
 // A map tile as the server keeps and sends it: classes and elevation in decimetres (INT16_MIN unknown).
 struct WebTile {
