@@ -11,9 +11,7 @@ namespace ag {
 Status StatusStage::init(StageContext& ctx) {
   perf_ = &ctx.perf;
   clock_ = &ctx.clock;
-  const SectionView p = ctx.params();
-  log_counters_ = p.boolean("log_counters");
-  log_every_ = p.integer("log_every");
+  cfg_ = load_params(ctx.params(), kStatusStageFields);
   auto w = ctx.channels.latest_writer(chan::kSchedulerStatus);
   if (!w) return w.error();
   out_ = w.value();
@@ -75,7 +73,7 @@ void StatusStage::step(TimeNs now) noexcept {
   out_.publish(msg_);
 
   const bool trouble = msg_.total_overruns != reported_overruns_ || msg_.total_slips != reported_slips_;
-  if (log_counters_ && (trouble || (msg_.seq - 1) % static_cast<std::uint32_t>(log_every_) == 0)) {
+  if (cfg_.log_counters && (trouble || (msg_.seq - 1) % static_cast<std::uint32_t>(cfg_.log_every) == 0)) {
     for (std::size_t i = 0; i < n; ++i) {
       const auto& l = msg_.stages[i];
       const log::Level lvl = (trouble && (l.overruns != 0 || l.slips != 0)) ? log::Level::kWarn : log::Level::kInfo;

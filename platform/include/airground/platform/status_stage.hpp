@@ -7,6 +7,7 @@
 #include <span>
 
 #include "airground/platform/config.hpp"
+#include "airground/platform/param_binding.hpp"
 #include "airground/platform/stage.hpp"
 
 namespace ag {
@@ -43,12 +44,19 @@ namespace chan {
 inline constexpr LatestTopic<SchedulerStatus> kSchedulerStatus{"scheduler_status"};
 }  // namespace chan
 
+struct StatusSettings {
+  bool log_counters{true};
+  std::int64_t log_every{10};  // [reports]
+};
+inline constexpr ParamField<StatusSettings> kStatusStageFields[] = {
+    field::boolean("log_counters", &StatusSettings::log_counters, "write one line per stage on every report"),
+    field::integer("log_every", &StatusSettings::log_every, 1, 3600, "reports", "log the full table every N reports; problems are logged at once"),
+};
+inline constexpr auto kStatusStageParams = param_specs(kStatusStageFields);
+
 class StatusStage final : public Stage {
  public:
-  static constexpr ParamSpec kParams[] = {
-      ParamSpec::boolean("log_counters", true, "write one line per stage on every report"),
-      ParamSpec::integer("log_every", 10, 1, 3600, "reports", "log the full table every N reports; problems are logged at once"),
-  };
+  static constexpr std::span<const ParamSpec> kParams{kStatusStageParams};
   static std::unique_ptr<Stage> make() { return std::make_unique<StatusStage>(); }
 
   Status init(StageContext& ctx) override;
@@ -61,8 +69,7 @@ class StatusStage final : public Stage {
   const Clock* clock_{nullptr};
   LatestWriter<SchedulerStatus> out_;
   SchedulerStatus msg_{};
-  bool log_counters_{true};
-  std::int64_t log_every_{10};
+  StatusSettings cfg_{};
   std::uint64_t reported_overruns_{0};
   std::uint64_t reported_slips_{0};
   std::array<std::uint64_t, SchedulerStatus::kMaxStages> prev_units_{};
