@@ -33,9 +33,10 @@ Status BaseStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
   const std::string where = std::string(ctx.stage_name) + ".";
   const BaseParams bp = load_base_params(v);
+  const BaseStageSettings cfg = load_params(v, kBaseStageOwnFields);
   if (bp.left_node == bp.right_node)
     return Error::make(ErrorCode::kConfig, "config error: " + where + "left_node_id and right_node_id must differ");
-  const std::string can_backend = v.text("can_backend");
+  const std::string can_backend = cfg.can_backend;
   if (ctx.device != nullptr) device_ = ctx.device;
   device_->describe("samples", {"rx_errors", "error_frames", "tx_dropped", "ring_full"});
   left_node_ = bp.left_node;
@@ -47,7 +48,7 @@ Status BaseStage::init(StageContext& ctx) {
                                                  std::string(ctx.instance) + "' no CAN link");
     bus_ = &link->robot();
   } else if (can_backend == "replay") {
-    const std::string path = v.text("can_replay_path");
+    const std::string path = cfg.can_replay_path;
     if (path.empty()) return Error::make(ErrorCode::kConfig, "config error: " + where + "can_backend is replay but can_replay_path is empty");
     auto log = can::read_candump_file(path);
     if (!log) return Error::make(log.error().code, where + "can_replay_path: " + log.error().message);
@@ -65,8 +66,8 @@ Status BaseStage::init(StageContext& ctx) {
     bus_ = owned_bus_.get();
   } else if (can_backend == "cannelloni") {
     can::CannelloniConfig cc;
-    cc.local_port = static_cast<std::uint16_t>(v.integer("can_bridge_port"));
-    const std::string remote = v.text("can_bridge_remote");
+    cc.local_port = static_cast<std::uint16_t>(cfg.can_bridge_port);
+    const std::string remote = cfg.can_bridge_remote;
     const auto colon = remote.rfind(':');
     char* end = nullptr;
     const long port = colon == std::string::npos ? -1 : std::strtol(remote.c_str() + colon + 1, &end, 10);
@@ -79,7 +80,7 @@ Status BaseStage::init(StageContext& ctx) {
     owned_bus_ = std::move(b).value();
     bus_ = owned_bus_.get();
   } else {
-    auto b = can::SocketCanBus::open(v.text("can_interface"));
+    auto b = can::SocketCanBus::open(cfg.can_interface);
     if (b) {
       owned_bus_ = std::move(b).value();
     } else {
@@ -91,14 +92,14 @@ Status BaseStage::init(StageContext& ctx) {
     }
     bus_ = owned_bus_.get();
   }
-  if (const std::string rec = v.text("can_record_path"); !rec.empty()) {
-    auto w = can::CandumpWriter::create(rec, can_backend == "socketcan" ? v.text("can_interface") : "can0");
+  if (const std::string rec = cfg.can_record_path; !rec.empty()) {
+    auto w = can::CandumpWriter::create(rec, can_backend == "socketcan" ? cfg.can_interface : "can0");
     if (!w) return Error::make(w.error().code, where + "can_record_path: " + w.error().message);
     recorder_ = std::move(w).value();
     recording_bus_ = std::make_unique<can::RecordingCanBus>(*bus_, *recorder_, ctx.clock);
     bus_ = recording_bus_.get();
   }
-  if (const std::string odo = v.text("odometry_log_path"); !odo.empty()) {
+  if (const std::string odo = cfg.odometry_log_path; !odo.empty()) {
     odom_log_ = std::fopen(odo.c_str(), "w");
     if (odom_log_ == nullptr) return Error::make(ErrorCode::kIo, where + "odometry_log_path: cannot write " + odo + ": " + std::strerror(errno));
     odom_log_buf_ = std::make_unique<char[]>(kOdomLogBuffer);
@@ -129,14 +130,14 @@ Status BaseStage::init(StageContext& ctx) {
     out = owned.get();
     return ok_status();
   };
-  if (Status s = open_line(v.text("estop_backend"), "estop", v.text("estop_chip"), v.integer("estop_line"), v.boolean("estop_active_low"),
+  if (Status s = open_line(cfg.estop_backend, "estop", cfg.estop_chip, cfg.estop_line, cfg.estop_active_low,
                            gpio::Direction::kInput, owned_estop_, estop_line_);
       !s)
     return s;
-  if (Status s = open_line(v.text("led_backend"), "led", v.text("led_chip"), v.integer("led_line"), false, gpio::Direction::kOutput, owned_led_, led_);
+  if (Status s = open_line(cfg.led_backend, "led", cfg.led_chip, cfg.led_line, false, gpio::Direction::kOutput, owned_led_, led_);
       !s)
     return s;
-  latch_ = gpio::EStopLatch(v.boolean("start_armed"));
+  latch_ = gpio::EStopLatch(cfg.start_armed);
 
   auto cmd = ctx.channels.latest_reader(chan::kWheelCommand);
   if (!cmd) return cmd.error();
@@ -145,7 +146,7 @@ Status BaseStage::init(StageContext& ctx) {
   if (!arm) return arm.error();
   arm_ = arm.value();
   ctx.channels.allow_unwritten(chan::kBaseArm);  // optional: an operator's re-arm request, when a tool sends one
-  auto odom = ctx.channels.ring_writer(chan::kWheelOdometry.with_name(v.text("odometry_channel")));
+  auto odom = ctx.channels.ring_writer(chan::kWheelOdometry.with_name(cfg.odometry_channel));
   if (!odom) return odom.error();
   odom_out_ = odom.value();
   auto st = ctx.channels.latest_writer(chan::kBaseStatus);

@@ -10,18 +10,9 @@
 namespace ag::base {
 
 BaseParams load_base_params(const SectionView& s) {
-  BaseParams p;
-  p.left_node = static_cast<std::uint8_t>(s.integer("left_node_id"));
-  p.right_node = static_cast<std::uint8_t>(s.integer("right_node_id"));
-  p.wheel_radius_m = s.real("wheel_radius_m");
-  p.track_m = s.real("track_m");
-  p.gear_ratio = s.real("gear_ratio");
-  p.left_sign = s.integer("left_sign") < 0 ? -1 : 1;
-  p.right_sign = s.integer("right_sign") < 0 ? -1 : 1;
-  p.command_timeout_s = s.real("command_timeout_s");
-  p.heartbeat_timeout_s = s.real("heartbeat_timeout_s");
-  p.arm_timeout_s = s.real("arm_timeout_s");
-  p.max_wheel_speed_mps = s.real("max_wheel_speed_mps");
+  BaseParams p = load_params(s, kBaseFields);
+  p.left_sign = p.left_sign < 0 ? -1 : 1;
+  p.right_sign = p.right_sign < 0 ? -1 : 1;
   return p;
 }
 

@@ -21,23 +21,23 @@ const char* autopilot_name(std::uint8_t a) noexcept {
 // An autopilot that is absent (no device, no recording) does not stop the robot: the stage logs why,
 // counts it and publishes nothing (the VO then runs without gravity), like the GNSS stage.
 Status AutopilotStage::init(StageContext& ctx) {
-  const SectionView v = ctx.params();
+  const AutopilotSettings cfg = load_params(ctx.params(), kAutopilotStageFields);
   const std::string where = std::string(ctx.stage_name) + ".";
-  auto w = ctx.channels.ring_writer(chan::kAttitude.with_name(v.text("attitude_channel")));
+  auto w = ctx.channels.ring_writer(chan::kAttitude.with_name(cfg.attitude_channel));
   if (!w) return w.error();
   out_ = w.value();
-  const std::string& src = v.text("source");
+  const std::string& src = cfg.source;
   if (src != "serial" && src != "udp" && src != "replay" && src != "none")
     return Error::make(ErrorCode::kConfig, "config error: " + where + "source must be serial, udp, replay or none, got '" + src + "'");
-  if (src == "replay" && v.text("replay").empty())
+  if (src == "replay" && cfg.replay.empty())
     return Error::make(ErrorCode::kConfig, "config error: " + where + "replay is empty but " + where + "source is replay: name the .tlog to play");
-  max_bytes_ = static_cast<int>(v.integer("max_bytes_per_step"));
-  want_sysid_ = static_cast<int>(v.integer("system_id"));
-  want_compid_ = static_cast<int>(v.integer("component_id"));
-  latency_ = from_seconds(v.real("latency_s"));
-  request_hz_ = v.real("request_hz");
-  log_every_ = from_seconds(v.real("log_every_s"));
-  pace_ = v.boolean("replay_pace");
+  max_bytes_ = cfg.max_bytes_per_step;
+  want_sysid_ = cfg.system_id;
+  want_compid_ = cfg.component_id;
+  latency_ = from_seconds(cfg.latency_s);
+  request_hz_ = cfg.request_hz;
+  log_every_ = from_seconds(cfg.log_every_s);
+  pace_ = cfg.replay_pace;
   buf_.assign(4096, 0);
   if (src == "none") return ok_status();
   auto absent = [&](const std::string& why) {
@@ -46,19 +46,19 @@ Status AutopilotStage::init(StageContext& ctx) {
     return ok_status();
   };
   if (src == "replay") {
-    auto r = TlogReplay::open(v.text("replay"));
+    auto r = TlogReplay::open(cfg.replay);
     if (!r) return absent(where + "replay: " + r.error().message);
     link_ = std::move(r).value();
     replay_ = true;
   } else if (src == "udp") {
-    auto u = UdpLink::open(v.text("udp_bind"), static_cast<int>(v.integer("udp_port")));
+    auto u = UdpLink::open(cfg.udp_bind, cfg.udp_port);
     if (!u) {
       if (u.error().code == ErrorCode::kConfig) return Error::make(ErrorCode::kConfig, "config error: " + where + "udp_bind: " + u.error().message);
       return absent(where + "udp_port: " + u.error().message);
     }
     link_ = std::move(u).value();
   } else {
-    auto s = SerialLink::open(v.text("device"), static_cast<int>(v.integer("baud")));
+    auto s = SerialLink::open(cfg.device, cfg.baud);
     if (!s) {
       if (s.error().code == ErrorCode::kConfig) return Error::make(ErrorCode::kConfig, "config error: " + where + "baud: " + s.error().message);
       return absent(where + "device: " + s.error().message);

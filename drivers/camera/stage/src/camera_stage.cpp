@@ -92,29 +92,29 @@ void AreaResampler::run(const std::uint8_t* bgr, std::uint8_t* rgb) noexcept {
 void CameraStage::set_syscalls_for_tests(v4l2::Syscalls* sys) noexcept { g_test_syscalls = sys; }
 
 Status CameraStage::init(StageContext& ctx) {
-  const SectionView v = ctx.params();
+  const CameraSettings own = load_params(ctx.params(), kCameraStageFields);
   where_ = std::string(ctx.stage_name) + ".";
-  max_frames_ = static_cast<int>(v.integer("max_frames_per_step"));
+  max_frames_ = own.max_frames_per_step;
   img_ = std::make_unique<CameraImageMsg>();
   img_->cls.fill(255);  // a live camera has no labels
-  auto cw = ctx.channels.ring_writer(chan::kCamera.with_name(v.text("camera_channel")));
+  auto cw = ctx.channels.ring_writer(chan::kCamera.with_name(own.camera_channel));
   if (!cw) return cw.error();
   cam_out_ = cw.value();
-  auto vw = ctx.channels.ring_writer(chan::kVisualOdometry.with_name(v.text("vo_channel")));
+  auto vw = ctx.channels.ring_writer(chan::kVisualOdometry.with_name(own.vo_channel));
   if (!vw) return vw.error();
   vo_out_ = vw.value();
 
-  const std::string& source = v.text("source");
+  const std::string& source = own.source;
   if (ctx.device != nullptr) device_ = ctx.device;
   if (source != "none") device_->describe("images", {"device", "bad_buffers", "bad_records", "ring_full"});
   if (source == "v4l2") {
-    auto fmt = v4l2::parse_pixel_format(v.text("format"));
+    auto fmt = v4l2::parse_pixel_format(own.format);
     if (!fmt) return Error::make(ErrorCode::kConfig, "config error: " + where_ + "format: " + fmt.error().message);
-    cfg_.device = v.text("device");
-    cfg_.width = static_cast<std::uint32_t>(v.integer("width"));
-    cfg_.height = static_cast<std::uint32_t>(v.integer("height"));
+    cfg_.device = own.device;
+    cfg_.width = static_cast<std::uint32_t>(own.width);
+    cfg_.height = static_cast<std::uint32_t>(own.height);
     cfg_.format = fmt.value();
-    cfg_.fps = static_cast<std::uint32_t>(v.integer("fps"));
+    cfg_.fps = static_cast<std::uint32_t>(own.fps);
     sys_ = g_test_syscalls != nullptr ? g_test_syscalls : &v4l2::linux_syscalls();
     // Sized for what was asked; a device that grants more is resized at open (open allocates anyway).
     bgr_.assign(static_cast<std::size_t>(cfg_.width) * cfg_.height * 3, 0);
@@ -122,10 +122,10 @@ Status CameraStage::init(StageContext& ctx) {
     source_ = Source::kV4l2;
     (void)open_camera(ctx.clock.now(), false);
   } else if (source == "replay") {
-    replay_path_ = v.text("replay");
+    replay_path_ = own.replay;
     if (replay_path_.empty()) return Error::make(ErrorCode::kConfig, "config error: " + where_ + "replay is empty but source is replay: name a frame-stream file or FIFO");
-    arrival_ = v.text("stamps") == "arrival";
-    pace_ = v.boolean("pace");
+    arrival_ = own.stamps == "arrival";
+    pace_ = own.pace;
     source_ = Source::kReplay;
     (void)open_replay(ctx.clock.now(), false);
   } else {

@@ -41,32 +41,32 @@ void LocalEnu::forward(double lat, double lon, double h, double& e, double& n, d
 // A receiver that is absent (no device, a recording missing) does not stop the robot: the stage logs
 // why, counts it and publishes nothing (the pose graph then holds its priors), like the base stage.
 Status UbloxStage::init(StageContext& ctx) {
-  const SectionView v = ctx.params();
+  const UbloxSettings cfg = load_params(ctx.params(), kUbloxStageFields);
   const std::string where = std::string(ctx.stage_name) + ".";
-  auto w = ctx.channels.ring_writer(chan::kGps.with_name(v.text("gps_channel")));
+  auto w = ctx.channels.ring_writer(chan::kGps.with_name(cfg.gps_channel));
   if (!w) return w.error();
   out_ = w.value();
-  const std::string& src = v.text("source");
+  const std::string& src = cfg.source;
   if (src != "serial" && src != "replay" && src != "none")
     return Error::make(ErrorCode::kConfig, "config error: " + where + "source must be serial, replay or none, got '" + src + "'");
-  enu_ = std::make_unique<LocalEnu>(v.real("datum_lat_deg"), v.real("datum_lon_deg"), v.real("datum_height_m"));
-  max_bytes_ = static_cast<int>(v.integer("max_bytes_per_step"));
+  enu_ = std::make_unique<LocalEnu>(cfg.datum_lat_deg, cfg.datum_lon_deg, cfg.datum_height_m);
+  max_bytes_ = cfg.max_bytes_per_step;
   buf_.assign(1024, 0);
   if (src == "none") return ok_status();
   if (ctx.device != nullptr) device_ = ctx.device;
   device_->describe("fixes", {"bad_checksum", "malformed", "garbage_bytes", "read"});
-  device_name_ = src == "replay" ? v.text("replay") : v.text("device");
+  device_name_ = src == "replay" ? cfg.replay : cfg.device;
   auto absent = [&](const std::string& why) {
     ++c_.device_errors;
     AG_LOG_ERROR("gps", "%s; no fixes from this receiver (the robot keeps running)", why.c_str());
     return ok_status();
   };
   if (src == "replay") {
-    auto r = ReplayFile::open(v.text("replay"), 1024);
+    auto r = ReplayFile::open(cfg.replay, 1024);
     if (!r) return absent(where + "replay: " + r.error().message);
     source_ = std::move(r).value();
   } else {
-    auto s = SerialPort::open(v.text("device"), static_cast<int>(v.integer("baud")));
+    auto s = SerialPort::open(cfg.device, cfg.baud);
     if (!s) return absent(where + "device: " + s.error().message);
     source_ = std::move(s).value();
   }

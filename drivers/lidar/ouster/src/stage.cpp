@@ -13,16 +13,16 @@ namespace ag::ouster {
 // A sensor that is absent (no metadata, a port taken, a capture missing) does not stop the robot: the
 // stage logs why, counts it and publishes nothing, like the base stage with no CAN interface.
 Status OusterStage::init(StageContext& ctx) {
-  const SectionView v = ctx.params();
+  const OusterSettings cfg = load_params(ctx.params(), kOusterStageFields);
   const std::string where = std::string(ctx.stage_name) + ".";
-  auto w = ctx.channels.ring_writer(chan::kLidarScan.with_name(v.text("scan_channel")));
+  auto w = ctx.channels.ring_writer(chan::kLidarScan.with_name(cfg.scan_channel));
   if (!w) return w.error();
   out_ = w.value();
-  const std::string& cls = v.text("classes");
+  const std::string& cls = cfg.classes;
   if (cls != "none" && cls != "reflectivity")
     return Error::make(ErrorCode::kConfig, "config error: " + where + "classes must be none or reflectivity, got '" + cls + "'");
   classes_from_reflectivity_ = cls == "reflectivity";
-  const std::string& src = v.text("source");
+  const std::string& src = cfg.source;
   if (src != "udp" && src != "pcap" && src != "none")
     return Error::make(ErrorCode::kConfig, "config error: " + where + "source must be udp, pcap or none, got '" + src + "'");
   if (src == "none") return ok_status();
@@ -34,8 +34,8 @@ Status OusterStage::init(StageContext& ctx) {
     source_.reset();
     return ok_status();
   };
-  if (v.text("metadata").empty()) return absent(where + "metadata names no sensor metadata JSON");
-  auto info = read_metadata_file(v.text("metadata"));
+  if (cfg.metadata.empty()) return absent(where + "metadata names no sensor metadata JSON");
+  auto info = read_metadata_file(cfg.metadata);
   // A file that is not there or not JSON is an absent sensor; one that says what the decoder cannot
   // read (an unsupported profile, a bad mode) is a wrong configuration and stops the robot.
   if (!info && info.error().code == ErrorCode::kConfig) {
@@ -48,15 +48,15 @@ Status OusterStage::init(StageContext& ctx) {
   }
   if (!info) return absent(where + "metadata: " + info.error().message);
   const SensorInfo& s = info.value();
-  const auto lidar_port = static_cast<std::uint16_t>(v.integer("lidar_port") != 0 ? v.integer("lidar_port") : s.udp_port_lidar);
-  const auto imu_port = static_cast<std::uint16_t>(v.integer("imu_port") != 0 ? v.integer("imu_port") : s.udp_port_imu);
-  if (v.text("source") == "pcap") {
-    auto p = PcapPacketSource::open(v.text("pcap"), lidar_port, imu_port);
+  const auto lidar_port = static_cast<std::uint16_t>(cfg.lidar_port != 0 ? cfg.lidar_port : s.udp_port_lidar);
+  const auto imu_port = static_cast<std::uint16_t>(cfg.imu_port != 0 ? cfg.imu_port : s.udp_port_imu);
+  if (cfg.source == "pcap") {
+    auto p = PcapPacketSource::open(cfg.pcap, lidar_port, imu_port);
     if (!p) return absent(where + "pcap: " + p.error().message);
     source_ = std::move(p).value();
   } else {
     UdpSourceConfig u;
-    u.bind_address = v.text("bind_address");
+    u.bind_address = cfg.bind_address;
     u.lidar_port = lidar_port;
     u.imu_port = imu_port;
     auto p = UdpPacketSource::open(u);
@@ -73,8 +73,8 @@ Status OusterStage::init(StageContext& ctx) {
   scan_ = std::make_unique<LidarScanMsg>();
   xyz_.assign(3 * static_cast<std::size_t>(s.mode.columns) * s.beam_altitude_deg.size(), 0.0f);
   buf_.assign(kMaxPacketSize, 0);
-  mount_ = Pose3{v.real("mount_x_m"), v.real("mount_y_m"), v.real("mount_z_m"), 0, 0, v.real("mount_yaw_rad")};
-  max_packets_ = static_cast<int>(v.integer("max_packets_per_step"));
+  mount_ = Pose3{cfg.mount_x_m, cfg.mount_y_m, cfg.mount_z_m, 0, 0, cfg.mount_yaw_rad};
+  max_packets_ = cfg.max_packets_per_step;
   pcap_ = src == "pcap";
   lidar_port_ = lidar_port;
   imu_port_ = imu_port;

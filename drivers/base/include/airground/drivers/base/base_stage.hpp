@@ -18,6 +18,7 @@
 #include <cstdio>
 #include <memory>
 #include <span>
+#include <string>
 
 #include "airground/messages/channels.hpp"
 #include "airground/messages/drive_messages.hpp"
@@ -35,26 +36,44 @@ namespace ag::base {
 // a replayed log feeds back to the driver.
 [[nodiscard]] bool frame_from_controller(const can::CanFrame& f) noexcept;
 
-inline constexpr ParamSpec kBaseStageOwnParams[] = {
-    ParamSpec::text("can_backend", "socketcan", "socketcan|cannelloni|replay|inprocess",
-                    "CAN bus: SocketCAN (the robot), the cannelloni UDP bridge, a recorded candump log, or the simulator's in-process link"),
-    ParamSpec::text("can_interface", "can0", "", "SocketCAN interface of the motor controllers"),
-    ParamSpec::text("can_replay_path", "", "", "candump log replayed when can_backend is replay"),
-    ParamSpec::integer("can_bridge_port", 20000, 0, 65535, "", "local UDP port of the cannelloni bridge"),
-    ParamSpec::text("can_bridge_remote", "127.0.0.1:20000", "", "HOST:PORT of the bridge's other end (cannelloni)"),
-    ParamSpec::text("can_record_path", "", "", "record every frame sent and received as a candump log (empty: off)"),
-    ParamSpec::text("odometry_log_path", "", "", "write the wheel odometry as CSV (stamp_ns,x_m,y_m,yaw_rad,v_mps,w_radps; empty: off)"),
-    ParamSpec::text("estop_backend", "gpiod", "gpiod|fake|none", "e-stop input: libgpiod, the simulator's fake line, or none"),
-    ParamSpec::text("estop_chip", "gpiochip0", "", "GPIO chip of the e-stop input (name, path or number)"),
-    ParamSpec::integer("estop_line", 17, 0, 1023, "", "line offset of the e-stop input"),
-    ParamSpec::boolean("estop_active_low", true, "the e-stop input is active low (a pressed button pulls it to ground)"),
-    ParamSpec::boolean("start_armed", false, "drive without an operator's arm after start-up (false: wait for base_arm)"),
-    ParamSpec::text("led_backend", "gpiod", "gpiod|fake|none", "status LED output: libgpiod, the simulator's fake line, or none"),
-    ParamSpec::text("led_chip", "gpiochip0", "", "GPIO chip of the status LED"),
-    ParamSpec::integer("led_line", 27, 0, 1023, "", "line offset of the status LED"),
-    ParamSpec::text("odometry_channel", chan::kWheelOdometry.name, "", "ring channel the wheel odometry is published on"),
+// The base stage's own parameters (the wheels' follow: kBaseFields).
+struct BaseStageSettings {
+  std::string can_backend{"socketcan"};
+  std::string can_interface{"can0"};
+  std::string can_replay_path;
+  int can_bridge_port{20000};
+  std::string can_bridge_remote{"127.0.0.1:20000"};
+  std::string can_record_path;
+  std::string odometry_log_path;
+  std::string estop_backend{"gpiod"};
+  std::string estop_chip{"gpiochip0"};
+  int estop_line{17};
+  bool estop_active_low{true};
+  bool start_armed{false};
+  std::string led_backend{"gpiod"};
+  std::string led_chip{"gpiochip0"};
+  int led_line{27};
+  std::string odometry_channel{chan::kWheelOdometry.name};
 };
-inline constexpr auto kBaseStageParamArray = param_specs(kBaseStageOwnParams, kBaseParamSpecs);
+inline constexpr ParamField<BaseStageSettings> kBaseStageOwnFields[] = {
+    field::text("can_backend", &BaseStageSettings::can_backend, "socketcan", "socketcan|cannelloni|replay|inprocess", "CAN bus: SocketCAN (the robot), the cannelloni UDP bridge, a recorded candump log, or the simulator's in-process link"),
+    field::text("can_interface", &BaseStageSettings::can_interface, "can0", "", "SocketCAN interface of the motor controllers"),
+    field::text("can_replay_path", &BaseStageSettings::can_replay_path, "", "", "candump log replayed when can_backend is replay"),
+    field::integer("can_bridge_port", &BaseStageSettings::can_bridge_port, 0, 65535, "", "local UDP port of the cannelloni bridge"),
+    field::text("can_bridge_remote", &BaseStageSettings::can_bridge_remote, "127.0.0.1:20000", "", "HOST:PORT of the bridge's other end (cannelloni)"),
+    field::text("can_record_path", &BaseStageSettings::can_record_path, "", "", "record every frame sent and received as a candump log (empty: off)"),
+    field::text("odometry_log_path", &BaseStageSettings::odometry_log_path, "", "", "write the wheel odometry as CSV (stamp_ns,x_m,y_m,yaw_rad,v_mps,w_radps; empty: off)"),
+    field::text("estop_backend", &BaseStageSettings::estop_backend, "gpiod", "gpiod|fake|none", "e-stop input: libgpiod, the simulator's fake line, or none"),
+    field::text("estop_chip", &BaseStageSettings::estop_chip, "gpiochip0", "", "GPIO chip of the e-stop input (name, path or number)"),
+    field::integer("estop_line", &BaseStageSettings::estop_line, 0, 1023, "", "line offset of the e-stop input"),
+    field::boolean("estop_active_low", &BaseStageSettings::estop_active_low, "the e-stop input is active low (a pressed button pulls it to ground)"),
+    field::boolean("start_armed", &BaseStageSettings::start_armed, "drive without an operator's arm after start-up (false: wait for base_arm)"),
+    field::text("led_backend", &BaseStageSettings::led_backend, "gpiod", "gpiod|fake|none", "status LED output: libgpiod, the simulator's fake line, or none"),
+    field::text("led_chip", &BaseStageSettings::led_chip, "gpiochip0", "", "GPIO chip of the status LED"),
+    field::integer("led_line", &BaseStageSettings::led_line, 0, 1023, "", "line offset of the status LED"),
+    field::text("odometry_channel", &BaseStageSettings::odometry_channel, chan::kWheelOdometry.name, "", "ring channel the wheel odometry is published on"),
+};
+inline constexpr auto kBaseStageParamArray = param_specs(kBaseStageOwnFields, kBaseFields);
 
 struct BaseStageCounters {
   std::uint64_t commands_in{0};

@@ -15,6 +15,7 @@
 #include "airground/drivers/base/odrive_can_simple.hpp"
 #include "airground/drivers/can/can_bus.hpp"
 #include "airground/platform/config.hpp"
+#include "airground/platform/param_binding.hpp"
 
 namespace ag::base {
 
@@ -30,19 +31,20 @@ struct BaseParams {
   double max_wheel_speed_mps{2.0}; // [m/s] commands are clamped here
 };
 
-inline constexpr ParamSpec kBaseParamSpecs[] = {
-    ParamSpec::integer("left_node_id", 0, 0, 0x3F, "", "CAN Simple node id of the left wheel's controller"),
-    ParamSpec::integer("right_node_id", 1, 0, 0x3F, "", "CAN Simple node id of the right wheel's controller"),
-    ParamSpec::real("wheel_radius_m", 0.165, 0.01, 2.0, "m", "wheel radius"),
-    ParamSpec::real("track_m", 0.55, 0.05, 5.0, "m", "distance between the left and right wheel contact lines"),
-    ParamSpec::real("gear_ratio", 1.0, 0.01, 1000.0, "", "motor turns per wheel turn"),
-    ParamSpec::integer("left_sign", -1, -1, 1, "", "motor direction (+1/-1) that drives the left wheel forward"),
-    ParamSpec::integer("right_sign", 1, -1, 1, "", "motor direction (+1/-1) that drives the right wheel forward"),
-    ParamSpec::real("command_timeout_s", 0.2, 0.02, 5.0, "s", "watchdog: zero velocity when no fresh command came within this"),
-    ParamSpec::real("heartbeat_timeout_s", 0.35, 0.05, 10.0, "s", "a controller without a heartbeat this long stops the robot"),
-    ParamSpec::real("arm_timeout_s", 2.0, 0.1, 30.0, "s", "both axes must report closed-loop control within this after arming"),
-    ParamSpec::real("max_wheel_speed_mps", 2.0, 0.1, 10.0, "m/s", "wheel speed commands are clamped here"),
+inline constexpr ParamField<BaseParams> kBaseFields[] = {
+    field::integer("left_node_id", &BaseParams::left_node, 0, 0x3F, "", "CAN Simple node id of the left wheel's controller"),
+    field::integer("right_node_id", &BaseParams::right_node, 0, 0x3F, "", "CAN Simple node id of the right wheel's controller"),
+    field::real("wheel_radius_m", &BaseParams::wheel_radius_m, 0.01, 2.0, "m", "wheel radius"),
+    field::real("track_m", &BaseParams::track_m, 0.05, 5.0, "m", "distance between the left and right wheel contact lines"),
+    field::real("gear_ratio", &BaseParams::gear_ratio, 0.01, 1000.0, "", "motor turns per wheel turn"),
+    field::integer("left_sign", &BaseParams::left_sign, -1, 1, "", "motor direction (+1/-1) that drives the left wheel forward"),
+    field::integer("right_sign", &BaseParams::right_sign, -1, 1, "", "motor direction (+1/-1) that drives the right wheel forward"),
+    field::real("command_timeout_s", &BaseParams::command_timeout_s, 0.02, 5.0, "s", "watchdog: zero velocity when no fresh command came within this"),
+    field::real("heartbeat_timeout_s", &BaseParams::heartbeat_timeout_s, 0.05, 10.0, "s", "a controller without a heartbeat this long stops the robot"),
+    field::real("arm_timeout_s", &BaseParams::arm_timeout_s, 0.1, 30.0, "s", "both axes must report closed-loop control within this after arming"),
+    field::real("max_wheel_speed_mps", &BaseParams::max_wheel_speed_mps, 0.1, 10.0, "m/s", "wheel speed commands are clamped here"),
 };
+// The rows above, the signs made +1/-1 (a 0 drives forward, as +1).
 BaseParams load_base_params(const SectionView& s);
 
 enum class BaseState : std::uint8_t { kDisarmed = 0, kArming = 1, kRunning = 2, kFault = 3 };

@@ -10,32 +10,52 @@
 #include <cstdint>
 #include <memory>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "airground/messages/channels.hpp"
 #include "airground/messages/messages.hpp"
 #include "airground/drivers/autopilot/mavlink/frame_parser.hpp"
 #include "airground/drivers/autopilot/mavlink/link.hpp"
+#include "airground/platform/param_binding.hpp"
 #include "airground/platform/stage.hpp"
 
 namespace ag::mavlink {
 
-inline constexpr ParamSpec kAutopilotStageParams[] = {
-    ParamSpec::text("source", "serial", "serial|udp|replay|none", "the autopilot's serial port (TELEM2), its UDP onboard link, a .tlog recording, or no autopilot"),
-    ParamSpec::text("device", "/dev/ttyUSB0", "", "serial device wired to the autopilot's TELEM2"),
-    ParamSpec::integer("baud", 921600, 57600, 3000000, "Bd", "serial speed (PX4 SER_TEL2_BAUD)"),
-    ParamSpec::text("udp_bind", "0.0.0.0", "", "udp: local IPv4 address to listen on"),
-    ParamSpec::integer("udp_port", 14540, 0, 65535, "", "udp: local port PX4's onboard link sends to (0: any free port)"),
-    ParamSpec::text("replay", "", "", "replay: the .tlog to play"),
-    ParamSpec::boolean("replay_pace", true, "replay: hand records out at their recorded intervals (false: as fast as read)"),
-    ParamSpec::integer("system_id", 1, 0, 255, "", "MAVLink system id of the autopilot to listen to; 0 = any"),
-    ParamSpec::integer("component_id", 1, 0, 255, "", "MAVLink component id of the autopilot (MAV_COMP_ID_AUTOPILOT1 = 1); 0 = any"),
-    ParamSpec::real("latency_s", 0.0, 0.0, 0.5, "s", "subtracted from the arrival time: the autopilot's estimate-to-wire delay plus transfer"),
-    ParamSpec::real("request_hz", 50.0, 0.0, 400.0, "Hz", "ATTITUDE rate asked of the autopilot (MAV_CMD_SET_MESSAGE_INTERVAL); 0 = ask nothing"),
-    ParamSpec::integer("max_bytes_per_step", 16384, 64, 65536, "B", "bytes read per step (921600 Bd is 92 kB/s: 1.8 kB per 50 Hz step)"),
-    ParamSpec::real("log_every_s", 10.0, 0.0, 3600.0, "s", "log the link's counters this often; 0 = only problems"),
-    ParamSpec::text("attitude_channel", chan::kAttitude.name, "", "ring channel the attitude is published on"),
+// The autopilot stage's parameters as read (the times are converted to TimeNs in init()).
+struct AutopilotSettings {
+  std::string source{"serial"};
+  std::string device{"/dev/ttyUSB0"};
+  int baud{921600};
+  std::string udp_bind{"0.0.0.0"};
+  int udp_port{14540};
+  std::string replay;
+  bool replay_pace{true};
+  int system_id{1};
+  int component_id{1};
+  double latency_s{0.0};
+  double request_hz{50.0};
+  int max_bytes_per_step{16384};
+  double log_every_s{10.0};
+  std::string attitude_channel{chan::kAttitude.name};
 };
+inline constexpr ParamField<AutopilotSettings> kAutopilotStageFields[] = {
+    field::text("source", &AutopilotSettings::source, "serial", "serial|udp|replay|none", "the autopilot's serial port (TELEM2), its UDP onboard link, a .tlog recording, or no autopilot"),
+    field::text("device", &AutopilotSettings::device, "/dev/ttyUSB0", "", "serial device wired to the autopilot's TELEM2"),
+    field::integer("baud", &AutopilotSettings::baud, 57600, 3000000, "Bd", "serial speed (PX4 SER_TEL2_BAUD)"),
+    field::text("udp_bind", &AutopilotSettings::udp_bind, "0.0.0.0", "", "udp: local IPv4 address to listen on"),
+    field::integer("udp_port", &AutopilotSettings::udp_port, 0, 65535, "", "udp: local port PX4's onboard link sends to (0: any free port)"),
+    field::text("replay", &AutopilotSettings::replay, "", "", "replay: the .tlog to play"),
+    field::boolean("replay_pace", &AutopilotSettings::replay_pace, "replay: hand records out at their recorded intervals (false: as fast as read)"),
+    field::integer("system_id", &AutopilotSettings::system_id, 0, 255, "", "MAVLink system id of the autopilot to listen to; 0 = any"),
+    field::integer("component_id", &AutopilotSettings::component_id, 0, 255, "", "MAVLink component id of the autopilot (MAV_COMP_ID_AUTOPILOT1 = 1); 0 = any"),
+    field::real("latency_s", &AutopilotSettings::latency_s, 0.0, 0.5, "s", "subtracted from the arrival time: the autopilot's estimate-to-wire delay plus transfer"),
+    field::real("request_hz", &AutopilotSettings::request_hz, 0.0, 400.0, "Hz", "ATTITUDE rate asked of the autopilot (MAV_CMD_SET_MESSAGE_INTERVAL); 0 = ask nothing"),
+    field::integer("max_bytes_per_step", &AutopilotSettings::max_bytes_per_step, 64, 65536, "B", "bytes read per step (921600 Bd is 92 kB/s: 1.8 kB per 50 Hz step)"),
+    field::real("log_every_s", &AutopilotSettings::log_every_s, 0.0, 3600.0, "s", "log the link's counters this often; 0 = only problems"),
+    field::text("attitude_channel", &AutopilotSettings::attitude_channel, chan::kAttitude.name, "", "ring channel the attitude is published on"),
+};
+inline constexpr auto kAutopilotStageParams = param_specs(kAutopilotStageFields);
 
 struct AutopilotCounters {
   std::uint64_t frames{0};                 // checked frames of any message

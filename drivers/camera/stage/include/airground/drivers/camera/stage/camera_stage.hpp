@@ -17,25 +17,40 @@
 #include "airground/messages/messages.hpp"
 #include "airground/drivers/camera/frame_stream/frame_stream.hpp"
 #include "airground/drivers/camera/v4l2/camera.hpp"
+#include "airground/platform/param_binding.hpp"
 #include "airground/platform/stage.hpp"
 
 namespace ag::camera {
 
-inline constexpr ParamSpec kCameraStageParams[] = {
-    ParamSpec::text("source", "v4l2", "v4l2|replay|none", "images from the camera (V4L2), a frame-stream recording or FIFO (replay), or none"),
-    ParamSpec::text("device", "/dev/video0", "", "V4L2 capture device"),
-    ParamSpec::integer("width", 1280, 16, 4096, "px", "capture width asked of the device (the device may round it); resampled to 640"),
-    ParamSpec::integer("height", 800, 16, 4096, "px", "capture height asked of the device; resampled to 400 (keep 16:10 or the image is stretched)"),
-    ParamSpec::text("format", "YUYV", "GREY|YUYV|RGGB8|GRBG8", "pixel format asked of the device"),
-    ParamSpec::integer("fps", 10, 1, 120, "Hz", "frame rate asked of the device"),
-    ParamSpec::integer("max_frames_per_step", 2, 1, 16, "", "images published per step (each is converted, resampled and copied: ~1 MB)"),
-    ParamSpec::text("replay", "", "", "frame-stream file or FIFO when source is replay"),
-    ParamSpec::text("stamps", "record", "record|arrival",
-                    "replay: keep the recorded stamps (a HIL simulator on this machine's clock) or shift them to the arrival of the first record (a recording from another boot)"),
-    ParamSpec::boolean("pace", false, "replay of a file: hand records out at their recorded intervals from the first, not as fast as the rings take them"),
-    ParamSpec::text("camera_channel", chan::kCamera.name, "", "ring channel the images are published on"),
-    ParamSpec::text("vo_channel", chan::kVisualOdometryRecorded.name, "", "ring channel a frame-stream recording's own odometry is published on (the robot's vo stage writes visual_odometry)"),
+struct CameraSettings {
+  std::string source{"v4l2"};
+  std::string device{"/dev/video0"};
+  int width{1280};
+  int height{800};
+  std::string format{"YUYV"};
+  int fps{10};
+  int max_frames_per_step{2};
+  std::string replay;
+  std::string stamps{"record"};
+  bool pace{false};
+  std::string camera_channel{chan::kCamera.name};
+  std::string vo_channel{chan::kVisualOdometryRecorded.name};
 };
+inline constexpr ParamField<CameraSettings> kCameraStageFields[] = {
+    field::text("source", &CameraSettings::source, "v4l2", "v4l2|replay|none", "images from the camera (V4L2), a frame-stream recording or FIFO (replay), or none"),
+    field::text("device", &CameraSettings::device, "/dev/video0", "", "V4L2 capture device"),
+    field::integer("width", &CameraSettings::width, 16, 4096, "px", "capture width asked of the device (the device may round it); resampled to 640"),
+    field::integer("height", &CameraSettings::height, 16, 4096, "px", "capture height asked of the device; resampled to 400 (keep 16:10 or the image is stretched)"),
+    field::text("format", &CameraSettings::format, "YUYV", "GREY|YUYV|RGGB8|GRBG8", "pixel format asked of the device"),
+    field::integer("fps", &CameraSettings::fps, 1, 120, "Hz", "frame rate asked of the device"),
+    field::integer("max_frames_per_step", &CameraSettings::max_frames_per_step, 1, 16, "", "images published per step (each is converted, resampled and copied: ~1 MB)"),
+    field::text("replay", &CameraSettings::replay, "", "", "frame-stream file or FIFO when source is replay"),
+    field::text("stamps", &CameraSettings::stamps, "record", "record|arrival", "replay: keep the recorded stamps (a HIL simulator on this machine's clock) or shift them to the arrival of the first record (a recording from another boot)"),
+    field::boolean("pace", &CameraSettings::pace, "replay of a file: hand records out at their recorded intervals from the first, not as fast as the rings take them"),
+    field::text("camera_channel", &CameraSettings::camera_channel, chan::kCamera.name, "", "ring channel the images are published on"),
+    field::text("vo_channel", &CameraSettings::vo_channel, chan::kVisualOdometryRecorded.name, "", "ring channel a frame-stream recording's own odometry is published on (the robot's vo stage writes visual_odometry)"),
+};
+inline constexpr auto kCameraStageParams = param_specs(kCameraStageFields);
 
 struct CameraStageCounters {
   std::uint64_t frames_published{0};

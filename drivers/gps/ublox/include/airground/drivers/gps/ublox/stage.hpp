@@ -13,6 +13,7 @@
 #include "airground/messages/messages.hpp"
 #include "airground/drivers/gps/ublox/byte_source.hpp"
 #include "airground/drivers/gps/ublox/stream_parser.hpp"
+#include "airground/platform/param_binding.hpp"
 #include "airground/platform/stage.hpp"
 
 namespace ag::ublox {
@@ -27,17 +28,29 @@ class LocalEnu {
   double x0_, y0_, z0_, sl_, cl_, so_, co_;
 };
 
-inline constexpr ParamSpec kUbloxStageParams[] = {
-    ParamSpec::text("source", "serial", "serial|replay|none", "bytes from the receiver (serial port), a recording (replay), or no receiver"),
-    ParamSpec::text("device", "/dev/ttyACM0", "", "serial device of the receiver"),
-    ParamSpec::integer("baud", 115200, 9600, 921600, "Bd", "serial speed"),
-    ParamSpec::text("replay", "", "", "recorded stream to replay when source is replay"),
-    ParamSpec::real("datum_lat_deg", 0.0, -90.0, 90.0, "deg", "mission datum latitude (the map frame's origin)"),
-    ParamSpec::real("datum_lon_deg", 0.0, -180.0, 180.0, "deg", "mission datum longitude"),
-    ParamSpec::real("datum_height_m", 0.0, -1000.0, 10000.0, "m", "mission datum height above the WGS-84 ellipsoid"),
-    ParamSpec::integer("max_bytes_per_step", 4096, 64, 65536, "B", "bytes read per step (115200 Bd is 11.5 kB/s)"),
-    ParamSpec::text("gps_channel", chan::kGps.name, "", "ring channel the fixes are published on"),
+struct UbloxSettings {
+  std::string source{"serial"};
+  std::string device{"/dev/ttyACM0"};
+  int baud{115200};
+  std::string replay;
+  double datum_lat_deg{0.0};
+  double datum_lon_deg{0.0};
+  double datum_height_m{0.0};
+  int max_bytes_per_step{4096};
+  std::string gps_channel{chan::kGps.name};
 };
+inline constexpr ParamField<UbloxSettings> kUbloxStageFields[] = {
+    field::text("source", &UbloxSettings::source, "serial", "serial|replay|none", "bytes from the receiver (serial port), a recording (replay), or no receiver"),
+    field::text("device", &UbloxSettings::device, "/dev/ttyACM0", "", "serial device of the receiver"),
+    field::integer("baud", &UbloxSettings::baud, 9600, 921600, "Bd", "serial speed"),
+    field::text("replay", &UbloxSettings::replay, "", "", "recorded stream to replay when source is replay"),
+    field::real("datum_lat_deg", &UbloxSettings::datum_lat_deg, -90.0, 90.0, "deg", "mission datum latitude (the map frame's origin)"),
+    field::real("datum_lon_deg", &UbloxSettings::datum_lon_deg, -180.0, 180.0, "deg", "mission datum longitude"),
+    field::real("datum_height_m", &UbloxSettings::datum_height_m, -1000.0, 10000.0, "m", "mission datum height above the WGS-84 ellipsoid"),
+    field::integer("max_bytes_per_step", &UbloxSettings::max_bytes_per_step, 64, 65536, "B", "bytes read per step (115200 Bd is 11.5 kB/s)"),
+    field::text("gps_channel", &UbloxSettings::gps_channel, chan::kGps.name, "", "ring channel the fixes are published on"),
+};
+inline constexpr auto kUbloxStageParams = param_specs(kUbloxStageFields);
 
 struct UbloxStageCounters {
   std::uint64_t nav_pvt{0}, gga{0};

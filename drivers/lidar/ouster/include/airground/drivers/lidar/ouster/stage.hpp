@@ -6,6 +6,7 @@
 
 #include <memory>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "airground/messages/channels.hpp"
@@ -13,26 +14,42 @@
 #include "airground/drivers/lidar/ouster/frame.hpp"
 #include "airground/drivers/lidar/ouster/packet_source.hpp"
 #include "airground/drivers/lidar/ouster/xyz_lut.hpp"
+#include "airground/platform/param_binding.hpp"
 #include "airground/platform/stage.hpp"
 
 namespace ag::ouster {
 
-inline constexpr ParamSpec kOusterStageParams[] = {
-    ParamSpec::text("source", "udp", "udp|pcap|none", "packets from the sensor (UDP), a capture (pcap replay), or no lidar"),
-    ParamSpec::text("metadata", "", "", "the sensor's metadata JSON (get_metadata / the SDK's .json)"),
-    ParamSpec::text("pcap", "", "", "capture to replay when source is pcap"),
-    ParamSpec::text("bind_address", "0.0.0.0", "", "IPv4 address the UDP sockets bind"),
-    ParamSpec::integer("lidar_port", 0, 0, 65535, "", "UDP lidar port; 0 = the metadata's udp_port_lidar"),
-    ParamSpec::integer("imu_port", 0, 0, 65535, "", "UDP IMU port; 0 = the metadata's udp_port_imu"),
-    ParamSpec::integer("max_packets_per_step", 256, 1, 4096, "", "packets drained per step (a 2048x10 sensor sends 1280/s)"),
-    ParamSpec::real("mount_x_m", 0.0, -5.0, 5.0, "m", "sensor origin in the body frame, forward"),
-    ParamSpec::real("mount_y_m", 0.0, -5.0, 5.0, "m", "sensor origin in the body frame, left"),
-    ParamSpec::real("mount_z_m", 0.5, -5.0, 5.0, "m", "sensor origin in the body frame, up"),
-    ParamSpec::real("mount_yaw_rad", 0.0, -3.15, 3.15, "rad", "sensor yaw in the body frame"),
-    ParamSpec::text("scan_channel", chan::kLidarScan.name, "", "ring channel the scans are published on"),
-    ParamSpec::text("classes", "none", "none|reflectivity",
-                    "point classes: none (255), or the reflectivity byte as a class id (the simulator's HIL mode codes ground truth there)"),
+struct OusterSettings {
+  std::string source{"udp"};
+  std::string metadata;
+  std::string pcap;
+  std::string bind_address{"0.0.0.0"};
+  int lidar_port{0};
+  int imu_port{0};
+  int max_packets_per_step{256};
+  double mount_x_m{0.0};
+  double mount_y_m{0.0};
+  double mount_z_m{0.5};
+  double mount_yaw_rad{0.0};
+  std::string scan_channel{chan::kLidarScan.name};
+  std::string classes{"none"};
 };
+inline constexpr ParamField<OusterSettings> kOusterStageFields[] = {
+    field::text("source", &OusterSettings::source, "udp", "udp|pcap|none", "packets from the sensor (UDP), a capture (pcap replay), or no lidar"),
+    field::text("metadata", &OusterSettings::metadata, "", "", "the sensor's metadata JSON (get_metadata / the SDK's .json)"),
+    field::text("pcap", &OusterSettings::pcap, "", "", "capture to replay when source is pcap"),
+    field::text("bind_address", &OusterSettings::bind_address, "0.0.0.0", "", "IPv4 address the UDP sockets bind"),
+    field::integer("lidar_port", &OusterSettings::lidar_port, 0, 65535, "", "UDP lidar port; 0 = the metadata's udp_port_lidar"),
+    field::integer("imu_port", &OusterSettings::imu_port, 0, 65535, "", "UDP IMU port; 0 = the metadata's udp_port_imu"),
+    field::integer("max_packets_per_step", &OusterSettings::max_packets_per_step, 1, 4096, "", "packets drained per step (a 2048x10 sensor sends 1280/s)"),
+    field::real("mount_x_m", &OusterSettings::mount_x_m, -5.0, 5.0, "m", "sensor origin in the body frame, forward"),
+    field::real("mount_y_m", &OusterSettings::mount_y_m, -5.0, 5.0, "m", "sensor origin in the body frame, left"),
+    field::real("mount_z_m", &OusterSettings::mount_z_m, -5.0, 5.0, "m", "sensor origin in the body frame, up"),
+    field::real("mount_yaw_rad", &OusterSettings::mount_yaw_rad, -3.15, 3.15, "rad", "sensor yaw in the body frame"),
+    field::text("scan_channel", &OusterSettings::scan_channel, chan::kLidarScan.name, "", "ring channel the scans are published on"),
+    field::text("classes", &OusterSettings::classes, "none", "none|reflectivity", "point classes: none (255), or the reflectivity byte as a class id (the simulator's HIL mode codes ground truth there)"),
+};
+inline constexpr auto kOusterStageParams = param_specs(kOusterStageFields);
 
 struct OusterStageCounters {
   std::uint64_t packets{0}, imu_packets{0};
