@@ -55,15 +55,15 @@ void enu_to_geodetic(double lat0_deg, double lon0_deg, double h0_m, double e, do
 }  // namespace
 
 Status RecorderStage::init(StageContext& ctx) {
-  const SectionView p = ctx.params();
-  const std::string& path = p.text("path");
+  const RecorderSettings cfg = load_params(ctx.params(), kRecorderFields);
+  const std::string& path = cfg.path;
   if (path.empty()) return ok_status();  // off: no taps, step() does nothing
   enabled_ = true;
   robot_ = std::string(ctx.instance);
-  pose_source_ = p.text("pose_source");
-  lidar_every_ = p.integer("lidar_every");
-  lidar_stride_ = static_cast<std::uint16_t>(p.integer("lidar_column_stride"));
-  scheduler_period_ = from_seconds(p.real("scheduler_period_s"));
+  pose_source_ = cfg.pose_source;
+  lidar_every_ = cfg.lidar_every;
+  lidar_stride_ = static_cast<std::uint16_t>(cfg.lidar_column_stride);
+  scheduler_period_ = from_seconds(cfg.scheduler_period_s);
 
   auto& ch = ctx.channels;
   if (pose_source_ == "localization") {
@@ -75,12 +75,12 @@ Status RecorderStage::init(StageContext& ctx) {
     if (!r) return r.error();
     keyframe_poses_ = r.value();
   }
-  if (const std::string& c = p.text("odometry_channel"); !c.empty()) {
+  if (const std::string& c = cfg.odometry_channel; !c.empty()) {
     auto r = ch.ring_tap(chan::kWheelOdometry.with_name(c));
     if (!r) return r.error();
     odometry_ = r.value();
   }
-  if (const std::string& c = p.text("gps_channel"); !c.empty()) {
+  if (const std::string& c = cfg.gps_channel; !c.empty()) {
     if (!ctx.config.has("gps.datum_lat_deg"))
       return Error::make(ErrorCode::kConfig, std::string(ctx.stage_name) + ".gps_channel '" + c +
                                                  "': this role has no gps.datum_lat_deg/datum_lon_deg/datum_height_m to place the fixes");
@@ -91,21 +91,21 @@ Status RecorderStage::init(StageContext& ctx) {
     if (!r) return r.error();
     gps_ = r.value();
   }
-  if (const std::string& c = p.text("lidar_channel"); !c.empty()) {
+  if (const std::string& c = cfg.lidar_channel; !c.empty()) {
     auto r = ch.ring_tap(chan::kLidarScan.with_name(c));
     if (!r) return r.error();
     lidar_ = r.value();
   }
-  if (const std::string& c = p.text("map_tiles_channel"); !c.empty()) {
+  if (const std::string& c = cfg.map_tiles_channel; !c.empty()) {
     auto r = ch.ring_tap(chan::kMapTiles.with_name(c));
     if (!r) return r.error();
     tiles_ = r.value();
   }
-  if (const std::string& c = p.text("camera_channel"); !c.empty()) {
+  if (const std::string& c = cfg.camera_channel; !c.empty()) {
     auto r = ch.ring_tap(chan::kCamera.with_name(c));
     if (!r) return r.error();
     camera_ = r.value();
-    camera_period_ = from_seconds(p.real("camera_period_s"));
+    camera_period_ = from_seconds(cfg.camera_period_s);
   }
   if (scheduler_period_ > 0) {
     auto r = ch.latest_reader(chan::kSchedulerStatus);
@@ -118,18 +118,18 @@ Status RecorderStage::init(StageContext& ctx) {
   ro.dir = path;
   ro.family = role_name_ + "-" + robot_ + "-";
   ro.prefix = ro.family + utc_stamp();
-  ro.max_file_bytes = static_cast<std::uint64_t>(p.integer("max_file_mb")) << 20;
-  ro.max_total_bytes = static_cast<std::uint64_t>(p.integer("max_total_mb")) << 20;
+  ro.max_file_bytes = static_cast<std::uint64_t>(cfg.max_file_mb) << 20;
+  ro.max_total_bytes = static_cast<std::uint64_t>(cfg.max_total_mb) << 20;
   ro.writer.library = "airground-recorder";
-  ro.writer.zstd_level = static_cast<int>(p.integer("zstd_level"));
+  ro.writer.zstd_level = cfg.zstd_level;
   if (ro.max_total_bytes < ro.max_file_bytes)
-    return Error::make(ErrorCode::kConfig, std::string(ctx.stage_name) + ".max_total_mb (" + std::to_string(p.integer("max_total_mb")) +
+    return Error::make(ErrorCode::kConfig, std::string(ctx.stage_name) + ".max_total_mb (" + std::to_string(cfg.max_total_mb) +
                                                ") must be at least " + std::string(ctx.stage_name) + ".max_file_mb (" +
-                                               std::to_string(p.integer("max_file_mb")) + ")");
+                                               std::to_string(cfg.max_file_mb) + ")");
   if (Status s = files_.open(ro, [this](mcap::McapWriter& w) { return declare(w); }); !s)
     return Error::make(ErrorCode::kConfig, std::string(ctx.stage_name) + ".path: " + s.error().message);
   AG_LOG_INFO("recorder", "recording %s to %s (files of %lld MiB, %lld MiB in all)", robot_.c_str(), files_.current_path().c_str(),
-              static_cast<long long>(p.integer("max_file_mb")), static_cast<long long>(p.integer("max_total_mb")));
+              static_cast<long long>(cfg.max_file_mb), static_cast<long long>(cfg.max_total_mb));
   return ok_status();
 }
 

@@ -17,6 +17,7 @@
 #include "airground/drivers/recording/mcap/counters_json.hpp"
 #include "airground/drivers/recording/recorder/mcap_rotation.hpp"
 #include "airground/platform/config.hpp"
+#include "airground/platform/param_binding.hpp"
 #include "airground/platform/stage.hpp"
 #include "airground/platform/status_stage.hpp"
 
@@ -35,25 +36,53 @@ struct RecorderCounters {
   std::uint64_t files_opened{0}, files_deleted{0};
 };
 
-// The parameters of both roles; only the defaults of the channel choices differ (uav: keyframe poses,
-// GPS, map tiles; ugv: localization, wheel odometry, LiDAR, map tiles from gossip).
+// The parameters of both roles. The struct's initializers are a recorder of nothing but map tiles and
+// counters; each role sets the defaults of the five source choices in its rows (recorder_params).
+struct RecorderSettings {
+  std::string path;
+  int max_file_mb{512};    // [MiB]
+  int max_total_mb{8192};  // [MiB]
+  int zstd_level{3};
+  std::string pose_source{"none"};
+  std::string odometry_channel;
+  std::string gps_channel;
+  std::string lidar_channel;
+  int lidar_every{5};
+  int lidar_column_stride{4};
+  std::string map_tiles_channel{chan::kMapTiles.name};
+  double scheduler_period_s{10.0};  // [s]
+  std::string camera_channel;
+  double camera_period_s{2.0};  // [s]
+};
+inline constexpr ParamField<RecorderSettings> kRecorderFields[] = {
+    field::text("path", &RecorderSettings::path, "", "", "directory of the MCAP recording (created if missing); empty: the recorder is off"),
+    field::integer("max_file_mb", &RecorderSettings::max_file_mb, 1, 65536, "MiB", "a file is closed (complete) and the next one opened before it would pass this"),
+    field::integer("max_total_mb", &RecorderSettings::max_total_mb, 1, 16777216, "MiB", "this robot's recordings in path; the oldest files go past it (>= max_file_mb)"),
+    field::integer("zstd_level", &RecorderSettings::zstd_level, 0, 19, "", "chunk compression (0: none), paid on the recorder's own thread"),
+    field::text("pose_source", &RecorderSettings::pose_source, "none", "localization|keyframe_poses|none",
+                "the robot's own pose: the localizer's (ugv) or the pose graph's newest keyframe (uav)"),
+    field::text("odometry_channel", &RecorderSettings::odometry_channel, "", "", "wheel odometry ring to record; empty: none"),
+    field::text("gps_channel", &RecorderSettings::gps_channel, "", "", "GNSS fix ring to record, as lat/lon around gps.datum_*; empty: none"),
+    field::text("lidar_channel", &RecorderSettings::lidar_channel, "", "", "LiDAR revolution ring to record as point clouds; empty: none"),
+    field::integer("lidar_every", &RecorderSettings::lidar_every, 1, 1000, "scans", "record every Nth revolution"),
+    field::integer("lidar_column_stride", &RecorderSettings::lidar_column_stride, 1, 64, "columns", "of a recorded revolution, every Nth measurement column"),
+    field::text("map_tiles_channel", &RecorderSettings::map_tiles_channel, chan::kMapTiles.name, "", "aerial map tile ring to record as grids; empty: none"),
+    field::real("scheduler_period_s", &RecorderSettings::scheduler_period_s, 0.0, 3600.0, "s", "scheduler counters this often (0: never)"),
+    field::text("camera_channel", &RecorderSettings::camera_channel, "", "", "camera image ring to record (foxglove.RawImage rgb8, half size); empty: none"),
+    field::real("camera_period_s", &RecorderSettings::camera_period_s, 0.0, 3600.0, "s", "at most one camera image this often (0: every image the recorder sees)"),
+};
+
+// A role's rows: kRecorderFields with that role's sources as the defaults (uav: keyframe poses, GPS,
+// map tiles; ugv: localization, wheel odometry, LiDAR, map tiles from gossip).
 consteval std::array<ParamSpec, 14> recorder_params(std::string_view pose, std::string_view odometry, std::string_view gps,
                                                     std::string_view lidar, std::string_view camera) {
-  return {ParamSpec::text("path", "", "", "directory of the MCAP recording (created if missing); empty: the recorder is off"),
-          ParamSpec::integer("max_file_mb", 512, 1, 65536, "MiB", "a file is closed (complete) and the next one opened before it would pass this"),
-          ParamSpec::integer("max_total_mb", 8192, 1, 16777216, "MiB", "this robot's recordings in path; the oldest files go past it (>= max_file_mb)"),
-          ParamSpec::integer("zstd_level", 3, 0, 19, "", "chunk compression (0: none), paid on the recorder's own thread"),
-          ParamSpec::text("pose_source", pose, "localization|keyframe_poses|none",
-                          "the robot's own pose: the localizer's (ugv) or the pose graph's newest keyframe (uav)"),
-          ParamSpec::text("odometry_channel", odometry, "", "wheel odometry ring to record; empty: none"),
-          ParamSpec::text("gps_channel", gps, "", "GNSS fix ring to record, as lat/lon around gps.datum_*; empty: none"),
-          ParamSpec::text("lidar_channel", lidar, "", "LiDAR revolution ring to record as point clouds; empty: none"),
-          ParamSpec::integer("lidar_every", 5, 1, 1000, "scans", "record every Nth revolution"),
-          ParamSpec::integer("lidar_column_stride", 4, 1, 64, "columns", "of a recorded revolution, every Nth measurement column"),
-          ParamSpec::text("map_tiles_channel", chan::kMapTiles.name, "", "aerial map tile ring to record as grids; empty: none"),
-          ParamSpec::real("scheduler_period_s", 10.0, 0.0, 3600.0, "s", "scheduler counters this often (0: never)"),
-          ParamSpec::text("camera_channel", camera, "", "camera image ring to record (foxglove.RawImage rgb8, half size); empty: none"),
-          ParamSpec::real("camera_period_s", 2.0, 0.0, 3600.0, "s", "at most one camera image this often (0: every image the recorder sees)")};
+  std::array<ParamSpec, 14> rows = param_specs(kRecorderFields);
+  const std::pair<std::string_view, std::string_view> role_defaults[] = {
+      {"pose_source", pose}, {"odometry_channel", odometry}, {"gps_channel", gps}, {"lidar_channel", lidar}, {"camera_channel", camera}};
+  for (ParamSpec& r : rows)
+    for (const auto& [key, def] : role_defaults)
+      if (r.key == key) r.default_text = def;
+  return rows;
 }
 
 class RecorderStage final : public Stage {
