@@ -26,32 +26,32 @@ void SimVoTapStage::step(TimeNs) noexcept {
 }
 
 Status SimProbeStage::init(StageContext& ctx) {
-  const SectionView p = ctx.params();
+  const SimProbeSettings cfg = load_params(ctx.params(), kSimProbeFields);
   auto loc = ctx.channels.latest_reader(chan::kLocalization);
   if (!loc) return loc.error();
   loc_ = loc.value();
   auto cmd = ctx.channels.latest_reader(chan::kWheelCommand);
   if (!cmd) return cmd.error();
   cmd_ = cmd.value();
-  if (p.boolean("scans")) {
+  if (cfg.scans) {
     auto r = ctx.channels.ring_reader(chan::kLidarScan);
     if (!r) return r.error();
     scans_ = r.value();
     read_scans_ = true;
   }
-  if (p.boolean("odometry")) {
+  if (cfg.odometry) {
     auto r = ctx.channels.ring_reader(chan::kWheelOdometry);
     if (!r) return r.error();
     odom_ = r.value();
     read_odom_ = true;
   }
-  if (p.boolean("tiles")) {
+  if (cfg.tiles) {
     auto r = ctx.channels.ring_reader(chan::kMapTiles);
     if (!r) return r.error();
     tiles_ = r.value();
     read_tiles_ = true;
   }
-  if (p.boolean("initial_pose")) {
+  if (cfg.initial_pose) {
     auto r = ctx.channels.latest_reader(chan::kInitialPose);
     if (!r) return r.error();
     init_ = r.value();

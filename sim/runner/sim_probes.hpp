@@ -3,11 +3,13 @@
 #pragma once
 
 #include <memory>
+#include <span>
 
 #include "airground/messages/channels.hpp"
 #include "airground/messages/drive_messages.hpp"
 #include "airground/messages/messages.hpp"
 #include "airground/platform/channels.hpp"
+#include "airground/platform/param_binding.hpp"
 #include "airground/platform/stage.hpp"
 
 namespace ag::sim::lockstep {
@@ -35,17 +37,26 @@ class SimVoTapStage final : public Stage {
   RingReader<VoMsg, kVoRing> in_{};
 };
 
+struct SimProbeSettings {
+  bool scans{false};
+  bool odometry{false};
+  bool tiles{false};
+  bool initial_pose{false};
+};
+inline constexpr ParamField<SimProbeSettings> kSimProbeFields[] = {
+    field::boolean("scans", &SimProbeSettings::scans, "read lidar_scan"),
+    field::boolean("odometry", &SimProbeSettings::odometry, "read wheel_odometry"),
+    field::boolean("tiles", &SimProbeSettings::tiles, "read map_tiles"),
+    field::boolean("initial_pose", &SimProbeSettings::initial_pose, "read initial_pose"),
+};
+inline constexpr auto kSimProbeParams = param_specs(kSimProbeFields);
+
 // The simulator's reader on a ground robot's channels, appended to its table: the newest "localization"
 // for the sampling callback and the scores, the drive stage's wheel commands and, for tests, what
 // arrives on the robot's input channels.
 class SimProbeStage final : public Stage {
  public:
-  static constexpr ParamSpec kParams[] = {
-      ParamSpec::boolean("scans", false, "read lidar_scan"),
-      ParamSpec::boolean("odometry", false, "read wheel_odometry"),
-      ParamSpec::boolean("tiles", false, "read map_tiles"),
-      ParamSpec::boolean("initial_pose", false, "read initial_pose"),
-  };
+  static constexpr std::span<const ParamSpec> kParams{kSimProbeParams};
   static std::unique_ptr<Stage> make() { return std::make_unique<SimProbeStage>(); }
 
   Status init(StageContext& ctx) override;
