@@ -312,7 +312,7 @@ Result<PlanningMetrics> eval_planning(const EvalPlanningOptions& o, const std::f
 
   if (progress) progress({0, o.pairs, "building the roadmap"});
   const MapRaster m = resample(world);
-  plan::Roadmap rm(rp, ClassTable::builtin(), plan::MapExtent{m.tx0, m.ty0, m.tiles_x, m.tiles_y});
+  plan::Roadmap rm(rp, ClassTable::builtin(), TileExtent{m.tx0, m.ty0, m.tiles_x, m.tiles_y});
   set_tiles(rm, m);
   const double t0 = cpu_ms();
   rm.rebuild();

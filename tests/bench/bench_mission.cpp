@@ -41,7 +41,7 @@ int main() {
     const int n = 1 + static_cast<int>(rng() % 4);
     for (int i = 0; i < n; ++i) rect(c, r + i * 11, c + 4, r + i * 11 + 9, ClassId::kVehicle);
   }
-  RegionExtractor ex(RegionParams{}, ClassTable::builtin(), plan::MapExtent{0, 0, tiles, tiles});
+  RegionExtractor ex(RegionParams{}, ClassTable::builtin(), TileExtent{0, 0, tiles, tiles});
   std::copy(grid.begin(), grid.end(), ex.classes().begin());
   ex.mark_changed();
   ex.extract();  // warm

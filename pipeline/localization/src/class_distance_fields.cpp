@@ -20,16 +20,6 @@ DistanceFieldParams load_distance_field_params(const SectionView& s, double reso
   return p;
 }
 
-TileExtent extent_covering(double x0, double y0, double x1, double y1, double resolution_m, int tile_cells) noexcept {
-  const double tile_m = resolution_m * tile_cells;
-  TileExtent e;
-  e.tile_x0 = static_cast<std::int32_t>(std::floor(std::min(x0, x1) / tile_m));
-  e.tile_y0 = static_cast<std::int32_t>(std::floor(std::min(y0, y1) / tile_m));
-  e.tiles_x = static_cast<std::int32_t>(std::floor(std::max(x0, x1) / tile_m)) - e.tile_x0 + 1;
-  e.tiles_y = static_cast<std::int32_t>(std::floor(std::max(y0, y1) / tile_m)) - e.tile_y0 + 1;
-  return e;
-}
-
 ClassDistanceFields::ClassDistanceFields(const DistanceFieldParams& params, const LocalizationChannels& channels,
                                          const TileExtent& extent)
     : p_(params), channels_(channels), extent_(extent) {

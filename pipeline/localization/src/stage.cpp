@@ -21,12 +21,12 @@ bool finite(const Pose2& p) noexcept { return std::isfinite(p.x) && std::isfinit
 
 Status LocalizationStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
-  const double x0 = v.real("area_x0_m"), y0 = v.real("area_y0_m"), x1 = v.real("area_x1_m"), y1 = v.real("area_y1_m");
+  auto loaded_area = load_mission_area(v, kLocalizationAreaFields, ctx.stage_name);
+  if (!loaded_area) return loaded_area.error();
+  const MapRect area = loaded_area.value().rect();
   const std::string where = std::string(ctx.stage_name) + ".";
-  if (!(x1 > x0) || !(y1 > y0))
-    return Error::make(ErrorCode::kConfig, "config error: " + where + "area_x1_m/area_y1_m must be east/north of area_x0_m/area_y0_m");
   LocalizerParams p = load_localizer_params(v, kMapResolutionM, kTileCells);
-  p.filter.area = {x0, y0, x1, y1};  // the robot is inside its mission area
+  p.filter.area = area;  // the robot is inside its mission area
   if (p.filter.max_particles < p.filter.min_particles)
     return Error::make(ErrorCode::kConfig, "config error: " + where + "pf_max_particles must be >= pf_min_particles");
   if (p.filter.range_bin_max_m < p.filter.range_bin_min_m)
@@ -36,7 +36,7 @@ Status LocalizationStage::init(StageContext& ctx) {
       geometric_ ? LocalizationChannels::two_class(1.0, 1.5, p.fields.obstacle_faces) : LocalizationChannels::per_class();
   if (geometric_) labeller_ = std::make_unique<GeometricLabeller>(p.label, 128, 2048);
   else labeller_ = std::make_unique<GroundTruthLabeller>();
-  const TileExtent extent = extent_covering(x0, y0, x1, y1, kMapResolutionM, kTileCells);
+  const TileExtent extent = tiles_covering(area, kMapResolutionM, kTileCells);
   fields_ = std::make_unique<ClassDistanceFields>(p.fields, channels, extent);
   const auto seed_param = static_cast<std::uint64_t>(v.integer("seed"));
   loc_ = std::make_unique<SemanticLocalizer>(p, channels, seed_param != 0 ? seed_param : seed_from_name(ctx.instance));

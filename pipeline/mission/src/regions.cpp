@@ -11,7 +11,7 @@ namespace {
 constexpr double kBig = 1e20;
 }
 
-RegionExtractor::RegionExtractor(const RegionParams& p, const ClassTable& classes, const plan::MapExtent& extent)
+RegionExtractor::RegionExtractor(const RegionParams& p, const ClassTable& classes, const TileExtent& extent)
     : p_(p), extent_(extent) {
   fw_ = w_ = extent.tiles_x * p.tile_cells;
   fh_ = h_ = extent.tiles_y * p.tile_cells;

@@ -19,14 +19,13 @@ Status RegionsStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
   const std::string where = std::string(ctx.stage_name) + ".";
   const RegionsSettings own = load_params(v, kRegionsStageFields);
-  const double x0 = own.area_x0_m, y0 = own.area_y0_m, x1 = own.area_x1_m, y1 = own.area_y1_m;
-  if (!(x1 > x0) || !(y1 > y0))
-    return Error::make(ErrorCode::kConfig, "config error: " + where + "area_x1_m/area_y1_m must be east/north of area_x0_m/area_y0_m");
+  auto area = load_mission_area(v, kRegionsAreaFields, ctx.stage_name);
+  if (!area) return area.error();
   RegionParams p = load_params(v, kRegionFields);
   p.resolution_m = kMapResolutionM;
   p.tile_cells = kTileCells;
   p.max_regions = static_cast<int>(kMaxRegionsMsg);
-  ex_ = std::make_unique<RegionExtractor>(p, ClassTable::builtin(), plan::extent_covering_area(x0, y0, x1, y1, kMapResolutionM, kTileCells));
+  ex_ = std::make_unique<RegionExtractor>(p, ClassTable::builtin(), tiles_covering(area.value().rect(), kMapResolutionM, kTileCells));
   msg_ = std::make_unique<RegionsMsg>();
   pub_ = std::make_unique<comms::GossipPublishMsg>();
   batch_ = std::make_unique<RegionBatch>();

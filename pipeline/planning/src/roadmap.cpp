@@ -19,16 +19,6 @@ RoadmapParams load_roadmap_params(const SectionView& s, double resolution_m, int
   return p;
 }
 
-MapExtent extent_covering_area(double x0, double y0, double x1, double y1, double resolution_m, int tile_cells) noexcept {
-  const double t = resolution_m * tile_cells;
-  MapExtent e;
-  e.tile_x0 = static_cast<std::int32_t>(std::floor(x0 / t));
-  e.tile_y0 = static_cast<std::int32_t>(std::floor(y0 / t));
-  e.tiles_x = static_cast<std::int32_t>(std::floor(x1 / t)) - e.tile_x0 + 1;
-  e.tiles_y = static_cast<std::int32_t>(std::floor(y1 / t)) - e.tile_y0 + 1;
-  return e;
-}
-
 const char* to_string(PlanStatus s) noexcept {
   switch (s) {
     case PlanStatus::kOk: return "ok";
@@ -42,7 +32,7 @@ const char* to_string(PlanStatus s) noexcept {
   return "?";
 }
 
-Roadmap::Roadmap(const RoadmapParams& params, const ClassTable& classes, const MapExtent& extent) : p_(params), extent_(extent) {
+Roadmap::Roadmap(const RoadmapParams& params, const ClassTable& classes, const TileExtent& extent) : p_(params), extent_(extent) {
   w_ = extent.tiles_x * p_.tile_cells;
   h_ = extent.tiles_y * p_.tile_cells;
   ox_ = extent.tile_x0 * p_.tile_cells * p_.resolution_m;

@@ -13,17 +13,17 @@ namespace ag::plan {
 Status PlannerStage::init(StageContext& ctx) {
   const SectionView v = ctx.params();
   cfg_ = load_params(v, kPlannerFields);
-  const double x0 = cfg_.area_x0_m, y0 = cfg_.area_y0_m, x1 = cfg_.area_x1_m, y1 = cfg_.area_y1_m;
+  auto loaded_area = load_mission_area(v, kPlannerAreaFields, ctx.stage_name);
+  if (!loaded_area) return loaded_area.error();
+  const MapRect area = loaded_area.value().rect();
   const std::string where = std::string(ctx.stage_name) + ".";
-  if (!(x1 > x0) || !(y1 > y0))
-    return Error::make(ErrorCode::kConfig, "config error: " + where + "area_x1_m/area_y1_m must be east/north of area_x0_m/area_y0_m");
   const double margin = cfg_.geofence_margin_m;
-  if (!(x1 - x0 > 2 * margin) || !(y1 - y0 > 2 * margin))
+  if (!(area.x1 - area.x0 > 2 * margin) || !(area.y1 - area.y0 > 2 * margin))
     return Error::make(ErrorCode::kConfig, "config error: " + where + "geofence_margin_m (" + std::to_string(margin) +
                                                " m) leaves nothing of the mission area area_* inside the geofence");
   RoadmapParams p = load_roadmap_params(v, kMapResolutionM, kTileCells);
-  p.fence = {x0 + margin, y0 + margin, x1 - margin, y1 - margin};
-  map_ = std::make_unique<Roadmap>(p, ClassTable::builtin(), extent_covering_area(x0, y0, x1, y1, kMapResolutionM, kTileCells));
+  p.fence = {area.x0 + margin, area.y0 + margin, area.x1 - margin, area.y1 - margin};
+  map_ = std::make_unique<Roadmap>(p, ClassTable::builtin(), tiles_covering(area, kMapResolutionM, kTileCells));
   path_ = std::make_unique<PlannedPath>();
   msg_ = std::make_unique<PlannedPathMsg>();
   replan_period_ = from_seconds(cfg_.replan_period_s);
@@ -90,7 +90,7 @@ void PlannerStage::plan_now(TimeNs now) noexcept {
 void PlannerStage::step(TimeNs now) noexcept {
   for (MapTileMsg* t = tiles_.front(); t != nullptr; t = tiles_.front()) {
     ++c_.tiles_in;
-    const MapExtent& e = map_->extent();
+    const TileExtent& e = map_->extent();
     if (t->tx < e.tile_x0 || t->ty < e.tile_y0 || t->tx >= e.tile_x0 + e.tiles_x || t->ty >= e.tile_y0 + e.tiles_y) {
       if (c_.tiles_outside++ == 0)
         AG_LOG_WARN("planner", "map tile (%d, %d) is outside the mission area (planner.area_*): dropped (counted)", static_cast<int>(t->tx),

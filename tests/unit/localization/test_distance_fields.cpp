@@ -292,7 +292,7 @@ TEST(ClassDistanceFields, UnknownCellsAndOutsideAreUnknown) {
 TEST(ClassDistanceFields, MemoryOfAOneSquareKilometreMap) {
   DistanceFieldParams p;
   const LocalizationChannels ch = LocalizationChannels::per_class();
-  const TileExtent e = extent_covering(0, 0, 1000, 1000, 0.5, 64);
+  const TileExtent e = tiles_covering(MapRect{0, 0, 1000, 1000}, 0.5, 64);
   EXPECT_EQ(e.tiles_x, 32);
   ClassDistanceFields f(p, ch, e);
   const double mb = static_cast<double>(f.memory_bytes()) / (1024.0 * 1024.0);

@@ -92,7 +92,7 @@ TEST(SimulatedLidar, TheFilterSettlesOnTheTruePose) {
   auto beams = sim::OusterBeamModel::load_default(1024);
   ASSERT_TRUE(beams.ok()) << beams.error().message;
   const sim::LidarSimulator lidar(w, beams.value(), sim::LidarNoise{});
-  const TileExtent extent = extent_covering(g.origin_x, g.origin_y - g.size_y(), g.origin_x + g.size_x(), g.origin_y, 0.5, 64);
+  const TileExtent extent = tiles_covering(MapRect{g.origin_x, g.origin_y - g.size_y(), g.origin_x + g.size_x(), g.origin_y}, 0.5, 64);
   const LocalizationChannels per_class = LocalizationChannels::per_class(), two_class = LocalizationChannels::two_class();
   ClassDistanceFields fields(DistanceFieldParams{}, per_class, extent);
   ClassDistanceFields fields2(DistanceFieldParams{}, two_class, extent);
@@ -131,7 +131,7 @@ TEST(SimulatedLidar, TheParkRoadDoesNotPullTheGeometricEstimate) {
   auto beams = sim::OusterBeamModel::load_default(1024);
   ASSERT_TRUE(beams.ok()) << beams.error().message;
   const sim::LidarSimulator lidar(w, beams.value(), sim::LidarNoise{});
-  const TileExtent extent = extent_covering(g.origin_x, g.origin_y - g.size_y(), g.origin_x + g.size_x(), g.origin_y, 0.5, 64);
+  const TileExtent extent = tiles_covering(MapRect{g.origin_x, g.origin_y - g.size_y(), g.origin_x + g.size_x(), g.origin_y}, 0.5, 64);
   const LocalizationChannels regions = LocalizationChannels::two_class(1.0, 1.5, false), faces = LocalizationChannels::two_class();
   ClassDistanceFields before(DistanceFieldParams{}, regions, extent), now(DistanceFieldParams{}, faces, extent);
   load_world_classes(w, before);

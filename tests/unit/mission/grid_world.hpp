@@ -34,7 +34,7 @@ struct GridWorld {
       for (int c = 0; c < kT; ++c) t[static_cast<std::size_t>(r * kT + c)] = cls[static_cast<std::size_t>((ty * kT + r) * w() + tx * kT + c)];
     return t;
   }
-  [[nodiscard]] plan::MapExtent extent() const { return plan::MapExtent{0, 0, tiles_x, tiles_y}; }
+  [[nodiscard]] TileExtent extent() const { return TileExtent{0, 0, tiles_x, tiles_y}; }
   void load(RegionExtractor& ex, std::uint64_t version, int max_tx = 1 << 20) const {
     for (int ty = 0; ty < tiles_y; ++ty)
       for (int tx = 0; tx < tiles_x && tx < max_tx; ++tx) ex.set_tile(tx, ty, version, tile(tx, ty));

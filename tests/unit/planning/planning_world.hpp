@@ -16,7 +16,7 @@ namespace ag::plan::test {
 using loc::test::SyntheticWorld;
 using loc::test::TestRng;
 
-inline MapExtent extent_of(const SyntheticWorld& w) { return MapExtent{0, 0, w.tiles_x(), w.tiles_y()}; }
+inline TileExtent extent_of(const SyntheticWorld& w) { return TileExtent{0, 0, w.tiles_x(), w.tiles_y()}; }
 
 inline std::unique_ptr<Roadmap> load_roadmap(const SyntheticWorld& w, RoadmapParams p = RoadmapParams{}) {
   if (const char* e = std::getenv("AG_PLAN_GAIN")) p.clearance_gain_m = std::atof(e);

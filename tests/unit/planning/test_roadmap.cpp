@@ -26,14 +26,14 @@ TEST(RoadmapFields, UnknownHolesCloseButSeenObstaclesStay) {
   t[30 * 64 + 40] = kBuilding;  // a one-cell obstacle that was seen
   for (std::size_t c = 0; c < 64 * 3; ++c) t[5 * 64 + c] = kUnknown;  // a band three cells wide is not a hole
   RoadmapParams p;
-  Roadmap rm(p, ClassTable::builtin(), MapExtent{0, 0, 1, 1});
+  Roadmap rm(p, ClassTable::builtin(), TileExtent{0, 0, 1, 1});
   ASSERT_TRUE(rm.set_tile(0, 0, 1, t));
   rm.rebuild();
   EXPECT_TRUE(rm.traversable_cell(20, 30));
   EXPECT_FALSE(rm.traversable_cell(40, 30));
   EXPECT_FALSE(rm.traversable_cell(10, 5));
   p.hole_fill_radius_cells = 0;
-  Roadmap off(p, ClassTable::builtin(), MapExtent{0, 0, 1, 1});
+  Roadmap off(p, ClassTable::builtin(), TileExtent{0, 0, 1, 1});
   ASSERT_TRUE(off.set_tile(0, 0, 1, t));
   off.rebuild();
   EXPECT_FALSE(off.traversable_cell(20, 30)) << "hole filling off";
@@ -66,7 +66,7 @@ TEST(RoadmapFields, ClearanceAndFreeCellsMatchBruteForceOnASyntheticWorld) {
 TEST(RoadmapFields, TheGeofenceBlocksCellsOutsideTheMissionArea) {
   RoadmapParams p;
   p.fence = {4.0, 4.0, 28.0, 28.0};
-  Roadmap rm(p, ClassTable::builtin(), MapExtent{0, 0, 1, 1});
+  Roadmap rm(p, ClassTable::builtin(), TileExtent{0, 0, 1, 1});
   ASSERT_TRUE(rm.set_tile(0, 0, 1, road_tile()));
   rm.rebuild();
   EXPECT_FALSE(rm.traversable_cell(7, 30)) << "centre x 3.75 m: outside";
@@ -87,7 +87,7 @@ TEST(RoadmapFields, TheGeofenceBlocksCellsOutsideTheMissionArea) {
   EXPECT_GE(path->min_clearance_m, p.min_clearance_m - 1e-6);
   rm.plan({16, 16}, {1.5, 16}, *path);  // 2.5 m outside: beyond the snap radius of any free cell
   EXPECT_EQ(path->status, PlanStatus::kGoalBlocked);
-  Roadmap open(RoadmapParams{}, ClassTable::builtin(), MapExtent{0, 0, 1, 1});
+  Roadmap open(RoadmapParams{}, ClassTable::builtin(), TileExtent{0, 0, 1, 1});
   ASSERT_TRUE(open.set_tile(0, 0, 1, road_tile()));
   open.rebuild();
   EXPECT_TRUE(open.traversable_cell(7, 30)) << "no fence by default";
@@ -135,7 +135,7 @@ TEST(RoadmapGraph, EveryFreeCellIsSeenAndEveryEdgeIsAFreeLine) {
 }
 
 TEST(RoadmapGraph, TheClearancePenaltyFallsWithClearance) {
-  Roadmap rm(RoadmapParams{}, ClassTable::builtin(), MapExtent{0, 0, 1, 1});
+  Roadmap rm(RoadmapParams{}, ClassTable::builtin(), TileExtent{0, 0, 1, 1});
   EXPECT_GT(rm.edge_cost(10, 0.6, 0), rm.edge_cost(10, 1.0, 0));
   EXPECT_GT(rm.edge_cost(10, 1.0, 0), rm.edge_cost(10, 5.0, 0));
   EXPECT_GT(rm.edge_cost(10, 5.0, 0), 10.0 * RoadmapParams{}.lambda) << "lambda * length plus a positive penalty";
@@ -192,7 +192,7 @@ TEST(RoadmapQuery, SeparatedPartsHaveNoRouteAndBadEndsAreNamed) {
   std::vector<std::uint8_t> t = road_tile();
   for (int r = 0; r < 64; ++r)
     for (int c = 30; c < 34; ++c) t[static_cast<std::size_t>(r * 64 + c)] = kBuilding;
-  Roadmap rm(RoadmapParams{}, ClassTable::builtin(), MapExtent{0, 0, 1, 1});
+  Roadmap rm(RoadmapParams{}, ClassTable::builtin(), TileExtent{0, 0, 1, 1});
   ASSERT_TRUE(rm.set_tile(0, 0, 1, t));
   rm.rebuild();
   auto path = std::make_unique<PlannedPath>();
@@ -210,7 +210,7 @@ TEST(RoadmapQuery, SeparatedPartsHaveNoRouteAndBadEndsAreNamed) {
 }
 
 TEST(RoadmapTiles, BadTilesAreRefused) {
-  Roadmap rm(RoadmapParams{}, ClassTable::builtin(), MapExtent{2, 3, 2, 2});
+  Roadmap rm(RoadmapParams{}, ClassTable::builtin(), TileExtent{2, 3, 2, 2});
   const std::vector<std::uint8_t> t = road_tile();
   EXPECT_FALSE(rm.set_tile(0, 0, 1, t)) << "outside the extent";
   EXPECT_FALSE(rm.set_tile(4, 3, 1, t)) << "outside the extent";

@@ -1,8 +1,10 @@
 // Poses and grid geometry in the shared map frame (local ENU, metres, radians).
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 
 namespace ag {
 
@@ -45,5 +47,31 @@ struct GridGeometry {
   [[nodiscard]] double y_of(double row_centre) const noexcept { return origin_y - (row_centre + 0.5) * resolution; }
   [[nodiscard]] bool contains(std::int32_t c, std::int32_t r) const noexcept { return c >= 0 && r >= 0 && c < width && r < height; }
 };
+
+// A map-frame rectangle [m]: a mission area, a geofence. The default is the whole plane.
+struct MapRect {
+  double x0{-std::numeric_limits<double>::infinity()}, y0{-std::numeric_limits<double>::infinity()};
+  double x1{std::numeric_limits<double>::infinity()}, y1{std::numeric_limits<double>::infinity()};
+  [[nodiscard]] bool contains(double x, double y) const noexcept { return x >= x0 && x <= x1 && y >= y0 && y <= y1; }
+};
+
+// Aerial-map tiles [tile_x0, tile_x0 + tiles_x) x [tile_y0, tile_y0 + tiles_y); tile (0, 0) starts at
+// the map-frame origin.
+struct TileExtent {
+  std::int32_t tile_x0{0}, tile_y0{0};
+  std::int32_t tiles_x{0}, tiles_y{0};
+};
+
+// The fewest tiles of tile_cells x tile_cells cells of resolution_m [m] that cover the rectangle r.
+[[nodiscard]] inline TileExtent tiles_covering(const MapRect& r, double resolution_m, int tile_cells) noexcept {
+  const double tile_m = resolution_m * tile_cells;
+  const auto tile = [tile_m](double v) { return static_cast<std::int32_t>(std::floor(v / tile_m)); };
+  TileExtent e;
+  e.tile_x0 = tile(std::min(r.x0, r.x1));
+  e.tile_y0 = tile(std::min(r.y0, r.y1));
+  e.tiles_x = tile(std::max(r.x0, r.x1)) - e.tile_x0 + 1;
+  e.tiles_y = tile(std::max(r.y0, r.y1)) - e.tile_y0 + 1;
+  return e;
+}
 
 }  // namespace ag

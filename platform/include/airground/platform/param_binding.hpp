@@ -159,11 +159,23 @@ template <class P>
 constexpr const ParamSpec& spec_of(const ParamField<P>& f) noexcept {
   return f.spec;
 }
-template <class... T, std::size_t... N>
-constexpr auto param_specs(const T (&... parts)[N]) {
-  std::array<ParamSpec, (N + ...)> out{};
+namespace detail {
+template <class R>
+struct rows_of;
+template <class T, std::size_t N>
+struct rows_of<T[N]> {
+  static constexpr std::size_t size = N;
+};
+template <class T, std::size_t N>
+struct rows_of<std::array<T, N>> {
+  static constexpr std::size_t size = N;
+};
+}  // namespace detail
+template <class... R>
+constexpr auto param_specs(const R&... parts) {
+  std::array<ParamSpec, (detail::rows_of<R>::size + ...)> out{};
   std::size_t k = 0;
-  ((std::for_each(std::begin(parts), std::end(parts), [&](const T& x) { out[k++] = spec_of(x); })), ...);
+  ((std::for_each(std::begin(parts), std::end(parts), [&](const auto& x) { out[k++] = spec_of(x); })), ...);
   return out;
 }
 

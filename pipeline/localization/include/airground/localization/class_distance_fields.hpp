@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "airground/localization/scan.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/config.hpp"
 #include "airground/platform/param_binding.hpp"
 #include "airground/platform/distance_transform.hpp"
@@ -51,13 +52,6 @@ inline constexpr auto kDistanceFieldParamSpecs = param_specs(kDistanceFieldField
 // resolution_m and tile_cells come from the aerial map, not from here.
 DistanceFieldParams load_distance_field_params(const SectionView& s, double resolution_m, int tile_cells);
 
-// The extent of the fields in aerial-map tiles: tiles [tile_x0, tile_x0 + tiles_x) x [tile_y0, ...).
-struct TileExtent {
-  std::int32_t tile_x0{0}, tile_y0{0};
-  std::int32_t tiles_x{0}, tiles_y{0};
-};
-// The smallest extent covering the map-frame rectangle [x0, x1] x [y0, y1].
-TileExtent extent_covering(double x0, double y0, double x1, double y1, double resolution_m, int tile_cells) noexcept;
 
 class ClassDistanceFields {
  public:

@@ -90,12 +90,7 @@ struct ParticleFilterParams {
   // The mission area [m, map frame] (the stage: its area_*): the robot is inside it, so a particle outside
   // has no weight. Over unmapped ground a particle's score is neutral, which beats a poor match on the
   // map: without the area a guess near the area's edge converged onto the nothing beyond it.
-  struct Area {
-    double x0{-std::numeric_limits<double>::infinity()}, y0{-std::numeric_limits<double>::infinity()};
-    double x1{std::numeric_limits<double>::infinity()}, y1{std::numeric_limits<double>::infinity()};
-    [[nodiscard]] bool contains(double x, double y) const noexcept { return x >= x0 && x <= x1 && y >= y0 && y <= y1; }
-  };
-  Area area{};
+  MapRect area{};
 };
 
 inline constexpr ParamField<ParticleFilterParams> kParticleFilterFields[] = {

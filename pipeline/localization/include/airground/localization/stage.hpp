@@ -11,6 +11,7 @@
 #include <span>
 
 #include "airground/messages/messages.hpp"
+#include "airground/messages/mission_area.hpp"
 #include "airground/localization/semantic_localizer.hpp"
 #include "airground/platform/config.hpp"
 #include "airground/platform/stage.hpp"
@@ -34,13 +35,13 @@ struct LocalizationStageCounters {
   std::uint64_t recoveries{0};
 };
 
-inline constexpr ParamSpec kLocalizationStageOwnParams[] = {
+inline constexpr ParamSpec kLocalizationLabelsParam[] = {
     ParamSpec::text("labels", "gt", "gt|geometric",
                     "scan labels: the driver's classes (simulator ground truth or a segmentation), or the paper's geometric ground/obstacle split"),
-    ParamSpec::real("area_x0_m", -500.0, -1e6, 1e6, "m", "mission area in the map frame: west edge (the distance fields cover it)"),
-    ParamSpec::real("area_y0_m", -500.0, -1e6, 1e6, "m", "mission area: south edge"),
-    ParamSpec::real("area_x1_m", 500.0, -1e6, 1e6, "m", "mission area: east edge"),
-    ParamSpec::real("area_y1_m", 500.0, -1e6, 1e6, "m", "mission area: north edge"),
+};
+inline constexpr auto kLocalizationAreaFields =
+    mission_area_fields("mission area in the map frame: west edge (the distance fields cover it)");
+inline constexpr ParamSpec kLocalizationStageOwnParams[] = {
     ParamSpec::integer("field_tiles_per_step", 2, 1, 1024, "tiles", "changed map tiles folded into the distance fields per step"),
     ParamSpec::integer("seed", 0, 0, 1'000'000'000, "", "particle filter seed; 0 = from the robot's name"),
     // A robot started from its YAML alone (no operator, no simulator) gets its guess here, like nav2
@@ -54,7 +55,7 @@ inline constexpr ParamSpec kLocalizationStageOwnParams[] = {
 };
 // The stage's section: its own keys, then every localizer parameter.
 inline constexpr auto kLocalizationStageParams =
-    param_specs(kLocalizationStageOwnParams, kOdometryGateFields, kPolarRenderParamSpecs, kParticleFilterFields,
+    param_specs(kLocalizationLabelsParam, kLocalizationAreaFields, kLocalizationStageOwnParams, kOdometryGateFields, kPolarRenderParamSpecs, kParticleFilterFields,
                 kFusedPoseFields, kGeometricLabelFields, kDistanceFieldFields);
 
 class LocalizationStage final : public Stage {

@@ -66,7 +66,7 @@ struct RegionStats {
 
 class RegionExtractor {
  public:
-  RegionExtractor(const RegionParams& p, const ClassTable& classes, const plan::MapExtent& extent);
+  RegionExtractor(const RegionParams& p, const ClassTable& classes, const TileExtent& extent);
 
   // Copies one tile (tile_cells^2 class ids, row 0 south); false when outside, wrong size or not newer.
   bool set_tile(std::int32_t tx, std::int32_t ty, std::uint64_t version, std::span<const std::uint8_t> cls) noexcept;
@@ -106,7 +106,7 @@ class RegionExtractor {
   void find_goal(Region& r) noexcept;
 
   RegionParams p_;
-  plan::MapExtent extent_;
+  TileExtent extent_;
   // The whole area (storage) and the working window of one extraction: the bounding box of the tiles
   // that ever held data (everything outside is unknown: no vehicles, not traversable, so the result is
   // the same as over the whole area, at the cost of the mapped part only).

@@ -19,6 +19,7 @@
 #include "airground/comms/messages.hpp"
 #include "airground/messages/drive_messages.hpp"
 #include "airground/messages/messages.hpp"
+#include "airground/messages/mission_area.hpp"
 #include "airground/mission/manager.hpp"
 #include "airground/mission/messages.hpp"
 #include "airground/mission/regions.hpp"
@@ -29,15 +30,11 @@
 namespace ag::mission {
 
 // The regions stage's own parameters (the extractor's follow them in the same section).
+inline constexpr auto kRegionsAreaFields = mission_area_fields("mission area in the map frame: west edge (the class grid covers it)");
 struct RegionsSettings {
-  double area_x0_m{-500.0}, area_y0_m{-500.0}, area_x1_m{500.0}, area_y1_m{500.0};  // [m] map frame
   double period_s{1.0};
 };
 inline constexpr ParamField<RegionsSettings> kRegionsStageFields[] = {
-    field::real("area_x0_m", &RegionsSettings::area_x0_m, -1e6, 1e6, "m", "mission area in the map frame: west edge (the class grid covers it)"),
-    field::real("area_y0_m", &RegionsSettings::area_y0_m, -1e6, 1e6, "m", "mission area: south edge"),
-    field::real("area_x1_m", &RegionsSettings::area_x1_m, -1e6, 1e6, "m", "mission area: east edge"),
-    field::real("area_y1_m", &RegionsSettings::area_y1_m, -1e6, 1e6, "m", "mission area: north edge"),
     field::real("period_s", &RegionsSettings::period_s, 0.1, 600.0, "s", "re-extract the regions at most this often (and only when tiles changed)"),
 };
 inline constexpr ParamField<RegionParams> kRegionFields[] = {
@@ -52,7 +49,7 @@ inline constexpr ParamField<RegionParams> kRegionFields[] = {
                                             {Traversability::kFree, Traversability::kRough, Traversability::kCostly},
                                             "highest traversability level a goal may lie on (as the planner's)"),
 };
-inline constexpr auto kRegionsParams = param_specs(kRegionsStageFields, kRegionFields);
+inline constexpr auto kRegionsParams = param_specs(kRegionsAreaFields, kRegionsStageFields, kRegionFields);
 
 struct RegionsCounters {
   std::uint64_t tiles_in{0}, tiles_applied{0}, tiles_rejected{0};

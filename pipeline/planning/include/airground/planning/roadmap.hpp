@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "airground/messages/classes.hpp"
+#include "airground/messages/geometry.hpp"
 #include "airground/platform/config.hpp"
 #include "airground/platform/param_binding.hpp"
 #include "airground/platform/distance_transform.hpp"
@@ -45,11 +46,7 @@ struct RoadmapParams {
   double clearance_penalty_cap{100.0};
   double shortcut_clearance_m{1.5}; // [m] a shortcut keeps min(this, what the replaced stretch kept)
   int max_nodes{16384};
-  struct Fence {  // [m] map frame; the default fences nothing
-    double x0{-std::numeric_limits<double>::infinity()}, y0{-std::numeric_limits<double>::infinity()};
-    double x1{std::numeric_limits<double>::infinity()}, y1{std::numeric_limits<double>::infinity()};
-  };
-  Fence fence{};  // cells centred outside it are blocked (the planner stage: its area_* less geofence_margin_m)
+  MapRect fence{};  // cells centred outside it are blocked (the planner stage: its area_* less geofence_margin_m)
 };
 
 // The roadmap's parameters (section "planner"); resolution, tile size and the fence come from the stage.
@@ -70,12 +67,6 @@ inline constexpr ParamField<RoadmapParams> kRoadmapFields[] = {
 };
 RoadmapParams load_roadmap_params(const SectionView& s, double resolution_m, int tile_cells);
 
-// Extent of the roadmap in aerial-map tiles.
-struct MapExtent {
-  std::int32_t tile_x0{0}, tile_y0{0};
-  std::int32_t tiles_x{0}, tiles_y{0};
-};
-MapExtent extent_covering_area(double x0, double y0, double x1, double y1, double resolution_m, int tile_cells) noexcept;
 
 struct Point2 {
   double x{0}, y{0};  // [m] map frame
@@ -131,7 +122,7 @@ class Roadmap {
     std::array<Edge, kMaxEdges> edges{};
   };
 
-  Roadmap(const RoadmapParams& params, const ClassTable& classes, const MapExtent& extent);
+  Roadmap(const RoadmapParams& params, const ClassTable& classes, const TileExtent& extent);
 
   // Copies one tile (tile_cells^2 class ids, row 0 = south). False when outside the extent, of the wrong
   // size, or at the stored version. The roadmap around it is stale until update() or rebuild().
@@ -175,7 +166,7 @@ class Roadmap {
   [[nodiscard]] bool node_sees(std::uint32_t node, std::int32_t c, std::int32_t r) const noexcept;
   [[nodiscard]] const RoadmapStats& stats() const noexcept { return stats_; }
   [[nodiscard]] const RoadmapParams& params() const noexcept { return p_; }
-  [[nodiscard]] const MapExtent& extent() const noexcept { return extent_; }
+  [[nodiscard]] const TileExtent& extent() const noexcept { return extent_; }
   [[nodiscard]] std::size_t memory_bytes() const noexcept;
   // Edge cost for a straight stretch of `length_m` whose smallest clearance is d and whose share of
   // costly cells is `costly_share`.
@@ -207,7 +198,7 @@ class Roadmap {
   void shortcut(PlannedPath& out) noexcept;
 
   RoadmapParams p_;
-  MapExtent extent_;
+  TileExtent extent_;
   std::int32_t w_{0}, h_{0};
   Rect fence_{};  // cells centred inside RoadmapParams::fence
   double ox_{0}, oy_{0};

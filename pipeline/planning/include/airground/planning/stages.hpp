@@ -17,6 +17,7 @@
 #include "airground/messages/messages.hpp"
 #include "airground/planning/drive_control.hpp"
 #include "airground/planning/local_tracker.hpp"
+#include "airground/messages/mission_area.hpp"
 #include "airground/planning/roadmap.hpp"
 #include "airground/platform/param_binding.hpp"
 #include "airground/platform/stage.hpp"
@@ -24,8 +25,8 @@
 namespace ag::plan {
 
 // The planner's own parameters (the roadmap's follow them in the same section).
+inline constexpr auto kPlannerAreaFields = mission_area_fields("mission area in the map frame: west edge (the roadmap covers it)");
 struct PlannerSettings {
-  double area_x0_m{-500.0}, area_y0_m{-500.0}, area_x1_m{500.0}, area_y1_m{500.0};  // [m] map frame
   double geofence_margin_m{1.0};
   int tiles_per_step{2};
   double replan_period_s{2.0};
@@ -34,10 +35,6 @@ struct PlannerSettings {
   double initialising_snap_m{20.0};
 };
 inline constexpr ParamField<PlannerSettings> kPlannerFields[] = {
-    field::real("area_x0_m", &PlannerSettings::area_x0_m, -1e6, 1e6, "m", "mission area in the map frame: west edge (the roadmap covers it)"),
-    field::real("area_y0_m", &PlannerSettings::area_y0_m, -1e6, 1e6, "m", "mission area: south edge"),
-    field::real("area_x1_m", &PlannerSettings::area_x1_m, -1e6, 1e6, "m", "mission area: east edge"),
-    field::real("area_y1_m", &PlannerSettings::area_y1_m, -1e6, 1e6, "m", "mission area: north edge"),
     field::real("geofence_margin_m", &PlannerSettings::geofence_margin_m, 0.0, 100.0, "m",
                 "the mission area is a geofence: routes keep min_clearance_m inside the area shrunk by this"),
     field::integer("tiles_per_step", &PlannerSettings::tiles_per_step, 1, 256, "tiles", "changed map tiles folded into the roadmap per step"),
@@ -47,7 +44,7 @@ inline constexpr ParamField<PlannerSettings> kPlannerFields[] = {
                    "plan from the localizer's best estimate while it is still converging (it converges by driving)"),
     field::real("initialising_snap_m", &PlannerSettings::initialising_snap_m, 0.0, 100.0, "m", "... and snap its start to a free cell within 2 sigma, at most this far"),
 };
-inline constexpr auto kPlannerParamArray = param_specs(kPlannerFields, kRoadmapFields);
+inline constexpr auto kPlannerParamArray = param_specs(kPlannerAreaFields, kPlannerFields, kRoadmapFields);
 
 struct PlannerCounters {
   std::uint64_t tiles_in{0}, tiles_applied{0}, tiles_outside{0}, tiles_stale{0};
