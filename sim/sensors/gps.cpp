@@ -7,26 +7,28 @@
 #include <cmath>
 #include <limits>
 
+#include "airground/platform/param_binding.hpp"
 #include "airground/sim/model_params.hpp"
 
 namespace ag::sim {
 
 namespace {
 
-constexpr ParamSpec kGpsParams[] = {
-    ParamSpec::real("sigma_m", 0.5, 0.0, 100.0, "m", "white noise per horizontal axis per fix"),
-    ParamSpec::real("sigma_vertical_m", 1.0, 0.0, 100.0, "m", "white noise, up, per fix"),
-    ParamSpec::real("rate_hz", 5.0, 0.1, 100.0, "Hz", "fix rate"),
-    ParamSpec::real("dropout_rate_per_s", 1.0 / 120.0, 0.0, 10.0, "1/s", "mean rate of dropout events, 0 = never"),
-    ParamSpec::real("dropout_mean_s", 5.0, 0.0, 3600.0, "s", "mean length of a dropout (exponential)"),
-    ParamSpec::real("bias_sigma_m", 0.0, 0.0, 100.0, "m", "stationary std of the horizontal bias per axis, 0 = off"),
-    ParamSpec::real("bias_sigma_vertical_m", 0.0, 0.0, 100.0, "m", "stationary std of the vertical bias"),
-    ParamSpec::real("bias_tau_s", 60.0, 0.1, 1e6, "s", "correlation time of the bias"),
-    ParamSpec::real("velocity_sigma_mps", 0.05, 0.0, 10.0, "m/s", "white noise per velocity component"),
-    ParamSpec::boolean("report_no_fix", false, "emit no-fix reports during dropouts instead of nothing"),
-    ParamSpec::real("outlier_at_s", -1.0, -1.0, 1e7, "s", "fault injection: one fix this long after the start is off by outlier_m; -1 = never"),
-    ParamSpec::real("outlier_m", 50.0, 0.0, 1e4, "m", "fault injection: size of that jump"),
+constexpr ParamField<GpsConfig> kGpsFields[] = {
+    field::real("sigma_m", &GpsConfig::sigma_m, 0.0, 100.0, "m", "white noise per horizontal axis per fix"),
+    field::real("sigma_vertical_m", &GpsConfig::sigma_vertical_m, 0.0, 100.0, "m", "white noise, up, per fix"),
+    field::real("rate_hz", &GpsConfig::rate_hz, 0.1, 100.0, "Hz", "fix rate"),
+    field::real("dropout_rate_per_s", &GpsConfig::dropout_rate_per_s, 0.0, 10.0, "1/s", "mean rate of dropout events, 0 = never"),
+    field::real("dropout_mean_s", &GpsConfig::dropout_mean_s, 0.0, 3600.0, "s", "mean length of a dropout (exponential)"),
+    field::real("bias_sigma_m", &GpsConfig::bias_sigma_m, 0.0, 100.0, "m", "stationary std of the horizontal bias per axis, 0 = off"),
+    field::real("bias_sigma_vertical_m", &GpsConfig::bias_sigma_vertical_m, 0.0, 100.0, "m", "stationary std of the vertical bias"),
+    field::real("bias_tau_s", &GpsConfig::bias_tau_s, 0.1, 1e6, "s", "correlation time of the bias"),
+    field::real("velocity_sigma_mps", &GpsConfig::velocity_sigma_mps, 0.0, 10.0, "m/s", "white noise per velocity component"),
+    field::boolean("report_no_fix", &GpsConfig::report_no_fix, "emit no-fix reports during dropouts instead of nothing"),
+    field::real("outlier_at_s", &GpsConfig::outlier_at_s, -1.0, 1e7, "s", "fault injection: one fix this long after the start is off by outlier_m; -1 = never"),
+    field::real("outlier_m", &GpsConfig::outlier_m, 0.0, 1e4, "m", "fault injection: size of that jump"),
 };
+constexpr auto kGpsParams = param_specs(kGpsFields);
 constexpr ParamSection kGpsSchema[] = {{"gps", kGpsParams, "simulated GNSS receiver"}};
 
 }  // namespace
@@ -37,20 +39,7 @@ namespace {
 Result<GpsConfig> gps_from(const Result<Config>& c) {
   if (!c) return c.error();
   const SectionView v(c.value(), "gps");
-  GpsConfig g;
-  g.sigma_m = v.real("sigma_m");
-  g.sigma_vertical_m = v.real("sigma_vertical_m");
-  g.rate_hz = v.real("rate_hz");
-  g.dropout_rate_per_s = v.real("dropout_rate_per_s");
-  g.dropout_mean_s = v.real("dropout_mean_s");
-  g.bias_sigma_m = v.real("bias_sigma_m");
-  g.bias_sigma_vertical_m = v.real("bias_sigma_vertical_m");
-  g.bias_tau_s = v.real("bias_tau_s");
-  g.velocity_sigma_mps = v.real("velocity_sigma_mps");
-  g.report_no_fix = v.boolean("report_no_fix");
-  g.outlier_at_s = v.real("outlier_at_s");
-  g.outlier_m = v.real("outlier_m");
-  return g;
+  return load_params(v, kGpsFields);
 }
 }  // namespace
 
