@@ -5,42 +5,33 @@
 #include <cmath>
 #include <limits>
 
+#include "airground/platform/param_binding.hpp"
 #include "airground/sim/model_params.hpp"
 
 namespace ag::sim {
 
 namespace {
 
-constexpr ParamSpec kVoParams[] = {
-    ParamSpec::real("rate_hz", 10.0, 0.0, 1000.0, "Hz", "frame rate, 0 = a frame at every call"),
-    ParamSpec::real("scale_min", 0.3, 1e-3, 1e3, "", "smallest initial scale of a segment (VO units per metre)"),
-    ParamSpec::real("scale_max", 3.0, 1e-3, 1e3, "", "largest initial scale of a segment"),
-    ParamSpec::real("scale_drift_per_s", 0.002, 0.0, 1.0, "1/sqrt(s)", "random walk of log(scale): std over 1 s"),
-    ParamSpec::real("yaw_drift_rad_per_s", 0.0005, 0.0, 1.0, "rad/sqrt(s)", "random walk of the frame yaw: std over 1 s"),
-    ParamSpec::real("position_noise_m", 0.02, 0.0, 100.0, "m", "white noise per axis per frame"),
-    ParamSpec::real("rotation_noise_rad", 0.001, 0.0, 1.0, "rad", "white noise per angle per frame"),
-    ParamSpec::real("tracking_loss_rate_per_s", 1.0 / 300.0, 0.0, 10.0, "1/s", "mean rate of tracking losses, 0 = never"),
-    ParamSpec::real("tracking_loss_duration_s", 2.0, 0.0, 3600.0, "s", "mean length of a tracking loss (exponential)"),
-    ParamSpec::real("forced_loss_at_s", -1.0, -1.0, 1e7, "s", "fault injection: one extra tracking loss this long after the start; -1 = none"),
-    ParamSpec::boolean("random_initial_yaw", true, "a new segment starts at a random yaw (false: yaw 0)"),
+constexpr ParamField<VoConfig> kVoFields[] = {
+    field::real("rate_hz", &VoConfig::rate_hz, 0.0, 1000.0, "Hz", "frame rate, 0 = a frame at every call"),
+    field::real("scale_min", &VoConfig::scale_min, 1e-3, 1e3, "", "smallest initial scale of a segment (VO units per metre)"),
+    field::real("scale_max", &VoConfig::scale_max, 1e-3, 1e3, "", "largest initial scale of a segment"),
+    field::real("scale_drift_per_s", &VoConfig::scale_drift_per_s, 0.0, 1.0, "1/sqrt(s)", "random walk of log(scale): std over 1 s"),
+    field::real("yaw_drift_rad_per_s", &VoConfig::yaw_drift_rad_per_s, 0.0, 1.0, "rad/sqrt(s)", "random walk of the frame yaw: std over 1 s"),
+    field::real("position_noise_m", &VoConfig::position_noise_m, 0.0, 100.0, "m", "white noise per axis per frame"),
+    field::real("rotation_noise_rad", &VoConfig::rotation_noise_rad, 0.0, 1.0, "rad", "white noise per angle per frame"),
+    field::real("tracking_loss_rate_per_s", &VoConfig::tracking_loss_rate_per_s, 0.0, 10.0, "1/s", "mean rate of tracking losses, 0 = never"),
+    field::real("tracking_loss_duration_s", &VoConfig::tracking_loss_duration_s, 0.0, 3600.0, "s", "mean length of a tracking loss (exponential)"),
+    field::real("forced_loss_at_s", &VoConfig::forced_loss_at_s, -1.0, 1e7, "s", "fault injection: one extra tracking loss this long after the start; -1 = none"),
+    field::boolean("random_initial_yaw", &VoConfig::random_initial_yaw, "a new segment starts at a random yaw (false: yaw 0)"),
 };
+constexpr auto kVoParams = param_specs(kVoFields);
 constexpr ParamSection kVoSchema[] = {{"visual_odometry", kVoParams, "simulated monocular visual odometry"}};
 
 Result<VoConfig> vo_from(const Result<Config>& c, std::string_view origin) {
   if (!c) return c.error();
   const SectionView v(c.value(), "visual_odometry");
-  VoConfig o;
-  o.rate_hz = v.real("rate_hz");
-  o.scale_min = v.real("scale_min");
-  o.scale_max = v.real("scale_max");
-  o.scale_drift_per_s = v.real("scale_drift_per_s");
-  o.yaw_drift_rad_per_s = v.real("yaw_drift_rad_per_s");
-  o.position_noise_m = v.real("position_noise_m");
-  o.rotation_noise_rad = v.real("rotation_noise_rad");
-  o.tracking_loss_rate_per_s = v.real("tracking_loss_rate_per_s");
-  o.tracking_loss_duration_s = v.real("tracking_loss_duration_s");
-  o.forced_loss_at_s = v.real("forced_loss_at_s");
-  o.random_initial_yaw = v.boolean("random_initial_yaw");
+  const VoConfig o = load_params(v, kVoFields);
   if (o.scale_min > o.scale_max)
     return model_config_error(origin, "key 'visual_odometry.scale_min' (" + std::to_string(o.scale_min) +
                                           ") must not exceed 'visual_odometry.scale_max' (" +
