@@ -4,36 +4,29 @@
 #include <algorithm>
 #include <cmath>
 
+#include "airground/platform/param_binding.hpp"
 #include "airground/sim/model_params.hpp"
 
 namespace ag::sim {
 
 namespace {
-constexpr ParamSpec kAttitudeParams[] = {
-    ParamSpec::real("rate_hz", 50.0, 1.0, 400.0, "Hz", "ATTITUDE rate"),
-    ParamSpec::real("roll_pitch_bias_sigma_rad", 0.0035, 0.0, 0.5, "rad", "stationary std of the roll and pitch bias"),
-    ParamSpec::real("roll_pitch_bias_tau_s", 60.0, 0.1, 1e6, "s", "correlation time of the roll and pitch bias"),
-    ParamSpec::real("yaw_bias_sigma_rad", 0.026, 0.0, 1.0, "rad", "stationary std of the yaw bias"),
-    ParamSpec::real("yaw_bias_tau_s", 300.0, 0.1, 1e6, "s", "correlation time of the yaw bias"),
-    ParamSpec::real("roll_pitch_noise_rad", 0.00003, 0.0, 0.5, "rad", "white noise on roll and pitch per sample"),
-    ParamSpec::real("yaw_noise_rad", 0.00003, 0.0, 0.5, "rad", "white noise on yaw per sample"),
-    ParamSpec::real("rate_noise_rad_s", 0.005, 0.0, 1.0, "rad/s", "white noise on each body rate"),
+constexpr ParamField<AttitudeConfig> kAttitudeFields[] = {
+    field::real("rate_hz", &AttitudeConfig::rate_hz, 1.0, 400.0, "Hz", "ATTITUDE rate"),
+    field::real("roll_pitch_bias_sigma_rad", &AttitudeConfig::roll_pitch_bias_sigma_rad, 0.0, 0.5, "rad", "stationary std of the roll and pitch bias"),
+    field::real("roll_pitch_bias_tau_s", &AttitudeConfig::roll_pitch_bias_tau_s, 0.1, 1e6, "s", "correlation time of the roll and pitch bias"),
+    field::real("yaw_bias_sigma_rad", &AttitudeConfig::yaw_bias_sigma_rad, 0.0, 1.0, "rad", "stationary std of the yaw bias"),
+    field::real("yaw_bias_tau_s", &AttitudeConfig::yaw_bias_tau_s, 0.1, 1e6, "s", "correlation time of the yaw bias"),
+    field::real("roll_pitch_noise_rad", &AttitudeConfig::roll_pitch_noise_rad, 0.0, 0.5, "rad", "white noise on roll and pitch per sample"),
+    field::real("yaw_noise_rad", &AttitudeConfig::yaw_noise_rad, 0.0, 0.5, "rad", "white noise on yaw per sample"),
+    field::real("rate_noise_rad_s", &AttitudeConfig::rate_noise_rad_s, 0.0, 1.0, "rad/s", "white noise on each body rate"),
 };
+constexpr auto kAttitudeParams = param_specs(kAttitudeFields);
 constexpr ParamSection kAttitudeSchema[] = {{"attitude", kAttitudeParams, "simulated autopilot attitude (PX4 EKF2 over MAVLink)"}};
 
 Result<AttitudeConfig> attitude_from(const Result<Config>& c) {
   if (!c) return c.error();
   const SectionView v(c.value(), "attitude");
-  AttitudeConfig a;
-  a.rate_hz = v.real("rate_hz");
-  a.roll_pitch_bias_sigma_rad = v.real("roll_pitch_bias_sigma_rad");
-  a.roll_pitch_bias_tau_s = v.real("roll_pitch_bias_tau_s");
-  a.yaw_bias_sigma_rad = v.real("yaw_bias_sigma_rad");
-  a.yaw_bias_tau_s = v.real("yaw_bias_tau_s");
-  a.roll_pitch_noise_rad = v.real("roll_pitch_noise_rad");
-  a.yaw_noise_rad = v.real("yaw_noise_rad");
-  a.rate_noise_rad_s = v.real("rate_noise_rad_s");
-  return a;
+  return load_params(v, kAttitudeFields);
 }
 }  // namespace
 
