@@ -4,45 +4,34 @@
 #include <algorithm>
 #include <cmath>
 
+#include "airground/platform/param_binding.hpp"
 #include "airground/sim/model_params.hpp"
 
 namespace ag::sim {
 
 namespace {
 
-constexpr ParamSpec kDriveParams[] = {
-    ParamSpec::real("track_width_m", 0.37, 0.05, 5.0, "m", "distance between left and right wheels"),
-    ParamSpec::real("wheel_radius_m", 0.098, 0.01, 2.0, "m", "wheel radius"),
-    ParamSpec::real("max_wheel_speed_rad_s", 2.0 / 0.098, 0.1, 1000.0, "rad/s", "wheel speed limit"),
-    ParamSpec::real("max_linear_accel_mps2", 2.0, 0.01, 100.0, "m/s^2", "linear acceleration limit"),
-    ParamSpec::real("max_angular_accel_radps2", 8.0, 0.01, 1000.0, "rad/s^2", "angular acceleration limit"),
-    ParamSpec::real("footprint_radius_m", 0.3, 0.01, 10.0, "m", "radius of the collision disc"),
-    ParamSpec::real("max_step_height_m", 0.25, 0.0, 10.0, "m", "highest climbable rise of the surface"),
-    ParamSpec::real("command_timeout_s", 0.5, 0.0, 60.0, "s", "stop when no command came for this long, 0 = never"),
-    ParamSpec::boolean("block_building", true, "buildings stop the robot"),
-    ParamSpec::boolean("block_tree", true, "trees stop the robot"),
-    ParamSpec::boolean("block_vehicle", true, "vehicles stop the robot"),
-    ParamSpec::boolean("block_water", true, "water stops the robot"),
+constexpr ParamField<DiffDriveConfig> kDriveFields[] = {
+    field::real("track_width_m", &DiffDriveConfig::track_width_m, 0.05, 5.0, "m", "distance between left and right wheels"),
+    field::real("wheel_radius_m", &DiffDriveConfig::wheel_radius_m, 0.01, 2.0, "m", "wheel radius"),
+    field::real("max_wheel_speed_rad_s", &DiffDriveConfig::max_wheel_speed_rad_s, 0.1, 1000.0, "rad/s", "wheel speed limit"),
+    field::real("max_linear_accel_mps2", &DiffDriveConfig::max_linear_accel_mps2, 0.01, 100.0, "m/s^2", "linear acceleration limit"),
+    field::real("max_angular_accel_radps2", &DiffDriveConfig::max_angular_accel_radps2, 0.01, 1000.0, "rad/s^2", "angular acceleration limit"),
+    field::real("footprint_radius_m", &DiffDriveConfig::footprint_radius_m, 0.01, 10.0, "m", "radius of the collision disc"),
+    field::real("max_step_height_m", &DiffDriveConfig::max_step_height_m, 0.0, 10.0, "m", "highest climbable rise of the surface"),
+    field::real("command_timeout_s", &DiffDriveConfig::command_timeout_s, 0.0, 60.0, "s", "stop when no command came for this long, 0 = never"),
+    field::boolean("block_building", &DiffDriveConfig::block_building, "buildings stop the robot"),
+    field::boolean("block_tree", &DiffDriveConfig::block_tree, "trees stop the robot"),
+    field::boolean("block_vehicle", &DiffDriveConfig::block_vehicle, "vehicles stop the robot"),
+    field::boolean("block_water", &DiffDriveConfig::block_water, "water stops the robot"),
 };
+constexpr auto kDriveParams = param_specs(kDriveFields);
 constexpr ParamSection kDriveSchema[] = {{"diff_drive", kDriveParams, "differential-drive ground robot"}};
 
 Result<DiffDriveConfig> drive_from(const Result<Config>& c) {
   if (!c) return c.error();
   const SectionView v(c.value(), "diff_drive");
-  DiffDriveConfig d;
-  d.track_width_m = v.real("track_width_m");
-  d.wheel_radius_m = v.real("wheel_radius_m");
-  d.max_wheel_speed_rad_s = v.real("max_wheel_speed_rad_s");
-  d.max_linear_accel_mps2 = v.real("max_linear_accel_mps2");
-  d.max_angular_accel_radps2 = v.real("max_angular_accel_radps2");
-  d.footprint_radius_m = v.real("footprint_radius_m");
-  d.max_step_height_m = v.real("max_step_height_m");
-  d.command_timeout_s = v.real("command_timeout_s");
-  d.block_building = v.boolean("block_building");
-  d.block_tree = v.boolean("block_tree");
-  d.block_vehicle = v.boolean("block_vehicle");
-  d.block_water = v.boolean("block_water");
-  return d;
+  return load_params(v, kDriveFields);
 }
 
 double clamp_abs(double v, double lim) noexcept { return std::clamp(v, -lim, lim); }
