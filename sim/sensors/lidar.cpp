@@ -13,6 +13,7 @@
 #include <stdexcept>
 
 #include "airground/platform/config.hpp"
+#include "airground/platform/param_binding.hpp"
 #include "airground/messages/geometry.hpp"
 #include "airground/platform/rng.hpp"
 
@@ -22,25 +23,21 @@ namespace {
 
 using nlohmann::json;
 
-constexpr LidarNoise kDefaultNoise{};
 constexpr std::size_t kMaxRings = 256;  // the metadata loader's limit; the fast scan's stack arrays
 constexpr double kInfinity = std::numeric_limits<double>::infinity();
-constexpr ParamSpec kNoiseParams[] = {
-    ParamSpec::real("range_sigma_m", kDefaultNoise.range_sigma_m, 0.0, 1.0, "m", "Gaussian range noise"),
-    ParamSpec::real("min_range_m", kDefaultNoise.min_range_m, 0.0, 10.0, "m", "closer returns are dropped"),
-    ParamSpec::real("max_range_m", kDefaultNoise.max_range_m, 1.0, 1000.0, "m", "nothing is seen beyond"),
-    ParamSpec::real("dropout_prob", kDefaultNoise.dropout_prob, 0.0, 1.0, "", "chance a return is lost"),
+constexpr ParamField<LidarNoise> kNoiseFields[] = {
+    field::real("range_sigma_m", &LidarNoise::range_sigma_m, 0.0, 1.0, "m", "Gaussian range noise"),
+    field::real("min_range_m", &LidarNoise::min_range_m, 0.0, 10.0, "m", "closer returns are dropped"),
+    field::real("max_range_m", &LidarNoise::max_range_m, 1.0, 1000.0, "m", "nothing is seen beyond"),
+    field::real("dropout_prob", &LidarNoise::dropout_prob, 0.0, 1.0, "", "chance a return is lost"),
 };
+constexpr auto kNoiseParams = param_specs(kNoiseFields);
 constexpr ParamSection kNoiseSchema[] = {{"lidar_noise", kNoiseParams, "simulated LiDAR range noise"}};
 
 Result<LidarNoise> noise_from(const Result<Config>& cfg, std::string_view origin) {
   if (!cfg) return cfg.error();
   const SectionView s(cfg.value(), "lidar_noise");
-  LidarNoise n;
-  n.range_sigma_m = s.real("range_sigma_m");
-  n.min_range_m = s.real("min_range_m");
-  n.max_range_m = s.real("max_range_m");
-  n.dropout_prob = s.real("dropout_prob");
+  const LidarNoise n = load_params(s, kNoiseFields);
   if (auto st = n.check(); !st)
     return Error::make(ErrorCode::kConfig, "config error: " + std::string(origin) + ": " + st.error().message);
   return n;
