@@ -3,41 +3,33 @@
 
 #include <cmath>
 
+#include "airground/platform/param_binding.hpp"
 #include "airground/sim/model_params.hpp"
 
 namespace ag::sim {
 
 namespace {
 
-constexpr ParamSpec kOdoParams[] = {
-    ParamSpec::text("mode", "wheels", "wheels|truth_plus_noise", "wheel encoders, or the paper's truth plus noise"),
-    ParamSpec::real("wheel_radius_m", 0.098, 0.01, 2.0, "m", "nominal wheel radius used by the odometry"),
-    ParamSpec::real("track_width_m", 0.37, 0.05, 5.0, "m", "nominal track width used by the odometry"),
-    ParamSpec::real("wheel_radius_error", 0.0005, 0.0, 0.2, "", "std of each wheel's relative radius error (drawn once)"),
-    ParamSpec::real("track_width_error", 0.01, 0.0, 0.5, "", "std of the relative track-width error (drawn once)"),
-    ParamSpec::real("slip_sigma_per_sqrt_m", 0.005, 0.0, 1.0, "m/sqrt(m)", "white distance error per wheel"),
-    ParamSpec::real("yaw_drift_rad_per_s", 0.0, -1.0, 1.0, "rad/s", "yaw-rate bias while moving"),
-    ParamSpec::real("yaw_drift_at_rest_rad_per_s", 0.0, -1.0, 1.0, "rad/s", "yaw-rate bias while standing still"),
-    ParamSpec::real("sigma_xy_m", 0.01, 0.0, 10.0, "m", "truth_plus_noise: std of dx, dy per step while moving"),
-    ParamSpec::real("sigma_yaw_rad", 0.002, 0.0, 1.0, "rad", "truth_plus_noise: std of dyaw per step while moving"),
+constexpr ParamField<WheelOdometryConfig> kOdoFields[] = {
+    field::choice<&WheelOdometryConfig::mode>("mode", "wheels|truth_plus_noise", {OdometryMode::kWheels, OdometryMode::kTruthPlusNoise},
+                                               "wheel encoders, or the paper's truth plus noise"),
+    field::real("wheel_radius_m", &WheelOdometryConfig::wheel_radius_m, 0.01, 2.0, "m", "nominal wheel radius used by the odometry"),
+    field::real("track_width_m", &WheelOdometryConfig::track_width_m, 0.05, 5.0, "m", "nominal track width used by the odometry"),
+    field::real("wheel_radius_error", &WheelOdometryConfig::wheel_radius_error, 0.0, 0.2, "", "std of each wheel's relative radius error (drawn once)"),
+    field::real("track_width_error", &WheelOdometryConfig::track_width_error, 0.0, 0.5, "", "std of the relative track-width error (drawn once)"),
+    field::real("slip_sigma_per_sqrt_m", &WheelOdometryConfig::slip_sigma_per_sqrt_m, 0.0, 1.0, "m/sqrt(m)", "white distance error per wheel"),
+    field::real("yaw_drift_rad_per_s", &WheelOdometryConfig::yaw_drift_rad_per_s, -1.0, 1.0, "rad/s", "yaw-rate bias while moving"),
+    field::real("yaw_drift_at_rest_rad_per_s", &WheelOdometryConfig::yaw_drift_at_rest_rad_per_s, -1.0, 1.0, "rad/s", "yaw-rate bias while standing still"),
+    field::real("sigma_xy_m", &WheelOdometryConfig::sigma_xy_m, 0.0, 10.0, "m", "truth_plus_noise: std of dx, dy per step while moving"),
+    field::real("sigma_yaw_rad", &WheelOdometryConfig::sigma_yaw_rad, 0.0, 1.0, "rad", "truth_plus_noise: std of dyaw per step while moving"),
 };
+constexpr auto kOdoParams = param_specs(kOdoFields);
 constexpr ParamSection kOdoSchema[] = {{"wheel_odometry", kOdoParams, "simulated ground-robot odometry"}};
 
 Result<WheelOdometryConfig> odo_from(const Result<Config>& c) {
   if (!c) return c.error();
   const SectionView v(c.value(), "wheel_odometry");
-  WheelOdometryConfig o;
-  o.mode = v.text("mode") == "wheels" ? OdometryMode::kWheels : OdometryMode::kTruthPlusNoise;
-  o.wheel_radius_m = v.real("wheel_radius_m");
-  o.track_width_m = v.real("track_width_m");
-  o.wheel_radius_error = v.real("wheel_radius_error");
-  o.track_width_error = v.real("track_width_error");
-  o.slip_sigma_per_sqrt_m = v.real("slip_sigma_per_sqrt_m");
-  o.yaw_drift_rad_per_s = v.real("yaw_drift_rad_per_s");
-  o.yaw_drift_at_rest_rad_per_s = v.real("yaw_drift_at_rest_rad_per_s");
-  o.sigma_xy_m = v.real("sigma_xy_m");
-  o.sigma_yaw_rad = v.real("sigma_yaw_rad");
-  return o;
+  return load_params(v, kOdoFields);
 }
 
 constexpr double kStill = 1e-9;  // [m], [rad]: below this a step is standing still
