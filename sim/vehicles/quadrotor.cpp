@@ -5,38 +5,31 @@
 #include <cmath>
 #include <utility>
 
+#include "airground/platform/param_binding.hpp"
 #include "airground/sim/model_params.hpp"
 
 namespace ag::sim {
 
 namespace {
 
-constexpr ParamSpec kQuadParams[] = {
-    ParamSpec::real("cruise_speed_mps", 5.0, 0.1, 30.0, "m/s", "default speed toward a waypoint"),
-    ParamSpec::real("max_speed_mps", 15.0, 0.1, 30.0, "m/s", "limit of any waypoint speed"),
-    ParamSpec::real("max_accel_mps2", 2.0, 0.1, 20.0, "m/s^2", "limit on the change of velocity"),
-    ParamSpec::real("max_vertical_speed_mps", 3.0, 0.1, 20.0, "m/s", "climb and descent limit"),
-    ParamSpec::real("max_yaw_rate_rad_s", 1.0, 0.01, 10.0, "rad/s", "yaw rate limit"),
-    ParamSpec::real("waypoint_tolerance_m", 1.0, 0.01, 100.0, "m", "a waypoint is reached within this distance"),
-    ParamSpec::text("yaw_mode", "motion", "motion|fixed", "nose along the motion, or a fixed yaw"),
-    ParamSpec::real("fixed_yaw_rad", 0.0, -kPi, kPi, "rad", "yaw in fixed mode"),
-    ParamSpec::boolean("tilt_from_acceleration", true, "roll and pitch follow the horizontal acceleration"),
+constexpr ParamField<QuadrotorConfig> kQuadFields[] = {
+    field::real("cruise_speed_mps", &QuadrotorConfig::cruise_speed_mps, 0.1, 30.0, "m/s", "default speed toward a waypoint"),
+    field::real("max_speed_mps", &QuadrotorConfig::max_speed_mps, 0.1, 30.0, "m/s", "limit of any waypoint speed"),
+    field::real("max_accel_mps2", &QuadrotorConfig::max_accel_mps2, 0.1, 20.0, "m/s^2", "limit on the change of velocity"),
+    field::real("max_vertical_speed_mps", &QuadrotorConfig::max_vertical_speed_mps, 0.1, 20.0, "m/s", "climb and descent limit"),
+    field::real("max_yaw_rate_rad_s", &QuadrotorConfig::max_yaw_rate_rad_s, 0.01, 10.0, "rad/s", "yaw rate limit"),
+    field::real("waypoint_tolerance_m", &QuadrotorConfig::waypoint_tolerance_m, 0.01, 100.0, "m", "a waypoint is reached within this distance"),
+    field::choice<&QuadrotorConfig::yaw_mode>("yaw_mode", "motion|fixed", {YawMode::kMotion, YawMode::kFixed}, "nose along the motion, or a fixed yaw"),
+    field::real("fixed_yaw_rad", &QuadrotorConfig::fixed_yaw_rad, -kPi, kPi, "rad", "yaw in fixed mode"),
+    field::boolean("tilt_from_acceleration", &QuadrotorConfig::tilt_from_acceleration, "roll and pitch follow the horizontal acceleration"),
 };
+constexpr auto kQuadParams = param_specs(kQuadFields);
 constexpr ParamSection kQuadSchema[] = {{"quadrotor", kQuadParams, "survey quadrotor"}};
 
 Result<QuadrotorConfig> quad_from(const Result<Config>& c, std::string_view origin) {
   if (!c) return c.error();
   const SectionView v(c.value(), "quadrotor");
-  QuadrotorConfig q;
-  q.cruise_speed_mps = v.real("cruise_speed_mps");
-  q.max_speed_mps = v.real("max_speed_mps");
-  q.max_accel_mps2 = v.real("max_accel_mps2");
-  q.max_vertical_speed_mps = v.real("max_vertical_speed_mps");
-  q.max_yaw_rate_rad_s = v.real("max_yaw_rate_rad_s");
-  q.waypoint_tolerance_m = v.real("waypoint_tolerance_m");
-  q.yaw_mode = v.text("yaw_mode") == "fixed" ? YawMode::kFixed : YawMode::kMotion;
-  q.fixed_yaw_rad = v.real("fixed_yaw_rad");
-  q.tilt_from_acceleration = v.boolean("tilt_from_acceleration");
+  const QuadrotorConfig q = load_params(v, kQuadFields);
   if (q.cruise_speed_mps > q.max_speed_mps)
     return model_config_error(origin, "key 'quadrotor.cruise_speed_mps' must not exceed 'quadrotor.max_speed_mps'");
   return q;
