@@ -110,7 +110,7 @@ DecodeError MissionManager::on_record(comms::RobotId origin, comms::Topic topic,
         }
       if (!known) {
         if (n_failures_ == kMaxFailures) ++c_.failures_overflow;
-        failures_[next_failure_] = Failure{origin, f.region_id, now};
+        failures_[next_failure_] = Failure{origin, f.region_id, now, f.reason};
         next_failure_ = (next_failure_ + 1) % kMaxFailures;
         n_failures_ = std::min(kMaxFailures, n_failures_ + 1);
       }
@@ -213,8 +213,12 @@ bool MissionManager::choose(TimeNs now) noexcept {
     }
     if (taken) continue;
     bool failed_recently = false;
-    for (std::size_t k = 0; k < n_failures_ && !failed_recently; ++k)
-      failed_recently = failures_[k].origin == p_.self && failures_[k].region == r.id && now - failures_[k].at < from_seconds(p_.retry_after_s);
+    for (std::size_t k = 0; k < n_failures_ && !failed_recently; ++k) {
+      const Failure& f = failures_[k];
+      if (f.origin != p_.self || f.region != r.id) continue;
+      const bool no_new_map = f.reason == FailureReason::kNoRoute && last_map_data_ <= f.at;
+      failed_recently = now - f.at < from_seconds(p_.retry_after_s) || no_new_map;
+    }
     if (failed_recently) continue;
     bool deferred = false;
     for (const Deferred& df : deferred_) deferred = deferred || (df.region == r.id && now < df.until);
@@ -253,7 +257,7 @@ void MissionManager::fail(FailureReason why, TimeNs now) noexcept {
     o->size = static_cast<std::uint32_t>(encode(f, o->payload));
   }
   if (n_failures_ == kMaxFailures) ++c_.failures_overflow;
-  failures_[next_failure_] = Failure{p_.self, region_, now};
+  failures_[next_failure_] = Failure{p_.self, region_, now, why};
   next_failure_ = (next_failure_ + 1) % kMaxFailures;
   n_failures_ = std::min(kMaxFailures, n_failures_ + 1);
   cancel_goal();

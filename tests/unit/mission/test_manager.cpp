@@ -213,6 +213,61 @@ TEST(Manager, ARobotDoesNotRetryItsOwnFailureBeforeRetryAfter) {
   double again = -1;
   const double failed = t.seconds();
   while (t.seconds() < failed + 60 && again < 0) {
+    if (std::abs(t.seconds() - (failed + 5)) < 0.1) t.bots[0].m->on_map_data(t.now);  // a tile: the way may be mapped now
+    t.step();
+    if (t.bots[0].m->current_region() == 5U) again = t.seconds();
+  }
+  ASSERT_GT(again, 0);
+  EXPECT_NEAR(again - failed, 30.0, 1.0);
+}
+
+// A robot that found no route to a region (unmapped ground on the way, out of radio range of the map)
+// does not retry it blindly: with nothing else left it goes home, where the map comes from, and tries
+// again once new map data has come.
+TEST(Manager, NoRouteIsRetriedOnlyAfterNewMapDataAndTheRobotGoesHomeForIt) {
+  Team t;
+  ManagerParams p = quick();  // idle_return_s = 10
+  p.retry_after_s = 30;
+  t.add(1, 1, 0, 0, p);
+  t.region(5, 60, 0);
+  t.publish_regions();
+  t.bots[0].no_route = true;
+  for (int i = 0; i < 4; ++i) t.step();
+  ASSERT_EQ(t.bots[0].m->status().failed_own, 1U);
+  t.bots[0].no_route = false;
+  for (int i = 0; i < 5 * 70; ++i) t.step();  // over twice retry_after_s, no map data
+  EXPECT_EQ(t.bots[0].m->status().failed_own, 1U);
+  EXPECT_EQ(t.bots[0].m->own_visited().count, 0) << "not retried (a retry at 30 s would have got there by 60 s)";
+  EXPECT_NE(t.bots[0].m->current_region(), 5U) << "no new map: not retried after retry_after_s";
+  EXPECT_TRUE(t.bots[0].m->state() == ClaimState::kReturning || t.bots[0].m->state() == ClaimState::kDone)
+      << "nothing it can do: home, where the map comes from";
+  t.bots[0].m->on_map_data(t.now);
+  t.step();
+  EXPECT_EQ(t.bots[0].m->current_region(), 5U) << "new map data: it tries again";
+  for (int i = 0; i < 5 * 120 && t.bots[0].m->own_visited().count == 0; ++i) t.step();
+  EXPECT_EQ(t.bots[0].m->own_visited().count, 1);
+}
+
+// Failures other than no route (here: no progress) are retried after retry_after_s alone.
+TEST(Manager, NoProgressIsRetriedAfterRetryAfterWithoutNewMapData) {
+  Team t;
+  ManagerParams p = quick();
+  p.retry_after_s = 30;
+  p.no_progress_timeout_s = 5;
+  p.idle_return_s = 1000;
+  t.add(1, 1, 0, 0, p);
+  t.region(5, 30, 0);
+  t.publish_regions();
+  t.bots[0].speed = 0;  // it cannot get closer
+  double failed = -1;
+  for (int i = 0; i < 5 * 20 && failed < 0; ++i) {
+    t.step();
+    if (t.bots[0].m->status().failed_own == 1U) failed = t.seconds();
+  }
+  ASSERT_GT(failed, 0);
+  t.bots[0].speed = 2.0;
+  double again = -1;
+  while (t.seconds() < failed + 60 && again < 0) {
     t.step();
     if (t.bots[0].m->current_region() == 5U) again = t.seconds();
   }

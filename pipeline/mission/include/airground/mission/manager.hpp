@@ -37,7 +37,11 @@ struct ManagerParams {
   int max_no_route{5};                 // failed plans in a row for the current goal: failure
   double no_progress_timeout_s{90.0};  // no progress_min_m closer in this long: failure
   double progress_min_m{2.0};
-  double retry_after_s{120.0};         // a region this robot failed is not chosen by it again before this
+  // A region this robot failed is not chosen by it again before this; one it had no route to (no free
+  // cell near it, or none on the way: unmapped ground) not before new map data has come either. With
+  // nothing else left the robot goes idle and returns to its start, where the map comes from (the
+  // quadrotor hovers over it after its survey; out of radio range the robot would otherwise retry forever).
+  double retry_after_s{120.0};
   double claim_timeout_s{20.0};        // a robot not heard this long: its claim is void
   double idle_return_s{60.0};          // nothing left and no new region this long: return to start
   double mission_end_s{0.0};           // > 0: return to start this long after the first tick regardless
@@ -134,6 +138,7 @@ class MissionManager {
     comms::RobotId origin{comms::kNoRobot};
     std::uint32_t region{0};
     TimeNs at{0};
+    FailureReason reason{FailureReason::kNoRoute};
   };
   Peer* peer(comms::RobotId id, bool create) noexcept;
   [[nodiscard]] bool alive(const Peer& p, TimeNs now) const noexcept;
