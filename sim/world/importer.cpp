@@ -282,6 +282,14 @@ Result<cv::Mat> classes_from_values(const cv::Mat& values, const Legend& legend,
   return out;
 }
 
+// The ground robots' staging pad keeps this far inside the world's edges where the map has room: the
+// quadrotor's survey leaves a border out (the simulator's survey_margin_m, 20 m, so that its camera stays
+// over the world), and robots that start in it start off the map they localize in (an imported 200 m
+// map's pad 5 m from its edge never converged with the online map; with the true map it did).
+constexpr double kStagingInsetM = 30.0;
+
+// The ground robots' staging pad: the most south-westerly open cell (road or dirt) with room around it,
+// kStagingInsetM inside every edge when the world has such a cell, else anywhere.
 Pose2 find_staging(const World& w) {
   const GridGeometry& g = w.header.grid;
   cv::Mat open = (w.class_id == raw(ClassId::kRoad)) | (w.class_id == raw(ClassId::kDirt));
@@ -291,17 +299,22 @@ Pose2 find_staging(const World& w) {
   double most = 0;
   cv::minMaxLoc(room, nullptr, &most);
   const float wanted = static_cast<float>(std::min(3.0 / g.resolution, 0.8 * most));
-  double best = std::numeric_limits<double>::max();
-  Pose2 pose;
-  for (int r = 0; r < g.height; ++r) {
-    for (int c = 0; c < g.width; ++c) {
-      if (room.at<float>(r, c) < wanted) continue;
-      const double x = g.x_of(c), y = g.y_of(r);
-      const double score = (x - g.origin_x) + (y - (g.origin_y - g.size_y()));
-      if (score < best) best = score, pose = Pose2{x, y, 0.0};
+  const auto south_westerly = [&](double inset_m) -> std::optional<Pose2> {
+    double best = std::numeric_limits<double>::max();
+    std::optional<Pose2> pose;
+    for (int r = 0; r < g.height; ++r) {
+      for (int c = 0; c < g.width; ++c) {
+        if (room.at<float>(r, c) < wanted) continue;
+        const double x = g.x_of(c), y = g.y_of(r);
+        const double from_west = x - g.origin_x, from_south = y - (g.origin_y - g.size_y());
+        if (std::min({from_west, from_south, g.size_x() - from_west, g.size_y() - from_south}) < inset_m) continue;
+        if (from_west + from_south < best) best = from_west + from_south, pose = Pose2{x, y, 0.0};
+      }
     }
-  }
-  return pose;
+    return pose;
+  };
+  if (auto inside = south_westerly(kStagingInsetM)) return *inside;
+  return south_westerly(0.0).value_or(Pose2{});
 }
 
 }  // namespace

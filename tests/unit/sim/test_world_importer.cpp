@@ -186,6 +186,30 @@ TEST(WorldImporter, ValueRaster) {
   EXPECT_EQ(cv::countNonZero(back->class_id != w.class_id), 0);
 }
 
+// The staging pad keeps 30 m inside the edges when the map has room there: the quadrotor's survey leaves a
+// 20 m border out, and robots starting in it would start off their map.
+TEST(WorldImporter, StagingPadKeepsClearOfTheBorderTheSurveyLeavesOut) {
+  const fs::path d = dir_for("staging");
+  cv::Mat v(200, 200, CV_8UC1, cv::Scalar(2));  // 100 m x 100 m of grass at 0.5 m
+  v(cv::Rect(0, 0, 8, 200)).setTo(1);           // a road along the west edge (0-4 m)
+  v(cv::Rect(0, 120, 200, 16)).setTo(1);        // an 8 m road across, 32-40 m from the south edge
+  ImportOptions o;
+  o.classes_path = (d / "classes.png").string();
+  ASSERT_TRUE(cv::imwrite(o.classes_path, v));
+  o.legend_path = write_text(d / "legend.yaml", kValueLegend);
+  o.resolution_m_per_px = 0.5;
+  o.datum = Datum{47.0, 8.0, 400.0};
+  const auto r = import_world(o);
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  const World& w = r.value();
+  const GridGeometry& g = w.grid();
+  const double from_west = w.header.staging.x - g.origin_x, from_south = w.header.staging.y - (g.origin_y - g.size_y());
+  EXPECT_EQ(w.class_at_xy(w.header.staging.x, w.header.staging.y), ClassId::kRoad);
+  EXPECT_GE(from_west, 30.0) << "not on the west edge's road, inside the border";
+  EXPECT_LE(from_west, 32.0) << "the most south-westerly cell that is clear of it";
+  EXPECT_NEAR(from_south, 36.0, 2.5) << "on the cross road";
+}
+
 TEST(WorldImporter, SixteenBitGeoTiffTakesItsResolutionFromTheGeotransform) {
   const fs::path d = dir_for("geotiff16");
   cv::Mat v(30, 50, CV_16UC1, cv::Scalar(200));
