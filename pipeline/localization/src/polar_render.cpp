@@ -8,13 +8,9 @@
 namespace ag::loc {
 
 PolarRenderParams load_polar_render_params(const SectionView& s) {
-  PolarRenderParams p;
-  p.angle_bins = static_cast<int>(s.integer("render_angle_bins"));
-  p.range_bins = static_cast<int>(s.integer("render_range_bins"));
-  p.min_range_m = s.real("render_min_range_m");
-  p.max_height_m = s.real("render_max_height_m");
-  p.max_count_per_bin = static_cast<int>(s.integer("render_max_count_per_bin"));
-  p.sensor_in_body = Pose2{s.real("render_sensor_x_m"), s.real("render_sensor_y_m"), s.real("render_sensor_yaw_rad")};
+  PolarRenderParams p = load_params(s, kPolarRenderFields);
+  const PolarRenderMount m = load_params(s, kPolarRenderMountFields);
+  p.sensor_in_body = Pose2{m.render_sensor_x_m, m.render_sensor_y_m, m.render_sensor_yaw_rad};
   return p;
 }
 

@@ -31,16 +31,18 @@ Status LocalizationStage::init(StageContext& ctx) {
     return Error::make(ErrorCode::kConfig, "config error: " + where + "pf_max_particles must be >= pf_min_particles");
   if (p.filter.range_bin_max_m < p.filter.range_bin_min_m)
     return Error::make(ErrorCode::kConfig, "config error: " + where + "pf_range_bin_max_m must be >= pf_range_bin_min_m");
-  geometric_ = v.text("labels") == "geometric";
+  LocalizationStageSettings own = load_params(v, kLocalizationStageOwnParams);
+  load_params(v, std::span<const ParamField<LocalizationStageSettings>>(kLocalizationLabelsParam), own);
+  geometric_ = own.labels == ScanLabels::kGeometric;
   const LocalizationChannels channels =
       geometric_ ? LocalizationChannels::two_class(1.0, 1.5, p.fields.obstacle_faces) : LocalizationChannels::per_class();
   if (geometric_) labeller_ = std::make_unique<GeometricLabeller>(p.label, 128, 2048);
   else labeller_ = std::make_unique<GroundTruthLabeller>();
   const TileExtent extent = tiles_covering(area, kMapResolutionM, kTileCells);
   fields_ = std::make_unique<ClassDistanceFields>(p.fields, channels, extent);
-  const auto seed_param = static_cast<std::uint64_t>(v.integer("seed"));
+  const auto seed_param = static_cast<std::uint64_t>(own.seed);
   loc_ = std::make_unique<SemanticLocalizer>(p, channels, seed_param != 0 ? seed_param : seed_from_name(ctx.instance));
-  tiles_per_step_ = static_cast<std::size_t>(v.integer("field_tiles_per_step"));
+  tiles_per_step_ = static_cast<std::size_t>(own.field_tiles_per_step);
 
   auto scans = ctx.channels.ring_reader(chan::kLidarScan);
   if (!scans) return scans.error();
@@ -59,10 +61,10 @@ Status LocalizationStage::init(StageContext& ctx) {
   if (!out) return out.error();
   out_ = out.value();
   msg_ = LocalizationMsg{};
-  config_init_pending_ = v.boolean("set_initial_pose");
-  config_init_.pose = Pose2{v.real("initial_x_m"), v.real("initial_y_m"), v.real("initial_yaw_rad")};
-  config_init_.sigma_xy_m = v.real("initial_sigma_m");
-  config_init_.sigma_yaw_rad = v.real("initial_sigma_yaw_rad");
+  config_init_pending_ = own.set_initial_pose;
+  config_init_.pose = Pose2{own.initial_x_m, own.initial_y_m, own.initial_yaw_rad};
+  config_init_.sigma_xy_m = own.initial_sigma_m;
+  config_init_.sigma_yaw_rad = own.initial_sigma_yaw_rad;
   return ok_status();
 }
 

@@ -10,6 +10,7 @@
 #include "airground/messages/geometry.hpp"
 #include "airground/localization/scan.hpp"
 #include "airground/platform/config.hpp"
+#include "airground/platform/param_binding.hpp"
 
 namespace ag::loc {
 
@@ -22,16 +23,23 @@ struct PolarRenderParams {
   Pose2 sensor_in_body{};     // LiDAR mount in the body frame [m, rad] (body x forward, y left)
 };
 
-inline constexpr ParamSpec kPolarRenderParamSpecs[] = {
-    ParamSpec::integer("render_angle_bins", 100, 8, 720, "bins", "angle bins over 360 deg (paper: 100)"),
-    ParamSpec::integer("render_range_bins", 25, 2, 200, "bins", "range bins (paper: 25)"),
-    ParamSpec::real("render_min_range_m", 1.0, 0.0, 20.0, "m", "returns closer than this are the robot itself"),
-    ParamSpec::real("render_max_height_m", 25.0, 0.5, 200.0, "m", "returns higher above the sensor are ignored"),
-    ParamSpec::integer("render_max_count_per_bin", 0, 0, 65535, "points", "cap of one channel's count per bin; 0 = none"),
-    ParamSpec::real("render_sensor_x_m", 0.0, -5.0, 5.0, "m", "LiDAR mount: forward offset in the body frame"),
-    ParamSpec::real("render_sensor_y_m", 0.0, -5.0, 5.0, "m", "LiDAR mount: left offset in the body frame"),
-    ParamSpec::real("render_sensor_yaw_rad", 0.0, -3.15, 3.15, "rad", "LiDAR mount: yaw in the body frame"),
+inline constexpr ParamField<PolarRenderParams> kPolarRenderFields[] = {
+    field::integer("render_angle_bins", &PolarRenderParams::angle_bins, 8, 720, "bins", "angle bins over 360 deg (paper: 100)"),
+    field::integer("render_range_bins", &PolarRenderParams::range_bins, 2, 200, "bins", "range bins (paper: 25)"),
+    field::real("render_min_range_m", &PolarRenderParams::min_range_m, 0.0, 20.0, "m", "returns closer than this are the robot itself"),
+    field::real("render_max_height_m", &PolarRenderParams::max_height_m, 0.5, 200.0, "m", "returns higher above the sensor are ignored"),
+    field::integer("render_max_count_per_bin", &PolarRenderParams::max_count_per_bin, 0, 65535, "points", "cap of one channel's count per bin; 0 = none"),
 };
+// The mount's three rows (PolarRenderParams::sensor_in_body is a Pose2, which a row cannot bind).
+struct PolarRenderMount {
+  double render_sensor_x_m{0.0}, render_sensor_y_m{0.0}, render_sensor_yaw_rad{0.0};
+};
+inline constexpr ParamField<PolarRenderMount> kPolarRenderMountFields[] = {
+    field::real("render_sensor_x_m", &PolarRenderMount::render_sensor_x_m, -5.0, 5.0, "m", "LiDAR mount: forward offset in the body frame"),
+    field::real("render_sensor_y_m", &PolarRenderMount::render_sensor_y_m, -5.0, 5.0, "m", "LiDAR mount: left offset in the body frame"),
+    field::real("render_sensor_yaw_rad", &PolarRenderMount::render_sensor_yaw_rad, -3.15, 3.15, "rad", "LiDAR mount: yaw in the body frame"),
+};
+inline constexpr auto kPolarRenderParamSpecs = param_specs(kPolarRenderFields, kPolarRenderMountFields);
 PolarRenderParams load_polar_render_params(const SectionView& s);
 
 class ScanRenderPolar {

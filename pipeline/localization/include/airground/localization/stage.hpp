@@ -35,23 +35,36 @@ struct LocalizationStageCounters {
   std::uint64_t recoveries{0};
 };
 
-inline constexpr ParamSpec kLocalizationLabelsParam[] = {
-    ParamSpec::text("labels", "gt", "gt|geometric",
-                    "scan labels: the driver's classes (simulator ground truth or a segmentation), or the paper's geometric ground/obstacle split"),
+// The stage's own parameters (the localizer's follow them in the same section).
+enum class ScanLabels : std::uint8_t { kDriver, kGeometric };
+struct LocalizationStageSettings {
+  ScanLabels labels{ScanLabels::kDriver};
+  int field_tiles_per_step{2};
+  std::int64_t seed{0};
+  bool set_initial_pose{false};
+  double initial_x_m{0.0}, initial_y_m{0.0}, initial_yaw_rad{0.0};
+  double initial_sigma_m{16.0}, initial_sigma_yaw_rad{0.5};
+};
+inline constexpr ParamField<LocalizationStageSettings> kLocalizationLabelsParam[] = {
+    field::choice<&LocalizationStageSettings::labels>(
+        "labels", "gt|geometric", {ScanLabels::kDriver, ScanLabels::kGeometric},
+        "scan labels: the driver's classes (simulator ground truth or a segmentation), or the paper's geometric ground/obstacle split"),
 };
 inline constexpr auto kLocalizationAreaFields =
     mission_area_fields("mission area in the map frame: west edge (the distance fields cover it)");
-inline constexpr ParamSpec kLocalizationStageOwnParams[] = {
-    ParamSpec::integer("field_tiles_per_step", 2, 1, 1024, "tiles", "changed map tiles folded into the distance fields per step"),
-    ParamSpec::integer("seed", 0, 0, 1'000'000'000, "", "particle filter seed; 0 = from the robot's name"),
+inline constexpr ParamField<LocalizationStageSettings> kLocalizationStageOwnParams[] = {
+    field::integer("field_tiles_per_step", &LocalizationStageSettings::field_tiles_per_step, 1, 1024, "tiles",
+                   "changed map tiles folded into the distance fields per step"),
+    field::integer("seed", &LocalizationStageSettings::seed, 0, 1'000'000'000, "", "particle filter seed; 0 = from the robot's name"),
     // A robot started from its YAML alone (no operator, no simulator) gets its guess here, like nav2
     // amcl's set_initial_pose; a later message on "initial_pose" replaces it.
-    ParamSpec::boolean("set_initial_pose", false, "start from the initial_* guess below instead of waiting for an initial_pose message"),
-    ParamSpec::real("initial_x_m", 0.0, -1e6, 1e6, "m", "initial guess (map frame): east"),
-    ParamSpec::real("initial_y_m", 0.0, -1e6, 1e6, "m", "initial guess: north"),
-    ParamSpec::real("initial_yaw_rad", 0.0, -6.3, 6.3, "rad", "initial guess: heading (0 = east, counter-clockwise)"),
-    ParamSpec::real("initial_sigma_m", 16.0, 0.5, 1000.0, "m", "how far off the initial guess may be"),
-    ParamSpec::real("initial_sigma_yaw_rad", 0.5, 0.02, 3.2, "rad", "how far off its heading may be"),
+    field::boolean("set_initial_pose", &LocalizationStageSettings::set_initial_pose,
+                   "start from the initial_* guess below instead of waiting for an initial_pose message"),
+    field::real("initial_x_m", &LocalizationStageSettings::initial_x_m, -1e6, 1e6, "m", "initial guess (map frame): east"),
+    field::real("initial_y_m", &LocalizationStageSettings::initial_y_m, -1e6, 1e6, "m", "initial guess: north"),
+    field::real("initial_yaw_rad", &LocalizationStageSettings::initial_yaw_rad, -6.3, 6.3, "rad", "initial guess: heading (0 = east, counter-clockwise)"),
+    field::real("initial_sigma_m", &LocalizationStageSettings::initial_sigma_m, 0.5, 1000.0, "m", "how far off the initial guess may be"),
+    field::real("initial_sigma_yaw_rad", &LocalizationStageSettings::initial_sigma_yaw_rad, 0.02, 3.2, "rad", "how far off its heading may be"),
 };
 // The stage's section: its own keys, then every localizer parameter.
 inline constexpr auto kLocalizationStageParams =
