@@ -6,6 +6,8 @@
 #include <cmath>
 #include <limits>
 
+#include "airground/platform/rng.hpp"
+
 namespace ag::vo {
 
 namespace {
@@ -48,13 +50,7 @@ Eigen::Matrix3d so3_exp(const Eigen::Vector3d& w) noexcept {
   return Eigen::AngleAxisd(th, w / th).toRotationMatrix();
 }
 
-std::uint64_t SampleStream::next() noexcept {
-  s_ += 0x9E3779B97F4A7C15ULL;
-  std::uint64_t z = s_;
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-  return z ^ (z >> 31);
-}
+std::uint64_t SampleStream::next() noexcept { return splitmix64(s_); }
 
 bool translation_known_rotation(std::span<const Eigen::Vector2d> x1, std::span<const Eigen::Vector2d> x2,
                                 const Eigen::Matrix3d& R21, const RansacParams& p, SampleStream& rng,
