@@ -27,12 +27,12 @@ constexpr StageSpec kUavStages[] = {
     // The nadir camera: V4L2 frames converted and resampled to 640x400 (~5 ms at 1280x800), or a
     // frame-stream recording / FIFO with its visual odometry (the simulator's HIL mode).
     {"camera", &camera::CameraStage::make, 20.0, 15'000, 40, -1, camera::CameraStage::kParams,
-     "nadir camera: V4L2 capture (or a frame-stream replay with its VO) on 'camera' and 'visual_odometry'", {}, true},
+     "nadir camera: V4L2 capture (or a frame-stream replay with its VO) on 'camera' and 'visual_odometry'", {}, true, "source=sim"},
     // The autopilot's attitude (the VO's gravity): ATTITUDE at 50 Hz over MAVLink, ~0.1 ms of parsing a step.
     {"autopilot", &mavlink::AutopilotStage::make, 50.0, 2'000, 38, -1, mavlink::AutopilotStage::kParams,
      "PX4 / ArduPilot attitude over MAVLink (TELEM2 serial, UDP onboard link or a .tlog), on 'attitude' in REP-103", {}, true},
     {"gps", &ublox::UbloxStage::make, 20.0, 2'000, 35, -1, ublox::UbloxStage::kParams,
-     "u-blox GNSS: UBX NAV-PVT (NMEA GGA fallback) from the serial port or a recording, on 'gps' in the map frame", {}, true},
+     "u-blox GNSS: UBX NAV-PVT (NMEA GGA fallback) from the serial port or a recording, on 'gps' in the map frame", {}, true, "source=sim"},
     // Monocular keyframe VO on every frame with the autopilot's attitude as gravity: ~5 ms a frame
     // (eval vo, one core here), bundle adjustment on keyframes; its own thread below the drivers.
     {"vo", &vo::VoStage::make, 10.0, 60'000, 33, -1, vo::VoStage::kParams,

@@ -28,7 +28,7 @@ constexpr StageSpec kUgvStages[] = {
     // 640 packets/s, drained at 20 Hz; the step that finishes a revolution converts 65k pixels through the
     // XYZ table and copies the scan (p99 ~10 ms on the 2-core CI machine under the HIL load).
     {"lidar", &ouster::OusterStage::make, 20.0, 12'000, 48, -1, ouster::OusterStage::kParams,
-     "Ouster LiDAR: UDP packets (or a pcap replay) assembled into revolutions on 'lidar_scan'", {}, true},
+     "Ouster LiDAR: UDP packets (or a pcap replay) assembled into revolutions on 'lidar_scan'", {}, true, "source=sim"},
     {"localization", &LocalizationStage::make, 10.0, 70'000, 40, -1, LocalizationStage::kParams,
      "LiDAR scans matched against the aerial map (particle filter), fused with wheel odometry: the robot's pose", {9.5, 14617.1, "scan matched"}},
     {"comms", &comms::CommsStage::make, 20.0, 5'000, 25, -1, comms::CommsStage::kParams,
@@ -41,7 +41,8 @@ constexpr StageSpec kUgvStages[] = {
     // The wheels: e-stop first, then the newest wheel command to the two ODrives over CAN (SocketCAN,
     // the cannelloni bridge or a replayed candump log), their encoders to 'wheel_odometry'.
     {"base", &base::BaseStage::make, 50.0, 1'000, 55, -1, base::BaseStage::kParams,
-     "e-stop, wheel commands to the motor controllers over CAN, wheel odometry, status LED", {}, true},
+     "e-stop, wheel commands to the motor controllers over CAN, wheel odometry, status LED", {}, true,
+     "can_backend=sim,estop_backend=fake,led_backend=fake"},
     // One LiDAR revolution into the local grid and the local goal: ~1-3 ms at 1024 columns.
     {"tracker", &TrackerStage::make, 10.0, 15'000, 45, -1, TrackerStage::kParams,
      "local waypoint tracker: obstacles the LiDAR sees, the local goal along the route, the reflex stop", {4.0, 2721.0, "scan tracked"}},

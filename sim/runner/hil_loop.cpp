@@ -110,7 +110,7 @@ void send_gnss_and_vo(Run& run, TimeNs now, const Pose3& qp) {
 }
 
 // Casts every ground robot's scan and sends it as one revolution of Ouster packets.
-void lidar_revolution(Run& run, TimeNs now, const std::vector<Pose3>& lidar_poses, TimeNs& next_lidar, std::vector<std::uint8_t>& pkt) {
+void lidar_revolution(Run& run, TimeNs now, const std::vector<Pose3>& lidar_poses, TimeNs& next_lidar) {
   HilResult& res = run.res;
   auto& ugvs = run.ugvs;
   for (std::size_t k = 0; k < ugvs.size(); ++k) run.lidar->scan(lidar_poses[k], run.opt.seed ^ static_cast<std::uint64_t>(now) ^ k, ugvs[k]->scan);
@@ -126,7 +126,7 @@ void lidar_revolution(Run& run, TimeNs now, const std::vector<Pose3>& lidar_pose
   }
   ++res.lidar_revolutions;
   for (std::size_t k = 0; k < ugvs.size(); ++k)
-    res.lidar_packets += send_revolution(*ugvs[k], lidar_poses[k], now, kLidarPeriod, run.labels_oracle, run.world, pkt);
+    res.lidar_packets += send_revolution(*ugvs[k], lidar_poses[k], now, kLidarPeriod, run.labels_oracle, run.world);
 }
 
 // The mission as the base station sees it; true once every ground robot has been done for 3 s (a few
@@ -254,7 +254,6 @@ void sensor_loop(Run& run) {
   run.t0 = monotonic_now();
   const TimeNs t0 = run.t0;
   SensorClock due{t0 + kNsPerS, t0 + 2 * kNsPerS, t0 + 5 * kNsPerS, t0, t0};
-  std::vector<std::uint8_t> pkt(ouster::kMaxPacketSize);
   const TimeNs deadline = t0 + static_cast<TimeNs>(run.opt.max_duration_s * 1e9);
   while (true) {
     const TimeNs now = monotonic_now();
@@ -270,7 +269,7 @@ void sensor_loop(Run& run) {
       record_truth(run, qp, lidar_poses);
     }
     send_gnss_and_vo(run, now, qp);
-    if (now >= due.next_lidar) lidar_revolution(run, now, lidar_poses, due.next_lidar, pkt);
+    if (now >= due.next_lidar) lidar_revolution(run, now, lidar_poses, due.next_lidar);
     if (now >= due.next_state) {
       due.next_state += kStatePeriod;
       if (poll_base_state(run, now, due.done_seen)) {

@@ -106,7 +106,7 @@ Settings common_settings(const Run& run, int id, const std::string& name, std::s
       {"comms.journal", ""}, {"comms.port", std::to_string(run.gossip[node])}, {"comms.broadcast", ""}, {"comms.peers", peers}};
 }
 
-Settings ugv_shared_settings(const Run& run, const DiffDriveConfig& dd) {
+Settings ugv_shared_settings(const Run& run) {
   const mission::Area a = world_area(run.world);
   const mission::MissionParameters& mp = run.mf.params;
   return Settings{
@@ -114,9 +114,7 @@ Settings ugv_shared_settings(const Run& run, const DiffDriveConfig& dd) {
       {"localization.labels", run.labels_oracle ? "gt" : "geometric"},
       {"localization.area_x0_m", num(a.x0)}, {"localization.area_y0_m", num(a.y0)}, {"localization.area_x1_m", num(a.x1)}, {"localization.area_y1_m", num(a.y1)},
       {"planner.area_x0_m", num(a.x0)}, {"planner.area_y0_m", num(a.y0)}, {"planner.area_x1_m", num(a.x1)}, {"planner.area_y1_m", num(a.y1)},
-      {"drive.track_m", num(dd.track_width_m)},
       {"base.can_backend", "cannelloni"}, {"base.estop_backend", "none"}, {"base.led_backend", "none"}, {"base.start_armed", "true"},
-      {"base.wheel_radius_m", num(dd.wheel_radius_m)}, {"base.track_m", num(dd.track_width_m)},
       {"mission.visit_radius_m", num(mp.visit_radius_m)}, {"mission.max_sigma_m", num(mp.max_sigma_m)},
       {"mission.claim_timeout_s", num(mp.claim_timeout_s)}, {"mission.idle_return_s", num(mp.idle_return_s)},
       {"mission.mission_end_s", num(mp.mission_end_s)},

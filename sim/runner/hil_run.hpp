@@ -25,6 +25,7 @@
 #include "airground/drivers/base/odrive_sim.hpp"
 #include "airground/drivers/camera/frame_stream/frame_stream.hpp"
 #include "airground/drivers/can/cannelloni.hpp"
+#include "ouster_device.hpp"
 #include "airground/drivers/lidar/ouster/frame.hpp"
 #include "airground/drivers/lidar/ouster/metadata.hpp"
 #include "airground/drivers/lidar/ouster/packet_format.hpp"
@@ -70,11 +71,8 @@ struct Ugv {
   base::BaseParams bp;
   int udp{-1};
   sockaddr_in lidar_to{};
-  ouster::SensorInfo info;
-  std::unique_ptr<ouster::PacketFormat> fmt;
-  ouster::LidarFrame frame;
+  std::unique_ptr<OusterPackets> ouster;
   std::vector<LidarPoint> scan;
-  std::uint16_t frame_id{0};
   std::uint64_t collisions{0};
   double distance_m{0};
   Pose2 last_pose{};
@@ -146,7 +144,7 @@ Result<fs::path> find_role_binaries(const std::string& bin_dir);
 // The settings every role shares (who it is, gossip port and peers, team key); `node` indexes run.gossip.
 [[nodiscard]] Settings common_settings(const Run& run, int id, const std::string& name, std::size_t node);
 // The settings every ground robot shares (labels, area, drive, base, mission parameters).
-[[nodiscard]] Settings ugv_shared_settings(const Run& run, const DiffDriveConfig& dd);
+[[nodiscard]] Settings ugv_shared_settings(const Run& run);
 Status write_role_yaml(const fs::path& path, const std::string& title, const RoleDescription& role, const Settings& kv);
 // Ground robot i's YAML (team member tm, `shared` from ugv_shared_settings, its devices on the given
 // ports); adds its process.
@@ -164,8 +162,6 @@ void signal_roles(std::vector<RoleProcess>& children, int sig);
 void stop_roles(std::vector<RoleProcess>& children);
 
 // hil_devices.cpp: the wire bridges.
-// The OS-1-64 metadata of the fixture in the chosen packet profile and lidar mode; the error names the option.
-Result<json> ouster_metadata(const HilOptions& opt);
 // Writes the robot's Ouster metadata to meta_path (with its ports) and opens its lidar socket and CAN bridge.
 Status open_ugv_devices(Ugv& u, const json& meta, const fs::path& meta_path, std::uint16_t lidar_port, std::uint16_t imu_port,
                         std::uint16_t can_robot, std::uint16_t can_sim);
@@ -177,8 +173,7 @@ void step_base(Ugv& u, TimeNs now, double dt, const World& w);
 // A GNSS fix as UBX NAV-PVT on the serial line; true when all of it was written.
 bool send_nav_pvt(int pty, TimeNs now, const GpsFix& fix);
 // The robot's last scan as one revolution of Ouster packets from sensor pose sp; the packets sent.
-std::uint64_t send_revolution(Ugv& u, const Pose3& sp, TimeNs now, TimeNs lidar_period, bool labels_oracle, const World& w,
-                              std::vector<std::uint8_t>& pkt);
+std::uint64_t send_revolution(Ugv& u, const Pose3& sp, TimeNs now, TimeNs lidar_period, bool labels_oracle, const World& w);
 // The uav's frame stream once it opened the FIFO's other end; empty until then.
 std::optional<camera::FrameStreamWriter> open_frame_stream(const fs::path& fifo);
 // A rendered frame as the camera stage's image message (classes only with the labels oracle).

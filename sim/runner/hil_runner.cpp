@@ -12,10 +12,13 @@
 #include <fstream>
 #include <thread>
 
+#include "airground/platform/config.hpp"
 #include "airground/platform/rng.hpp"
+#include "airground/platform/role_instance.hpp"
 #include "airground/sim/runner.hpp"
 #include "airground/sim/survey.hpp"
 #include "hil_run.hpp"
+#include "roles.hpp"
 
 namespace ag::sim {
 namespace hil {
@@ -35,8 +38,12 @@ void pick_ports(Run& run) {
 
 // Per ground robot: lidar + IMU ports and the CAN bridge's two ends, its devices and its YAML.
 Status set_up_ugvs(Run& run, const json& meta) {
-  const DiffDriveConfig dd;
-  const Settings shared = ugv_shared_settings(run, dd);
+  // The simulated robot is the one the shipped file describes: its base's wheel radius and track.
+  auto shipped = Config::load_string(role_schema(ugv_role()), shipped_config_yaml("ugv"), "firmware_host/ugv/ugv.yaml (built into airground-sim)");
+  if (!shipped) return shipped.error();
+  const base::BaseParams bp = base::load_base_params(SectionView(shipped.value(), "base"));
+  const DiffDriveConfig dd = with_wheels(DiffDriveConfig{}, bp.wheel_radius_m, bp.track_m);
+  const Settings shared = ugv_shared_settings(run);
   for (int i = 0; i < static_cast<int>(run.mf.team.size()); ++i) {
     const mission::TeamMember& tm = run.mf.team[static_cast<std::size_t>(i)];
     auto u = std::make_unique<Ugv>("ugv" + std::to_string(tm.id), tm.id, DiffDriveRobot(dd, Pose2{tm.start_x, tm.start_y, tm.start_yaw}));
@@ -110,7 +117,7 @@ Status set_up(Run& run) {
   run.key = run.out / "config" / "team.key";
   if (auto st = write_team_key(run.key.string(), derive_seed(run.opt.seed, std::uint64_t{0x68696C})); !st) return st.error();
   pick_ports(run);
-  auto meta = ouster_metadata(run.opt);
+  auto meta = ouster_metadata(run.opt.lidar_columns, run.opt.lidar_profile);
   if (!meta) return meta.error();
   if (auto st = set_up_ugvs(run, meta.value()); !st) return st.error();
   if (auto st = open_gps_pty(run); !st) return st.error();

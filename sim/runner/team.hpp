@@ -37,7 +37,16 @@
 #include "airground/sim/scripted_driver.hpp"
 #include "airground/sim/visual_odometry.hpp"
 #include "airground/sim/wheel_odometry.hpp"
+#include "airground/drivers/base/diff_drive_base.hpp"
+#include "airground/drivers/base/odrive_sim.hpp"
+#include "airground/drivers/can/inprocess_bus.hpp"
+#include "airground/drivers/camera/stage/sim_camera.hpp"
+#include "airground/drivers/gpio/gpio_line.hpp"
+#include "airground/drivers/gps/ublox/byte_source.hpp"
+#include "airground/drivers/lidar/ouster/sim_source.hpp"
 #include "camera_prefetch.hpp"
+#include "gnss_device.hpp"
+#include "ouster_device.hpp"
 #include "team_recording.hpp"
 #include "uav_recording.hpp"
 #include "worker_pool.hpp"
@@ -73,6 +82,59 @@ class CsvLog {
 
 class SimProbeStage;
 
+// A ground robot's Ouster as its lidar stage (`source: sim`) sees it: the packets of each cast revolution
+// on an in-process link registered under the robot's name while the robot exists.
+struct SimLidar {
+  SimLidar(std::string robot, const ouster::SensorInfo& info);
+  SimLidar(const SimLidar&) = delete;
+  SimLidar& operator=(const SimLidar&) = delete;
+  ~SimLidar();
+  [[nodiscard]] bool registered() const noexcept { return registered_; }
+  std::string robot;
+  OusterPackets packets;
+  ouster::SimPacketLink link;
+
+ private:
+  bool registered_{false};
+};
+
+// The quadrotor's camera and u-blox as its camera and gps stages (`source: sim`) see them: rendered
+// frames and NAV-PVT bytes on in-process links registered under the robot's name while it exists.
+struct SimUavDevices {
+  explicit SimUavDevices(std::string robot);
+  SimUavDevices(const SimUavDevices&) = delete;
+  SimUavDevices& operator=(const SimUavDevices&) = delete;
+  ~SimUavDevices();
+  [[nodiscard]] bool registered() const noexcept { return camera_registered_ && gnss_registered_; }
+  std::string robot;
+  camera::SimCameraLink camera;
+  ublox::SimSerialLink gnss;
+
+ private:
+  bool camera_registered_{false}, gnss_registered_{false};
+};
+
+// A ground robot's wheels as its base stage (`can_backend: sim`) sees them: its two ODrives on an
+// in-process CAN link, an e-stop that is not pressed and the status LED as fake lines, registered under
+// the robot's name. The controllers' velocities turn the vehicle's wheels; their encoders report what
+// the wheels did (turn_shafts), with the wheel odometry model's calibration error and slip.
+struct SimBase {
+  SimBase(std::string robot, const Clock& clock, const base::BaseParams& bp);
+  SimBase(const SimBase&) = delete;
+  SimBase& operator=(const SimBase&) = delete;
+  ~SimBase();
+  // The controller's velocity of `axis` (0 left, 1 right) as the wheel's forward speed [rad/s].
+  [[nodiscard]] double wheel_rad_s(int axis) const noexcept;
+  // The wheels turned by these angles [rad, forward] over dt: the encoders' new position and velocity.
+  void turn_shafts(double left_rad, double right_rad, double dt) noexcept;
+  std::string robot;
+  base::BaseParams bp;
+  can::InProcessCanLink link;
+  base::OdriveSimulator odrive;
+  gpio::FakeLine estop{false}, led{false};
+  std::array<double, 2> shaft_turns{};
+};
+
 struct Ugv {
   Ugv(std::string n, int nd, DiffDriveRobot v, WheelOdometrySimulator o, PurePursuit p, const Pose2& s)
       : name(std::move(n)), node(nd), vehicle(std::move(v)), odometry(std::move(o)), pursuit(std::move(p)), start(s) {}
@@ -87,6 +149,10 @@ struct Ugv {
   DiffDriveRobot vehicle;
   WheelOdometrySimulator odometry;
   PurePursuit pursuit;
+  std::unique_ptr<SimLidar> lidar;  // before `role`: its stages use these until the role is gone
+  std::unique_ptr<SimBase> base;
+  double lidar_mount_z_m{0.5};
+  TimeNs last_encoder{0};  // [m] where its configuration says the LiDAR is (lidar.mount_z_m)
   std::uint64_t leg{0};
   std::uint64_t goals_reached{0};
   bool on_route{false};     // following a planned route (not waiting for one)
@@ -102,15 +168,12 @@ struct Ugv {
   std::FILE* scan_bin{nullptr};
   std::unique_ptr<RoleInstance> role;
 
-  // The robot's drivers in simulation: what the LiDAR, the wheel encoders, the operator (initial pose)
-  // and the map source publish to its stages.
+  // The robot's drivers in simulation: what the wheel encoders, the operator (initial pose) and the map
+  // source publish to its stages (the LiDAR's packets go to its own lidar stage: `lidar` above).
   int index{0};
-  RingWriter<LidarScanMsg, kLidarRing> scan_out{};
-  RingWriter<WheelOdometryMsg, kWheelOdometryRing> odom_out{};
   RingWriter<MapTileMsg, kMapTileRing> tiles_out{};
   LatestWriter<InitialPoseMsg> init_out{};
-  std::unique_ptr<LidarScanMsg> scan_msg{};  // one preallocated revolution, filled in place
-  std::uint32_t scan_seq{0};
+  LatestWriter<BaseArmMsg> arm_out{};  // the operator arms the base once it is set up
   InitialPoseMsg init_pose{};
   bool init_published{false};
   std::uint64_t scans_published{0}, odom_published{0}, tiles_published{0}, tiles_refused{0}, channel_drops{0};
@@ -165,12 +228,9 @@ struct Uav {
   CsvLog truth_log, gps_log, vo_log, frame_log;
   std::unique_ptr<RoleInstance> role;
   // The quadrotor's drivers in simulation: what the camera, the VO and the GPS publish to its stages.
-  RingWriter<CameraImageMsg, kCameraRing> camera_out{};
   RingWriter<VoMsg, kVoRing> vo_out{};  // the oracle VO (RunOptions::oracles "vo")
   bool vo_oracle{false};
   bool labels_oracle{false};  // the frames carry the renderer's classes (RunOptions::oracles "labels")
-  RingWriter<GpsMsg, kGpsRing> gps_out{};
-  std::unique_ptr<CameraImageMsg> image{};
   cv::Mat rgb_small{}, cls_small{};
   std::uint32_t image_seq{0};
   std::vector<TruthSample> truth{};
@@ -194,9 +254,9 @@ struct Team {
   RadioModel* air{nullptr};            // whichever of the two is on
   int base_node{0};
   bool base_killed{false};
-  double wheel_radius_m{0.098};
   std::vector<RoleInstance*> ugv_roles;  // for RunOptions::observe
   TimeNs next_observe{0};
+  std::unique_ptr<SimUavDevices> uav_devices;  // before `uav`: its stages read the links until the role is gone
   std::unique_ptr<Uav> uav;
   std::vector<std::unique_ptr<Ugv>> ugvs;
   std::unique_ptr<RoleInstance> base;

@@ -20,7 +20,75 @@
 #include "sim_probes.hpp"
 
 namespace ag::sim::lockstep {
+
+// Two revolutions of room: the lidar stage drains one every step it runs (20 Hz against the sensor's 10).
+SimLidar::SimLidar(std::string r, const ouster::SensorInfo& info)
+    : robot(std::move(r)), packets(info), link(info, 2 * static_cast<std::size_t>(packets.packets_per_revolution()), packets.packet_size()),
+      registered_(ouster::register_sim_lidar(robot, &link)) {}
+
+SimLidar::~SimLidar() {
+  if (registered_) ouster::unregister_sim_lidar(robot);
+}
+
+SimUavDevices::SimUavDevices(std::string r)
+    : robot(std::move(r)), camera_registered_(camera::register_sim_camera(robot, &camera)), gnss_registered_(ublox::register_sim_gps(robot, &gnss)) {}
+
+SimUavDevices::~SimUavDevices() {
+  if (camera_registered_) camera::unregister_sim_camera(robot);
+  if (gnss_registered_) ublox::unregister_sim_gps(robot);
+}
+
+SimBase::SimBase(std::string r, const Clock& clock, const base::BaseParams& p)
+    : robot(std::move(r)), bp(p), link(clock), odrive(link.device(), {p.left_node, p.right_node}) {
+  can::register_inprocess_link(robot, &link);
+  gpio::register_fake_line(robot, "estop", &estop);
+  gpio::register_fake_line(robot, "led", &led);
+}
+
+SimBase::~SimBase() {
+  can::unregister_inprocess_link(robot);
+  gpio::unregister_fake_lines(robot);
+}
+
+double SimBase::wheel_rad_s(int axis) const noexcept {
+  const double sign = axis == 0 ? bp.left_sign : bp.right_sign;
+  return sign * odrive.vel_turns_s(axis) * 2.0 * kPi / bp.gear_ratio;
+}
+
+void SimBase::turn_shafts(double left_rad, double right_rad, double dt) noexcept {
+  const double rad[2] = {left_rad, right_rad};
+  for (int i = 0; i < 2; ++i) {
+    const double turns = (i == 0 ? bp.left_sign : bp.right_sign) * rad[i] * bp.gear_ratio / (2.0 * kPi);
+    shaft_turns[static_cast<std::size_t>(i)] += turns;
+    odrive.set_shaft(i, shaft_turns[static_cast<std::size_t>(i)], dt > 0 ? turns / dt : 0.0);
+  }
+}
+
 namespace {
+
+// "gps.datum_*=..." of the world's datum: the mission's map frame, as the mission file gives it a robot.
+std::vector<std::string> datum_keys(const Datum& d) {
+  char buf[3][96];
+  std::snprintf(buf[0], sizeof buf[0], "gps.datum_lat_deg=%.9f", d.lat_deg);
+  std::snprintf(buf[1], sizeof buf[1], "gps.datum_lon_deg=%.9f", d.lon_deg);
+  std::snprintf(buf[2], sizeof buf[2], "gps.datum_height_m=%.3f", d.height_m);
+  return {buf[0], buf[1], buf[2]};
+}
+
+// "<stage>.<key>=<value>" for every device stage of the role that has a simulator backend: what plugs the
+// stage into the simulated device (StageSpec::sim_backend, "key=value[,key=value]").
+std::vector<std::string> sim_backend_settings(const RoleDescription& role) {
+  std::vector<std::string> out;
+  for (const StageSpec& st : role.stages) {
+    std::string_view rest = st.sim_backend;
+    while (!rest.empty()) {
+      const auto comma = rest.find(',');
+      out.push_back(std::string(st.name) + "." + std::string(rest.substr(0, comma)));
+      rest = comma == std::string_view::npos ? std::string_view{} : rest.substr(comma + 1);
+    }
+  }
+  return out;
+}
 
 // Optional model overrides from --config-dir: <dir>/<name> when it exists. The file holds the model's
 // mapping either at the top level or under its section name (as `airground-sim config` writes it).
@@ -58,8 +126,9 @@ std::vector<StageSpec> ugv_table(const RunOptions& opt) {
   std::vector<StageSpec> out;
   for (const StageSpec& st : ugv_role().stages) {
     if (!opt.ugv_goals.empty() && std::string_view(st.name) == "mission") continue;  // the runner's goals replace the mission manager's
-    // The simulator is the devices (role table: `device`): it moves the vehicle by 'wheel_command' and writes 'lidar_scan'.
-    if (st.device) continue;
+    // A device stage with a simulator backend runs on the simulated device; one without, the world replaces
+    // (it moves the vehicle by 'wheel_command' and writes the wheel odometry).
+    if (st.device && st.sim_backend.empty()) continue;
     out.push_back(st);
   }
   const double hz = opt.physics_hz;
@@ -87,6 +156,8 @@ std::vector<std::string> ugv_settings(const Team& t, const std::vector<std::stri
     std::snprintf(buf, sizeof buf, "mission.survey_end_s=%.1f", survey_time_s);
     ugv_extra.emplace_back(buf);  // before ugv_config: a mission file's value or --set wins
   }
+  // The device stages on their simulated devices (role table: `sim_backend`).
+  for (const std::string& kv : sim_backend_settings(ugv_role())) ugv_extra.push_back(kv);
   ugv_extra.insert(ugv_extra.end(), opt.ugv_config.begin(), opt.ugv_config.end());
   if (opt.ugv_tap.scan) ugv_extra.emplace_back("sim_probe.scans=true");
   if (opt.ugv_tap.odometry) ugv_extra.emplace_back("sim_probe.odometry=true");
@@ -123,12 +194,35 @@ Status set_up_ugv(Team& t, const Models& m, RoleFactory& roles, int i, const Rol
       if (d.norm() > 2.0) break;
     }
   }
-  auto u = std::make_unique<Ugv>(name, (opt.uav ? 1 : 0) + i, DiffDriveRobot(m.drive, start),
-                                 WheelOdometrySimulator(m.odometry, opt.seed * 31 + static_cast<std::uint64_t>(i)),
+  std::vector<std::string> extra_i = ugv_extra;
+  if (opt.ugv_config_for) {
+    const auto more = opt.ugv_config_for(i, start);
+    extra_i.insert(extra_i.end(), more.begin(), more.end());
+  }
+  auto cfg = roles.configure(ugv_desc, ugv_role(), i + 1, name, extra_i, "ground robot config override");
+  if (!cfg) return cfg.error();
+  // The simulated robot is the one its configuration describes: wheel radius and track of its base
+  // (the odometry model's nominal geometry too; its calibration error and slip on top).
+  const base::BaseParams bp = base::load_base_params(SectionView(*cfg.value(), "base"));
+  const DiffDriveConfig dd = with_wheels(m.drive, bp.wheel_radius_m, bp.track_m);
+  WheelOdometryConfig oc = m.odometry;
+  oc.wheel_radius_m = bp.wheel_radius_m;
+  oc.track_width_m = bp.track_m;
+  auto u = std::make_unique<Ugv>(name, (opt.uav ? 1 : 0) + i, DiffDriveRobot(dd, start),
+                                 WheelOdometrySimulator(oc, opt.seed * 31 + static_cast<std::uint64_t>(i)),
                                  PurePursuit(PursuitParams{1.0, opt.ugv_speed_mps, 1.2, 0.8}), start);
+  u->base = std::make_unique<SimBase>(name, roles.clock(), bp);
+  u->lidar_mount_z_m = cfg.value()->get_real("lidar.mount_z_m");
   // Settle the robot on the ground (height and attitude) before the first step: otherwise the scan at
   // t = 0 would be cast from 0.6 m above the datum rather than above the terrain.
   (void)u->vehicle.step(1e-9, w);
+  {  // its Ouster, on the link its lidar stage reads (lidar.source: sim)
+    auto info = ouster_sensor_info(opt.lidar_columns, kSimLidarProfile);
+    if (!info) return info.error();
+    u->lidar = std::make_unique<SimLidar>(name, info.value());
+    if (!u->lidar->registered())
+      return Error::make(ErrorCode::kInvalidArgument, name + ": another team in this process has a simulated LiDAR of that name");
+  }
   for (auto& part : u->scan_parts) part.reserve(static_cast<std::size_t>(16 * opt.lidar_columns));
   if (rec) {
     u->truth_log = CsvLog(t.out / ("truth_" + name + ".csv"), "t_s,x_m,y_m,z_m,roll_rad,pitch_rad,yaw_rad");
@@ -136,22 +230,16 @@ Status set_up_ugv(Team& t, const Models& m, RoleFactory& roles, int i, const Rol
     u->scan_log = CsvLog(t.out / ("lidar_" + name + ".csv"), "t_s,scan,points");
     if (opt.record == RecordLevel::kFull) u->scan_bin = std::fopen((t.out / ("lidar_" + name + ".bin")).c_str(), "wb");
   }
-  std::vector<std::string> extra_i = ugv_extra;
-  if (opt.ugv_config_for) {
-    const auto more = opt.ugv_config_for(i, start);
-    extra_i.insert(extra_i.end(), more.begin(), more.end());
-  }
-  auto role = roles.make(ugv_desc, ugv_role(), i + 1, name, extra_i, "ground robot config override");
+  auto role = roles.create(ugv_desc, *cfg.value(), name);
   if (!role) return role.error();
   u->role = std::move(role).value();
   u->index = i;
   ChannelRegistry& ch = u->role->channels();
-  auto scan_w = ch.ring_writer(chan::kLidarScan);
-  auto odom_w = ch.ring_writer(chan::kWheelOdometry);
   auto init_w = ch.latest_writer(chan::kInitialPose);
-  if (!scan_w) return scan_w.error();
-  if (!odom_w) return odom_w.error();
+  auto arm_w = ch.latest_writer(chan::kBaseArm);
   if (!init_w) return init_w.error();
+  if (!arm_w) return arm_w.error();
+  u->arm_out = arm_w.value();
   if (!opt.gossip || opt.ugv_map != UgvMapSource::kNone) {  // else the robot's comms stage writes its map_tiles
     auto tile_w = ch.ring_writer(chan::kMapTiles);
     if (!tile_w) return tile_w.error();
@@ -165,10 +253,7 @@ Status set_up_ugv(Team& t, const Models& m, RoleFactory& roles, int i, const Rol
     u->goal.goal = RoutePoint{opt.ugv_goals[static_cast<std::size_t>(i)].x(), opt.ugv_goals[static_cast<std::size_t>(i)].y()};
     u->goal_pending = true;
   }
-  u->scan_out = scan_w.value();
-  u->odom_out = odom_w.value();
   u->init_out = init_w.value();
-  u->scan_msg = std::make_unique<LidarScanMsg>();
   {  // the initial guess: the true start moved init_error_m in a direction and turned by ±init_yaw_error_deg
     Rng rng(derive_seed(opt.seed, std::uint64_t{0x696E6974} + static_cast<std::uint64_t>(i)));
     const double dir = rng.uniform(-kPi, kPi);
@@ -310,7 +395,6 @@ Status set_up_world(Team& t, const Models& m) {
     t.radio = std::make_unique<RadioModel>(rcfg, opt.seed ^ std::uint64_t{0x7261646F}, radio_nodes);
     t.air = t.radio.get();
   }
-  t.wheel_radius_m = m.drive.wheel_radius_m;
   const Pose2 staging = w.header.staging;
   const int base_node = 1 + opt.ugvs;
   t.base_node = base_node;
@@ -344,6 +428,17 @@ RoleFactory::RoleFactory(const RunOptions& opt, SimClock& clock, std::vector<Con
 
 Result<std::unique_ptr<RoleInstance>> RoleFactory::make(const RoleDescription& role, const RoleDescription& shipped_role, int id, const std::string& name,
                                                         const std::vector<std::string>& extra, const char* what) {
+  auto c = configure(role, shipped_role, id, name, extra, what);
+  if (!c) return c.error();
+  return create(role, *c.value(), name);
+}
+
+Result<std::unique_ptr<RoleInstance>> RoleFactory::create(const RoleDescription& role, const Config& config, const std::string& name) {
+  return RoleInstance::create(role, config, clock_, name);
+}
+
+Result<const Config*> RoleFactory::configure(const RoleDescription& role, const RoleDescription& shipped_role, int id, const std::string& name,
+                                             const std::vector<std::string>& extra, const char* what) {
   std::vector<StageSpec> all(shipped_role.stages.begin(), shipped_role.stages.end());
   for (const StageSpec& st : role.stages)
     if (std::none_of(all.begin(), all.end(), [&](const StageSpec& a) { return std::string_view(a.name) == st.name; })) all.push_back(st);
@@ -362,17 +457,22 @@ Result<std::unique_ptr<RoleInstance>> RoleFactory::make(const RoleDescription& r
   if (c.has("segmentation.weights")) sim.push_back("segmentation.weights=" + erfnet_weights_path(c.get_text("segmentation.weights")));
   if (opt_.oracle("labels")) {  // the ablation: the drivers hand over the truth and the robots use it
     if (c.has("segmentation.labels")) sim.emplace_back("segmentation.labels=gt");
-    if (c.has("camera.source")) sim.emplace_back("camera.source=replay");  // frames with classes, as HIL's frame stream
     if (c.has("localization.labels")) sim.emplace_back("localization.labels=gt");
-    if (c.has("lidar.classes")) sim.emplace_back("lidar.classes=reflectivity");  // points with classes, as HIL's packets
+    if (c.has("lidar.classes")) sim.emplace_back("lidar.classes=reflectivity");  // the class in the reflectivity byte, as HIL's packets
   }
   for (const auto& kv : sim)
     if (auto st = c.set(kv, "the simulator"); !st) return st.error();
   for (const auto& kv : extra)
     if (auto st = c.set(kv, what); !st) return st.error();
   if (auto st = check_sensor_labels(c, origin + " with the simulator's settings and the " + what); !st) return st.error();
+  // The simulated camera gives what a V4L2 one gives, RGB: classes only in the ablation the user names.
+  if (!opt_.oracle("labels") && c.has("segmentation.labels") && c.get_text("segmentation.labels") == "gt" && c.get_text("camera.source") == "sim")
+    return Error::make(ErrorCode::kConfig, "config error: " + origin + " with the simulator's settings and the " + what +
+                                               ": segmentation.labels: gt relays the camera's classes, but camera.source: sim gives RGB only "
+                                               "(as a V4L2 camera); the renderer's classes only with --oracle labels");
+  if (configs_.size() == configs_.capacity()) return Error::make(ErrorCode::kInternal, "RoleFactory: more roles than the configurations reserved");
   configs_.push_back(std::move(c));
-  return RoleInstance::create(role, configs_.back(), clock_, name);
+  return &configs_.back();
 }
 
 Result<double> set_up_uav(Team& t, const Models& m, RoleFactory& roles, const std::vector<std::string>& comms_common) {
@@ -406,13 +506,19 @@ Result<double> set_up_uav(Team& t, const Models& m, RoleFactory& roles, const st
   std::vector<std::string> uav_extra = comms_common;
   if (opt.gossip) uav_extra.emplace_back("comms.send_map_tiles=true");
   for (const std::string& kv : world_area_keys(w.grid(), "regions")) uav_extra.push_back(kv);  // before uav_config: a caller's area wins
+  // The device stages on their simulated devices (role table: sim_backend), the receiver's datum the world's.
+  for (const std::string& kv : sim_backend_settings(uav_role())) uav_extra.push_back(kv);
+  for (const std::string& kv : datum_keys(w.header.datum)) uav_extra.push_back(kv);
   uav_extra.insert(uav_extra.end(), opt.uav_config.begin(), opt.uav_config.end());
-  // The simulator is the quadrotor's camera (and its VO) and its GNSS receiver: it writes their channels.
+  // The simulator is the quadrotor's camera (and its VO) and the autopilot: it writes their channels.
   RoleDescription uav_desc = uav_role();
   u->vo_oracle = opt.oracle("vo");
   u->labels_oracle = labels_oracle;
   for (const StageSpec& st : uav_desc.stages)
-    if (!st.device && !(u->vo_oracle && st.name == "vo")) t.uav_stages.push_back(st);
+    if ((!st.device || !st.sim_backend.empty()) && !(u->vo_oracle && st.name == "vo")) t.uav_stages.push_back(st);
+  t.uav_devices = std::make_unique<SimUavDevices>("uav");
+  if (!t.uav_devices->registered())
+    return Error::make(ErrorCode::kInvalidArgument, "uav: another team in this process has a simulated camera or receiver of that name");
   if (!u->vo_oracle && !t.uav_play)
     t.uav_stages.push_back(StageSpec{"sim_vo_tap", &SimVoTapStage::make, 10.0, 90'000, 1, -1, SimVoTapStage::kParams,
                                      "simulator: counts and logs the quadrotor's own odometry"});
@@ -426,11 +532,6 @@ Result<double> set_up_uav(Team& t, const Models& m, RoleFactory& roles, const st
     if (auto st = attach_uav_cache(t); !st) return st.error();
     return survey_time_s;
   }
-  auto cam_w = u->role->channels().ring_writer(chan::kCamera);
-  auto gps_w = u->role->channels().ring_writer(chan::kGps);
-  if (!cam_w) return cam_w.error();
-  if (!gps_w) return gps_w.error();
-  u->camera_out = cam_w.value();
   if (u->vo_oracle) {
     auto vo_w = u->role->channels().ring_writer(chan::kVisualOdometry);
     if (!vo_w) return vo_w.error();
@@ -439,12 +540,10 @@ Result<double> set_up_uav(Team& t, const Models& m, RoleFactory& roles, const st
     for (auto& slot : u->role->stages())
       if (auto* tap = dynamic_cast<SimVoTapStage*>(slot.stage.get())) tap->uav = u.get();
   }
-  u->gps_out = gps_w.value();
   auto att_w = u->role->channels().ring_writer(chan::kAttitude);
   if (!att_w) return att_w.error();
   u->attitude_out = att_w.value();
   u->attitude = AttitudeSimulator(m.attitude, opt.seed ^ std::uint64_t{0x61747431});
-  u->image = std::make_unique<CameraImageMsg>();
   if (opt.ugv_map == UgvMapSource::kOnline) {
     for (auto& slot : u->role->stages())
       if (auto* om = dynamic_cast<const mapping::OrthoMapStage*>(slot.stage.get())) t.ortho = &om->map();

@@ -66,6 +66,13 @@ class RoleFactory {
   RoleFactory(const RunOptions& opt, SimClock& clock, std::vector<Config>& configs);
   Result<std::unique_ptr<RoleInstance>> make(const RoleDescription& role, const RoleDescription& shipped_role, int id, const std::string& name,
                                              const std::vector<std::string>& extra = {}, const char* what = "");
+  // make() in two steps, for a robot whose simulated devices follow its configuration (the ground robot's
+  // wheels and LiDAR mount): the shipped file, the simulator's keys and `extra`, kept for the run ...
+  Result<const Config*> configure(const RoleDescription& role, const RoleDescription& shipped_role, int id, const std::string& name,
+                                  const std::vector<std::string>& extra, const char* what);
+  // ... and the role on it.
+  Result<std::unique_ptr<RoleInstance>> create(const RoleDescription& role, const Config& config, const std::string& name);
+  [[nodiscard]] const Clock& clock() const noexcept { return clock_; }
 
  private:
   const RunOptions& opt_;

@@ -40,10 +40,12 @@ void write_points(const std::vector<LidarPoint>& pts, std::vector<unsigned char>
   std::fwrite(scratch.data(), 1, scratch.size(), f);
 }
 
-// The camera driver's job in simulation: the rendered frame at the mapper's 640x400, RGB only (its
-// labels only in the ablation the user names).
-void publish_image(Uav& a, TimeNs now) {
-  CameraImageMsg& m = *a.image;
+// The simulated camera's frame, at the mapper's 640x400, RGB only (its labels only in the ablation the
+// user names), to the quadrotor's camera stage.
+void publish_image(Uav& a, camera::SimCameraLink& link, TimeNs now) {
+  CameraImageMsg* slot = link.begin_frame();
+  if (slot == nullptr) return;  // the camera stage has not taken the last two frames: dropped (counted by the link)
+  CameraImageMsg& m = *slot;
   const cv::Mat* rgb = &a.frame.rgb;
   const cv::Mat* cls = &a.frame.cls;
   if (rgb->cols != kImageWidth || rgb->rows != kImageHeight) {
@@ -62,7 +64,7 @@ void publish_image(Uav& a, TimeNs now) {
     std::memcpy(m.rgb.data() + static_cast<std::size_t>(r) * kImageWidth * 3, rgb->ptr<std::uint8_t>(r), kImageWidth * 3);
     if (a.labels_oracle) std::memcpy(m.cls.data() + static_cast<std::size_t>(r) * kImageWidth, cls->ptr<std::uint8_t>(r), kImageWidth);
   }
-  (void)a.camera_out.push(m);
+  link.commit();
 }
 
 // A frame's exposure, motion (blur) and noise key: the same whether it is rendered ahead or when due.
@@ -93,6 +95,8 @@ void publish_given(Ugv& u, TimeNs now) {
     u.init_pose.published = now;
     u.init_out.publish(u.init_pose);
     u.init_published = true;
+    // ... and the operator arms the base (base.start_armed is false: a robot waits for that).
+    u.arm_out.publish(BaseArmMsg{now, now, true});
   }
   if (u.goal_pending) {  // a test's goal for a table without a mission stage
     u.goal.stamp = now;
@@ -134,17 +138,14 @@ void drive(Team& t, Ugv& u, TimeNs now, double dt) {
     if (u.on_route) ++u.goals_reached;
     new_leg(t, u, now);
   }
+  // The ODrives take what the robot's base stage sent them over CAN (and keep to it: its watchdog, not
+  // the vehicle's, stops the wheels when the drive stage falls silent).
+  u.base->odrive.step(now);
   if (t.opt.drive_by_stages) {
-    // The robot's own drive stage: its newest wheel command (the vehicle's command timeout stops it
-    // when the stage falls silent, like the base's watchdog).
     WheelCommandMsg cmd;
-    if (u.probe != nullptr && u.probe->take_command(cmd)) {
-      ++u.wheel_commands;
-      if (u.killed || u.held) u.vehicle.command_wheels(0, 0);
-      else u.vehicle.command_wheels(cmd.left_mps / t.wheel_radius_m, cmd.right_mps / t.wheel_radius_m);
-    } else if (u.killed || u.held) {
-      u.vehicle.command_wheels(0, 0);
-    }
+    if (u.probe != nullptr && u.probe->take_command(cmd)) ++u.wheel_commands;
+    if (u.killed || u.held) u.vehicle.command_wheels(0, 0);
+    else u.vehicle.command_wheels(u.base->wheel_rad_s(0), u.base->wheel_rad_s(1));
   } else {
     double v = 0, w = 0;
     if (u.released && !u.held && !u.killed) u.pursuit.command(u.vehicle.pose(), v, w);
@@ -177,16 +178,12 @@ void publish_odometry(Team& t, Ugv& u, TimeNs now, bool log_now) {
   const OdometrySample od = u.odometry.step(now, u.vehicle.pose(), u.vehicle.wheel_left_rad_s(), u.vehicle.wheel_right_rad_s());
   ++u.odom_samples;
   u.odom_last = od.pose;
-  {  // the base's odometry over CAN, as the robot computes it with its nominal wheel radius and track
-    WheelOdometryMsg m;
-    m.stamp = od.stamp;
-    m.published = now;
-    m.pose = od.pose;
+  {  // the encoders: the wheel angles the base stage, integrating with its nominal radius and track, turns
+     // into the model's increment (calibration error and slip included); it reads them over CAN
     const WheelOdometryConfig& oc = u.odometry.config();
-    m.v_mps = 0.5 * oc.wheel_radius_m * (od.wheel_left_rad_s + od.wheel_right_rad_s);
-    m.w_radps = oc.wheel_radius_m * (od.wheel_right_rad_s - od.wheel_left_rad_s) / oc.track_width_m;
-    m.moving = od.moving;
-    if (u.odom_out.push(m) > 0) ++u.channel_drops;
+    const double half = 0.5 * oc.track_width_m * od.dyaw;
+    u.base->turn_shafts((od.distance - half) / oc.wheel_radius_m, (od.distance + half) / oc.wheel_radius_m, to_seconds(now - u.last_encoder));
+    u.last_encoder = now;
     ++u.odom_published;
   }
   if (t.opt.ugv_map != UgvMapSource::kNone) publish_tiles(t, u, now);
@@ -216,16 +213,9 @@ void publish_uav_sensors(Team& t, Uav& a, const Pose3& p, TimeNs now) {
   GpsFix fix;
   if (a.gps.sample(now, p, fix)) {
     ++a.fixes;
-    GpsMsg m;
-    m.stamp = fix.stamp;
-    m.published = now;
-    m.fix_type = static_cast<std::uint8_t>(fix.fix_type);
-    m.east_m = fix.east_m;
-    m.north_m = fix.north_m;
-    m.up_m = fix.up_m;
-    m.h_accuracy_m = fix.h_accuracy_m;
-    m.v_accuracy_m = fix.v_accuracy_m;
-    (void)a.gps_out.push(m);  // a full ring is counted by the channel
+    NavPvtBytes msg;  // the receiver's UART: NAV-PVT to the quadrotor's gps stage
+    const std::size_t len = encode_nav_pvt_message(now, fix, msg);
+    (void)t.uav_devices->gnss.write(std::span<const std::uint8_t>(msg.data(), len));  // an overrun is counted by the link
     if (t.mcap) t.mcap->uav_gps(now, fix.lat_deg, fix.lon_deg, fix.height_m, fix.h_accuracy_m);
     if (a.gps_log) std::fprintf(a.gps_log.get(), "%.3f,%d,%.9f,%.9f,%.3f,%.3f,%.3f,%.3f,%.2f\n", to_seconds(now), static_cast<int>(fix.fix_type), fix.lat_deg, fix.lon_deg, fix.height_m, fix.east_m, fix.north_m, fix.up_m, fix.h_accuracy_m);
   }
@@ -288,7 +278,7 @@ void finish_camera_frame(Team& t, const Pose3& uav_pose, TimeNs now) {
   Uav& a = *t.uav;
   ++a.frames;
   t.camera_ae.observe(a.frame);
-  publish_image(a, now);
+  publish_image(a, t.uav_devices->camera, now);
   if (t.mcap) t.mcap->camera_frame(now, a.frames, a.frame.rgb);
   if (a.frame_log) std::fprintf(a.frame_log.get(), "%.3f,%llu,%.3f,%.3f,%.3f,%.4f\n", to_seconds(now), static_cast<unsigned long long>(a.frames), uav_pose.x, uav_pose.y, uav_pose.z, uav_pose.yaw);
   const bool keep = t.opt.record == RecordLevel::kFull || (t.opt.record == RecordLevel::kLight && (a.frames - 1) % 20 == 0);
@@ -328,24 +318,13 @@ void publish_scans(Team& t, TimeNs now) {
     std::size_t total = 0;
     for (const auto& part : u.scan_parts) total += part.size();
     ++u.scans;
-    {  // the Ouster driver's revolution: range, XYZ, no class (the world's classes only with --oracle labels)
-      const bool truth = t.opt.oracle("labels");
-      LidarScanMsg& m = *u.scan_msg;
-      m.stamp = now;
-      m.published = now;
-      m.seq = u.scan_seq++;
-      m.rings = static_cast<std::uint16_t>(t.lidar_rings);
-      m.columns = static_cast<std::uint16_t>(t.opt.lidar_columns);
-      m.labels = truth ? LabelSource::kGroundTruth : LabelSource::kNone;
-      m.sensor_in_body = Pose3{0, 0, t.opt.lidar_mount_height_m, 0, 0, 0};
-      std::size_t n = 0;
-      for (const auto& part : u.scan_parts)
-        for (const LidarPoint& q : part) {
-          if (n == kMaxScanPoints) break;
-          m.points[n++] = ScanReturn{q.x, q.y, q.z, q.range, truth ? q.cls : std::uint8_t{255}, q.ring, q.col};
-        }
-      m.count = static_cast<std::uint32_t>(n);
-      if (u.scan_out.push(m) > 0) ++u.channel_drops;
+    {  // the Ouster's packets to the robot's lidar stage: range and reflectivity (the class in it only with --oracle labels)
+      const Pose3 sp = lidar_pose(u, u.lidar_mount_z_m);
+      SimLidar& l = *u.lidar;
+      const std::uint64_t want = static_cast<std::uint64_t>(l.packets.packets_per_revolution());
+      const std::uint64_t sent = l.packets.send_revolution(u.scan_parts, sp, now, t.lidar_period, t.opt.oracle("labels"), *t.world,
+                                                           [&l, now](std::span<const std::uint8_t> p) { return l.link.send(p, now); });
+      if (sent < want) u.channel_drops += want - sent;
       ++u.scans_published;
     }
     if (t.mcap) t.mcap->ugv_scan(now, u.index, u.scans, u.scan_parts.data(), u.scan_parts.size());
@@ -396,7 +375,7 @@ void step_sensors(Team& t, TimeNs now) {
         const auto part = static_cast<int>(idx % kParts);
         const int cols = t.opt.lidar_columns;
         const std::uint64_t seed = t.opt.seed ^ (static_cast<std::uint64_t>(now) * std::uint64_t{0x9E3779B97F4A7C15}) ^ static_cast<std::uint64_t>(u.node);
-        t.lidar->scan_columns(lidar_pose(u, t.opt.lidar_mount_height_m), seed, cols * part / static_cast<int>(kParts),
+        t.lidar->scan_columns(lidar_pose(u, u.lidar_mount_z_m), seed, cols * part / static_cast<int>(kParts),
                               cols * (part + 1) / static_cast<int>(kParts), u.scan_parts[static_cast<std::size_t>(part)]);
       }
       t.job_cpu[j] = thread_cpu_now() - job0;

@@ -78,6 +78,7 @@ OdometrySample WheelOdometrySimulator::step(TimeNs t, const Pose2& truth, double
       dr += rng_.gaussian(0.0, cfg_.slip_sigma_per_sqrt_m * std::sqrt(std::abs(rot_r) * r));
     }
     const double d = 0.5 * (dl + dr);
+    out.distance = d;
     dyaw = (dr - dl) / (w * (1.0 + err_width_));
     dyaw += (out.moving ? cfg_.yaw_drift_rad_per_s : cfg_.yaw_drift_at_rest_rad_per_s) * dt;
     // Exact arc over the step.
@@ -101,6 +102,7 @@ OdometrySample WheelOdometrySimulator::step(TimeNs t, const Pose2& truth, double
       dy += rng_.gaussian(0.0, cfg_.sigma_xy_m);
       dyaw += rng_.gaussian(0.0, cfg_.sigma_yaw_rad);
     }
+    out.distance = std::copysign(std::hypot(dx, dy), dx);
     dyaw += (out.moving ? cfg_.yaw_drift_rad_per_s : cfg_.yaw_drift_at_rest_rad_per_s) * dt;
     if (dt > 0) {  // the wheel speeds that would produce this increment
       const double v = dx / dt, om = dyaw / dt;

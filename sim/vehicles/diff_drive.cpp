@@ -215,4 +215,11 @@ bool DiffDriveRobot::step(double dt, const World& world) {
   return false;
 }
 
+DiffDriveConfig with_wheels(DiffDriveConfig c, double wheel_radius_m, double track_width_m) noexcept {
+  c.max_wheel_speed_rad_s = c.max_wheel_speed_rad_s * c.wheel_radius_m / wheel_radius_m;
+  c.wheel_radius_m = wheel_radius_m;
+  c.track_width_m = track_width_m;
+  return c;
+}
+
 }  // namespace ag::sim

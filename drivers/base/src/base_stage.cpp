@@ -41,10 +41,10 @@ Status BaseStage::init(StageContext& ctx) {
   device_->describe("samples", {"rx_errors", "error_frames", "tx_dropped", "ring_full"});
   left_node_ = bp.left_node;
   right_node_ = bp.right_node;
-  if (can_backend == "inprocess") {
+  if (can_backend == "sim") {
     can::InProcessCanLink* link = can::find_inprocess_link(ctx.instance);
     if (link == nullptr)
-      return Error::make(ErrorCode::kConfig, "config error: " + where + "can_backend is inprocess but the simulator gave robot '" +
+      return Error::make(ErrorCode::kConfig, "config error: " + where + "can_backend is sim but the simulator gave robot '" +
                                                  std::string(ctx.instance) + "' no CAN link");
     bus_ = &link->robot();
   } else if (can_backend == "replay") {

@@ -50,8 +50,10 @@ void OdriveSimulator::step(TimeNs now) noexcept {
     next_enc_ += from_seconds(p_.encoder_period_s);
     if (next_enc_ <= now) next_enc_ = now + from_seconds(p_.encoder_period_s);
     for (std::size_t i = 0; i < 2; ++i)
-      if (!silent_[i])
-        (void)bus_.send(odrive::encode_encoder_estimates(nodes_[i], {static_cast<float>(pos_[i]), static_cast<float>(vel_[i])}));
+      if (!silent_[i]) {
+        const double pos = shaft_[i] ? shaft_pos_[i] : pos_[i], vel = shaft_[i] ? shaft_vel_[i] : vel_[i];
+        (void)bus_.send(odrive::encode_encoder_estimates(nodes_[i], {static_cast<float>(pos), static_cast<float>(vel)}));
+      }
   }
   if (now >= next_hb_) {
     next_hb_ += from_seconds(p_.heartbeat_period_s);

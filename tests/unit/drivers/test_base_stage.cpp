@@ -44,7 +44,7 @@ struct Rig {
     sim = std::make_unique<OdriveSimulator>(link.device(), std::array<std::uint8_t, 2>{0, 1});
     static const std::vector<ParamSection> schema = role_schema(kRole);
     Config cfg = Config::defaults(schema);
-    sets.insert(sets.begin(), {"base.can_backend=inprocess", "base.estop_backend=fake", "base.led_backend=fake", "base.start_armed=true"});
+    sets.insert(sets.begin(), {"base.can_backend=sim", "base.estop_backend=fake", "base.led_backend=fake", "base.start_armed=true"});
     for (const auto& s : sets) EXPECT_TRUE(cfg.set(s).ok()) << s;
     auto r = RoleInstance::create(kRole, cfg, clock, "ugv1");
     EXPECT_TRUE(r.ok()) << (r.ok() ? "" : r.error().message);
@@ -166,7 +166,7 @@ TEST(BaseStage, MissingSimulatorDevicesEqualNodeIdsAndBadReplayOrBridgeSettingsA
   static const std::vector<ParamSection> schema = role_schema(kRole);
   SimClock clock(0);
   Config cfg = Config::defaults(schema);
-  ASSERT_TRUE(cfg.set("base.can_backend=inprocess").ok());
+  ASSERT_TRUE(cfg.set("base.can_backend=sim").ok());
   auto r = RoleInstance::create(kRole, cfg, clock, "ugv9");
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.error().message.find("ugv9"), std::string::npos) << r.error().message;

@@ -36,9 +36,20 @@ std::string shipped_path(std::string_view role) {
 // The keys the simulator may set, and why. Everything else must be the shipped file's value.
 bool sim_may_set(const std::string& key, bool runner_feeds_map) {
   const std::string section = key.substr(0, key.find('.'));
-  // The device stages the simulator replaces: it is the camera, autopilot, GNSS receiver, LiDAR and wheels.
-  static const std::set<std::string> devices = {"camera", "autopilot", "gps", "lidar", "base"};
-  if (devices.count(section) != 0) return true;
+  // A device stage on its simulated device: only the keys of its backend (role table: sim_backend). Its
+  // mount, wheel geometry and everything else are the shipped file's: the simulated robot is the one the
+  // file describes. A device stage without a sim backend the simulator replaces (any of its keys).
+  for (const RoleDescription* role : {&uav_role(), &ugv_role(), &base_role()})
+    for (const StageSpec& st : role->stages) {
+      if (!st.device || st.name != section) continue;
+      if (st.sim_backend.empty()) return true;
+      for (std::string_view rest = st.sim_backend; !rest.empty();) {
+        const auto comma = rest.find(',');
+        const std::string_view kv = rest.substr(0, comma);
+        if (key == section + "." + std::string(kv.substr(0, kv.find('=')))) return true;
+        rest = comma == std::string_view::npos ? std::string_view{} : rest.substr(comma + 1);
+      }
+    }
   static const std::set<std::string> keys = {
       "robot.id", "robot.name",  // who the robot is in this team
       "status.log_counters",     // the runner reports the counters itself
@@ -50,7 +61,9 @@ bool sim_may_set(const std::string& key, bool runner_feeds_map) {
       "regions.area_x0_m", "regions.area_y0_m", "regions.area_x1_m", "regions.area_y1_m",  //
       "planner.area_x0_m", "planner.area_y0_m", "planner.area_x1_m", "planner.area_y1_m",  //
       "localization.area_x0_m", "localization.area_y0_m", "localization.area_x1_m", "localization.area_y1_m",
-      "mission.start_x_m", "mission.start_y_m", "mission.priority", "mission.survey_end_s"};
+      "mission.start_x_m", "mission.start_y_m", "mission.priority", "mission.survey_end_s",
+      // the mission's datum (the world's), the map frame the receiver's fixes are given in
+      "gps.datum_lat_deg", "gps.datum_lon_deg", "gps.datum_height_m"};
   if (keys.count(key) != 0) return true;
   // Without gossip the runner is the ground robots' map link (it writes their map_tiles).
   return runner_feeds_map && key == "comms.deliver_map_tiles";
@@ -162,9 +175,13 @@ TEST_F(ShippedConfig, EveryRobotRunsTheShippedFileExceptTheKeysTheSimulatorMustS
     // Field mode: classes from the robots' own ErfNet and geometric labeller.
     EXPECT_EQ(got[0].get_text("segmentation.labels"), "erfnet");
     EXPECT_EQ(got[0].get_text("ortho_map.keyframes_channel"), "keyframes_labelled");
-    EXPECT_EQ(got[0].get_text("camera.source"), "v4l2") << "the simulated camera is RGB only, as the V4L2 one";
+    EXPECT_EQ(got[0].get_text("camera.source"), "sim") << "the quadrotor's own camera stage reads the simulated camera (RGB only)";
     EXPECT_EQ(got[1].get_text("localization.labels"), "geometric");
     EXPECT_EQ(got[1].get_text("lidar.classes"), "none");
+    EXPECT_EQ(got[1].get_text("lidar.source"), "sim") << "the robot's own lidar stage runs on the simulated Ouster";
+    EXPECT_EQ(got[0].get_text("gps.source"), "sim") << "the quadrotor's own gps stage reads the simulated u-blox";
+    EXPECT_EQ(got[1].get_text("base.can_backend"), "sim") << "the robot's own base stage drives the simulated ODrives over CAN";
+    EXPECT_EQ(got[1].get_real("lidar.mount_z_m"), RunOptions{}.lidar_mount_height_m) << "the simulated LiDAR is mounted where the file says";
     if (gossip) {
       EXPECT_EQ(got[1].get_text("comms.transport"), "inproc");
       EXPECT_TRUE(got[1].get_bool("comms.deliver_map_tiles"));
@@ -211,6 +228,7 @@ TEST_F(ShippedConfig, ScansCarryNoClassesUnlessTheLabelsOracleIsNamed) {
       EXPECT_GT(classed, points / 2) << "the world's classes on most returns";
       EXPECT_EQ(got[0].get_text("segmentation.labels"), "gt");
       EXPECT_EQ(got[1].get_text("localization.labels"), "gt");
+      EXPECT_EQ(got[1].get_text("lidar.classes"), "reflectivity") << "the oracle's class rides in the reflectivity byte";
     } else {
       EXPECT_EQ(classed, 0u) << "no class in field mode";
     }

@@ -138,7 +138,7 @@ TEST_F(UgvFeeds, ScansOdometryInitialPoseAndGroundTruthTilesArrive) {
     EXPECT_EQ(m.rings, 64);
     EXPECT_EQ(m.columns, 512);
     EXPECT_DOUBLE_EQ(m.sensor_in_body.z, o.lidar_mount_height_m);
-    EXPECT_EQ(m.seq, scan_stamps.size());
+    EXPECT_EQ(m.seq, scan_stamps.size() + 1) << "the lidar stage numbers its revolutions from 1";
     ASSERT_GT(m.count, 10000u) << "a revolution in a town sees most of its rays return";
     scan_stamps.push_back(m.stamp);
     for (std::uint32_t k = 0; k < m.count; k += 37) hits.push_back(Hit{m.stamp, m.points[k]});

@@ -121,6 +121,12 @@ Status CameraStage::init(StageContext& ctx) {
     resample_.configure(cfg_.width, cfg_.height, kImageWidth, kImageHeight);
     source_ = Source::kV4l2;
     (void)open_camera(ctx.clock.now(), false);
+  } else if (source == "sim") {
+    sim_ = find_sim_camera(ctx.instance);
+    if (sim_ == nullptr)
+      return Error::make(ErrorCode::kConfig, "config error: " + where_ + "source is sim but the simulator gave robot '" +
+                                                 std::string(ctx.instance) + "' no camera");
+    source_ = Source::kSim;
   } else if (source == "replay") {
     replay_path_ = own.replay;
     if (replay_path_.empty()) return Error::make(ErrorCode::kConfig, "config error: " + where_ + "replay is empty but source is replay: name a frame-stream file or FIFO");
@@ -196,6 +202,7 @@ void CameraStage::step(TimeNs now) noexcept {
   switch (source_) {
     case Source::kV4l2: step_v4l2(now); break;
     case Source::kReplay: step_replay(now); break;
+    case Source::kSim: step_sim(now); break;
     case Source::kNone: return;
   }
   note_device(now);
@@ -207,7 +214,7 @@ void CameraStage::note_device(TimeNs now) noexcept {
   device_->error_total(3, c_.ring_full);
   if (cam_) device_->error_total(1, cam_->counters().error_buffers + cam_->counters().short_buffers);
   device_->error_total(2, c_.replay.crc_errors + c_.replay.bad_records);
-  const bool open = (source_ == Source::kV4l2 && cam_) || (source_ == Source::kReplay && reader_ && !finished_);
+  const bool open = (source_ == Source::kV4l2 && cam_) || (source_ == Source::kReplay && reader_ && !finished_) || source_ == Source::kSim;
   if (!open || !silence_.check(*device_, now)) return;
   ++c_.silence_warnings;
   const double s = static_cast<double>(silence_.silent_for(now)) * 1e-9;
@@ -215,6 +222,8 @@ void CameraStage::note_device(TimeNs now) noexcept {
     AG_LOG_WARN("camera", "%sdevice: no image for %.0f s from %s, which is open and streaming (%llu error/short buffers, %llu dropped): "
                 "no trigger, a USB bandwidth limit, or another process", where_.c_str(), s, cfg_.device.c_str(),
                 ull(cam_->counters().error_buffers + cam_->counters().short_buffers), ull(cam_->counters().dropped));
+  else if (source_ == Source::kSim)
+    AG_LOG_WARN("camera", "%ssim: no image for %.0f s from the simulator's camera", where_.c_str(), s);
   else
     AG_LOG_WARN("camera", "%sreplay: no image for %.0f s from %s (%s)", where_.c_str(), s, replay_path_.c_str(),
                 reader_->is_fifo() ? "no writer on the FIFO yet, or it stopped writing" : "a file with no image records here");
@@ -334,6 +343,20 @@ void CameraStage::step_replay(TimeNs now) noexcept {
     pending_ = Pending::kNothing;
   }
   note_replay_faults(now);
+}
+
+// The simulator's frames as they come (a frame a reader has no room for is refused and counted, as a
+// live camera's).
+void CameraStage::step_sim(TimeNs now) noexcept {
+  for (int images = 0; images < max_frames_; ++images) {
+    const CameraImageMsg* f = sim_->front();
+    if (f == nullptr) break;
+    ++c_.frames_published;
+    device_->unit_received(true, now);
+    device_->received_bytes(sizeof(CameraImageMsg));
+    if (cam_out_.push(*f) != 0) ++c_.ring_full;
+    sim_->pop();
+  }
 }
 
 }  // namespace ag::camera

@@ -7,6 +7,8 @@
 #include <fcntl.h>
 #include <fstream>
 #include <iterator>
+#include <map>
+#include <mutex>
 #include <poll.h>
 #include <unistd.h>
 
@@ -72,6 +74,64 @@ long ReplayFile::read(std::span<std::uint8_t> buf) noexcept {
   std::memcpy(buf.data(), data_.data() + pos_, n);
   pos_ += n;
   return static_cast<long>(n);
+}
+
+class SimSerialSource final : public ByteSource {
+ public:
+  explicit SimSerialSource(SimSerialLink& l) : link_(l) {}
+  [[nodiscard]] long read(std::span<std::uint8_t> buf) noexcept override { return link_.read(buf); }
+  bool wait(TimeNs) noexcept override { return link_.queued() > 0; }  // the world wrote before this step
+  [[nodiscard]] const std::string& error() const noexcept override { return error_; }
+
+ private:
+  SimSerialLink& link_;
+  std::string error_;
+};
+
+SimSerialLink::SimSerialLink(std::size_t capacity) : ring_(capacity == 0 ? 1 : capacity, 0) {}
+
+std::size_t SimSerialLink::write(std::span<const std::uint8_t> bytes) noexcept {
+  const std::size_t n = std::min(bytes.size(), ring_.size() - size_);
+  for (std::size_t i = 0; i < n; ++i) ring_[(head_ + size_ + i) % ring_.size()] = bytes[i];
+  size_ += n;
+  dropped_ += bytes.size() - n;
+  return n;
+}
+
+long SimSerialLink::read(std::span<std::uint8_t> buf) noexcept {
+  const std::size_t n = std::min(buf.size(), size_);
+  for (std::size_t i = 0; i < n; ++i) buf[i] = ring_[(head_ + i) % ring_.size()];
+  head_ = (head_ + n) % ring_.size();
+  size_ -= n;
+  return static_cast<long>(n);
+}
+
+std::unique_ptr<ByteSource> SimSerialLink::open_source() { return std::make_unique<SimSerialSource>(*this); }
+
+namespace {
+std::mutex& gps_links_mutex() {
+  static std::mutex m;
+  return m;
+}
+std::map<std::string, SimSerialLink*, std::less<>>& gps_links() {
+  static std::map<std::string, SimSerialLink*, std::less<>> l;
+  return l;
+}
+}  // namespace
+
+bool register_sim_gps(std::string_view robot, SimSerialLink* link) {
+  std::lock_guard<std::mutex> g(gps_links_mutex());
+  return gps_links().emplace(std::string(robot), link).second;
+}
+void unregister_sim_gps(std::string_view robot) {
+  std::lock_guard<std::mutex> g(gps_links_mutex());
+  const auto it = gps_links().find(robot);
+  if (it != gps_links().end()) gps_links().erase(it);
+}
+SimSerialLink* find_sim_gps(std::string_view robot) {
+  std::lock_guard<std::mutex> g(gps_links_mutex());
+  const auto it = gps_links().find(robot);
+  return it == gps_links().end() ? nullptr : it->second;
 }
 
 }  // namespace ag::ublox

@@ -47,21 +47,27 @@ Status UbloxStage::init(StageContext& ctx) {
   if (!w) return w.error();
   out_ = w.value();
   const std::string& src = cfg.source;
-  if (src != "serial" && src != "replay" && src != "none")
-    return Error::make(ErrorCode::kConfig, "config error: " + where + "source must be serial, replay or none, got '" + src + "'");
+  if (src != "serial" && src != "replay" && src != "sim" && src != "none")
+    return Error::make(ErrorCode::kConfig, "config error: " + where + "source must be serial, replay, sim or none, got '" + src + "'");
   enu_ = std::make_unique<LocalEnu>(cfg.datum_lat_deg, cfg.datum_lon_deg, cfg.datum_height_m);
   max_bytes_ = cfg.max_bytes_per_step;
   buf_.assign(1024, 0);
   if (src == "none") return ok_status();
   if (ctx.device != nullptr) device_ = ctx.device;
   device_->describe("fixes", {"bad_checksum", "malformed", "garbage_bytes", "read"});
-  device_name_ = src == "replay" ? cfg.replay : cfg.device;
+  device_name_ = src == "replay" ? cfg.replay : src == "sim" ? std::string("the simulator's receiver") : cfg.device;
   auto absent = [&](const std::string& why) {
     ++c_.device_errors;
     AG_LOG_ERROR("gps", "%s; no fixes from this receiver (the robot keeps running)", why.c_str());
     return ok_status();
   };
-  if (src == "replay") {
+  if (src == "sim") {
+    SimSerialLink* link = find_sim_gps(ctx.instance);
+    if (link == nullptr)
+      return Error::make(ErrorCode::kConfig, "config error: " + where + "source is sim but the simulator gave robot '" +
+                                                 std::string(ctx.instance) + "' no receiver");
+    source_ = link->open_source();
+  } else if (src == "replay") {
     auto r = ReplayFile::open(cfg.replay, 1024);
     if (!r) return absent(where + "replay: " + r.error().message);
     source_ = std::move(r).value();

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <string>
 
+#include "airground/drivers/lidar/ouster/sim_source.hpp"
 #include "airground/messages/channels.hpp"
 #include "airground/platform/log.hpp"
 
@@ -23,8 +24,8 @@ Status OusterStage::init(StageContext& ctx) {
     return Error::make(ErrorCode::kConfig, "config error: " + where + "classes must be none or reflectivity, got '" + cls + "'");
   classes_from_reflectivity_ = cls == "reflectivity";
   const std::string& src = cfg.source;
-  if (src != "udp" && src != "pcap" && src != "none")
-    return Error::make(ErrorCode::kConfig, "config error: " + where + "source must be udp, pcap or none, got '" + src + "'");
+  if (src != "udp" && src != "pcap" && src != "sim" && src != "none")
+    return Error::make(ErrorCode::kConfig, "config error: " + where + "source must be udp, pcap, sim or none, got '" + src + "'");
   if (src == "none") return ok_status();
   if (ctx.device != nullptr) device_ = ctx.device;
   device_->describe("frames", {"wrong_size", "bad_type", "no_valid_column", "source"});
@@ -34,8 +35,16 @@ Status OusterStage::init(StageContext& ctx) {
     source_.reset();
     return ok_status();
   };
-  if (cfg.metadata.empty()) return absent(where + "metadata names no sensor metadata JSON");
-  auto info = read_metadata_file(cfg.metadata);
+  SimPacketLink* sim = nullptr;
+  if (src == "sim") {  // the simulator's sensor: its packets in-process, and its metadata as get_metadata gives it
+    sim = find_sim_lidar(ctx.instance);
+    if (sim == nullptr)
+      return Error::make(ErrorCode::kConfig, "config error: " + where + "source is sim but the simulator gave robot '" +
+                                                 std::string(ctx.instance) + "' no lidar");
+  } else if (cfg.metadata.empty()) {
+    return absent(where + "metadata names no sensor metadata JSON");
+  }
+  auto info = sim != nullptr ? Result<SensorInfo>(sim->info()) : read_metadata_file(cfg.metadata);
   // A file that is not there or not JSON is an absent sensor; one that says what the decoder cannot
   // read (an unsupported profile, a bad mode) is a wrong configuration and stops the robot.
   if (!info && info.error().code == ErrorCode::kConfig) {
@@ -50,7 +59,9 @@ Status OusterStage::init(StageContext& ctx) {
   const SensorInfo& s = info.value();
   const auto lidar_port = static_cast<std::uint16_t>(cfg.lidar_port != 0 ? cfg.lidar_port : s.udp_port_lidar);
   const auto imu_port = static_cast<std::uint16_t>(cfg.imu_port != 0 ? cfg.imu_port : s.udp_port_imu);
-  if (cfg.source == "pcap") {
+  if (sim != nullptr) {
+    source_ = sim->open_source();
+  } else if (cfg.source == "pcap") {
     auto p = PcapPacketSource::open(cfg.pcap, lidar_port, imu_port);
     if (!p) return absent(where + "pcap: " + p.error().message);
     source_ = std::move(p).value();
@@ -80,9 +91,11 @@ Status OusterStage::init(StageContext& ctx) {
   imu_port_ = imu_port;
   expected_size_ = fmt_->lidar_packet_size();
   profile_ = s.profile;
-  AG_LOG_INFO("lidar", "%s %s, %s, %dx%d, profile %s (%zu B packets), %s port %u", s.prod_line.empty() ? "Ouster" : s.prod_line.c_str(),
-              s.firmware.c_str(), s.layout.c_str(), s.mode.columns, s.mode.frequency_hz, to_string(s.profile), expected_size_,
-              pcap_ ? "pcap" : "udp", static_cast<unsigned>(lidar_port));
+  char where_from[48];
+  if (sim != nullptr) std::snprintf(where_from, sizeof where_from, "the simulator's sensor");
+  else std::snprintf(where_from, sizeof where_from, "%s port %u", src.c_str(), static_cast<unsigned>(lidar_port));
+  AG_LOG_INFO("lidar", "%s %s, %s, %dx%d, profile %s (%zu B packets), %s", s.prod_line.empty() ? "Ouster" : s.prod_line.c_str(),
+              s.firmware.c_str(), s.layout.c_str(), s.mode.columns, s.mode.frequency_hz, to_string(s.profile), expected_size_, where_from);
   return ok_status();
 }
 

@@ -36,9 +36,12 @@ struct StageSpec {
   std::span<const ParamSpec> params{};
   std::string_view help{};
   StageCost cost{};
-  // A device stage (camera, LiDAR, GNSS, autopilot, CAN) talks to hardware: in the simulator's lockstep the
-  // world writes its output channels and reads its inputs, and the stage itself does not run.
+  // A device stage (camera, LiDAR, GNSS, autopilot, CAN) talks to hardware. In the simulator's lockstep it
+  // runs on the simulated device when it has a sim_backend: the settings ("key=value[,key=value]", in its
+  // own section) that plug it in, as ArduPilot's SITL swaps a HAL. A device stage without one does not run
+  // there: the world writes its output channels and reads its inputs.
   bool device{false};
+  std::string_view sim_backend{};
 };
 
 // The share of each thread's time the budgets may claim; the rest is headroom for jitter and drivers.
@@ -51,6 +54,7 @@ void stage_budget_must_be_positive_and_below_its_period();
 void stage_priority_must_be_in_1_to_98();
 void stage_names_must_be_unique();
 void budgets_of_one_thread_exceed_its_time();
+void only_a_device_stage_has_a_sim_backend();
 
 constexpr bool same_thread(const StageSpec& a, const StageSpec& b) { return a.priority == b.priority && a.cpu == b.cpu; }
 }  // namespace table_check
@@ -64,6 +68,7 @@ consteval bool role_table_ok(const StageSpec (&t)[N]) {
     if (s.budget_us == 0 || static_cast<double>(s.budget_us) >= 1e6 / s.rate_hz)
       table_check::stage_budget_must_be_positive_and_below_its_period();
     if (s.priority < 1 || s.priority > 98) table_check::stage_priority_must_be_in_1_to_98();
+    if (!s.device && !s.sim_backend.empty()) table_check::only_a_device_stage_has_a_sim_backend();
     for (std::size_t j = 0; j < i; ++j)
       if (t[j].name == s.name) table_check::stage_names_must_be_unique();
     double load = 0.0;  // µs of budget per second on this stage's thread

@@ -32,6 +32,8 @@ struct DiffDriveConfig {
 };
 
 std::span<const ParamSection> diff_drive_config_schema() noexcept;  // one section, "diff_drive"
+// The model with a robot's own wheels (its base configuration's radius and track), at the same rim speed.
+[[nodiscard]] DiffDriveConfig with_wheels(DiffDriveConfig c, double wheel_radius_m, double track_width_m) noexcept;
 Result<DiffDriveConfig> load_diff_drive_config(const YAML::Node& node, std::string_view origin);
 Result<DiffDriveConfig> load_diff_drive_config(std::string_view yaml, std::string_view origin);
 

@@ -119,7 +119,7 @@ struct RunOptions {
   double camera_scale{0.5};       // 0.5 = 640x400, the size the mapper matches stereo at; 1.0 = 1280x800
   double lidar_hz{10};
   int lidar_columns{1024};        // 512, 1024 or 2048
-  double lidar_mount_height_m{0.6};
+  double lidar_mount_height_m{0.5};  // [m] the simulated LiDAR above the base: the shipped ugv.yaml's lidar.mount_z_m (ShippedConfig checks)
   double uav_altitude_m{40};
   double uav_speed_mps{5};
   double survey_overlap{0.6};

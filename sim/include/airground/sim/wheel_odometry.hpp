@@ -52,6 +52,7 @@ struct OdometrySample {
   Pose2 pose;                 // integrated pose in the odometry frame (the robot's pose at the first step)
   double dx{0}, dy{0};        // [m] increment since the previous step, in the robot frame at that step
   double dyaw{0};             // [rad]
+  double distance{0};         // [m] the wheels' mean distance over the step (signed): the arc dx, dy, dyaw lie on
   double wheel_left_rad_s{0}, wheel_right_rad_s{0};  // [rad/s] measured wheel speeds (what CAN reports)
   bool moving{false};         // the wheels turned (wheels mode) or the truth moved (truth_plus_noise)
 };

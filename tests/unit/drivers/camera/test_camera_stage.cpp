@@ -775,3 +775,53 @@ TEST(CameraStage, StepDoesNotAllocate) {
 
 }  // namespace
 }  // namespace ag::camera
+
+namespace ag::camera {
+namespace {
+
+// The simulator's backend (source: sim): frames the simulated camera commits come out of the stage in
+// order and unchanged; a frame with no free slot is dropped and counted; a robot the simulator gave no
+// camera is a configuration error naming it; the step does not allocate.
+TEST(CameraStage, TheSimulatorsCameraFramesComeOutInOrderAndAFullLinkDrops) {
+  std::string error;
+  EXPECT_EQ(Rig::make({"camera.source=sim"}, 0, &error), nullptr);
+  EXPECT_NE(error.find("camera.source is sim but the simulator gave robot 'uav' no camera"), std::string::npos) << error;
+
+  SimCameraLink link(2);
+  ASSERT_TRUE(register_sim_camera("uav", &link));
+  auto rig = Rig::make({"camera.source=sim"});
+  unregister_sim_camera("uav");
+  ASSERT_NE(rig, nullptr);
+  std::vector<std::unique_ptr<CameraImageMsg>> sent;
+  for (std::uint32_t i = 0; i < 3; ++i) {
+    auto img = make_image(i, 1'000 + i, i);
+    CameraImageMsg* slot = link.begin_frame();
+    if (i < 2) {
+      ASSERT_NE(slot, nullptr) << i;
+      *slot = *img;
+      link.commit();
+      sent.push_back(std::move(img));
+    } else {
+      EXPECT_EQ(slot, nullptr) << "both slots are taken until the stage steps";
+    }
+  }
+  EXPECT_EQ(link.dropped(), 1u);
+  {
+#if AG_COUNT_ALLOC
+    test_alloc::AllocationWindow w;
+#endif
+    rig->stage->step(50 * kNsPerMs);
+#if AG_COUNT_ALLOC
+    EXPECT_EQ(w.allocations(), 0u) << "sim step() allocated";
+#endif
+  }
+  rig->sink->step(50 * kNsPerMs);
+  ASSERT_EQ(rig->sink->images.size(), 2u);
+  for (std::size_t i = 0; i < 2; ++i) EXPECT_TRUE(same_image(*rig->sink->images[i], *sent[i])) << "image " << i;
+  EXPECT_EQ(rig->stage->counters().frames_published, 2u);
+  EXPECT_EQ(link.front(), nullptr) << "the stage took both";
+  ASSERT_NE(link.begin_frame(), nullptr) << "and freed their slots";
+}
+
+}  // namespace
+}  // namespace ag::camera

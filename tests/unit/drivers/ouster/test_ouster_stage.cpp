@@ -8,6 +8,7 @@
 #include <memory>
 #include <sstream>
 
+#include "airground/drivers/lidar/ouster/sim_source.hpp"
 #include "airground/drivers/lidar/ouster/stage.hpp"
 #include "airground/platform/role_instance.hpp"
 
@@ -228,6 +229,76 @@ TEST(OusterStage, ASilentSensorIsWarnedAboutOnce) {
     }
   }
   EXPECT_EQ(stage->counters().silence_warnings, 1u);
+}
+
+}  // namespace
+}  // namespace ag::ouster
+
+namespace ag::ouster {
+namespace {
+
+// The simulator's backend (source: sim): the capture's packets handed over in-process give the same
+// revolution as the capture itself, with the metadata the simulated sensor answers; a robot the
+// simulator gave no sensor is a configuration error naming it; a full link drops and counts.
+TEST(OusterStage, TheSimulatorsSensorGivesWhatTheSameBytesGiveFromACapture) {
+  auto info = read_metadata_file(kDir + "os1-64_legacy_metadata.json");
+  ASSERT_TRUE(info.ok()) << info.error().message;
+  auto pcap = PcapPacketSource::open(kDir + "OS-1-64_1024x10_fw20.pcap");
+  ASSERT_TRUE(pcap.ok()) << pcap.error().message;
+  SimPacketLink link(info.value(), 64, kMaxPacketSize);
+  std::vector<std::uint8_t> buf(kMaxPacketSize);
+  std::size_t n = 0, lidar = 0;
+  TimeNs t = 0;
+  for (PacketKind k; (k = pcap.value()->next(buf, n, t)) != PacketKind::kEnd;)
+    if (k == PacketKind::kLidar) lidar += link.send(std::span<const std::uint8_t>(buf.data(), n), t) ? 1u : 0u;
+  ASSERT_EQ(lidar, 64u);
+  EXPECT_FALSE(link.send(std::span<const std::uint8_t>(buf.data(), 100), 0)) << "a 65th packet finds the ring full";
+  EXPECT_EQ(link.dropped(), 1u);
+
+  SimClock clock(0);
+  auto no_link = make_role(clock, {"ouster.source=sim"});
+  ASSERT_FALSE(no_link.ok());
+  EXPECT_NE(no_link.error().message.find("ouster.source is sim but the simulator gave robot 'ugv1' no lidar"), std::string::npos)
+      << no_link.error().message;
+
+  ASSERT_TRUE(register_sim_lidar("ugv1", &link));
+  EXPECT_FALSE(register_sim_lidar("ugv1", &link)) << "one sensor per robot name";
+  auto sim = make_role(clock, {"ouster.source=sim", "ouster.mount_z_m=0.62"});  // no metadata file: the sensor's own
+  auto replay = make_role(clock, {"ouster.source=pcap", "ouster.metadata=" + kDir + "os1-64_legacy_metadata.json",
+                                  "ouster.pcap=" + kDir + "OS-1-64_1024x10_fw20.pcap", "ouster.mount_z_m=0.62"});
+  unregister_sim_lidar("ugv1");
+  ASSERT_TRUE(sim.ok()) << sim.error().message;
+  ASSERT_TRUE(replay.ok()) << replay.error().message;
+  auto* s = dynamic_cast<OusterStage*>(sim.value()->stages().front().stage.get());
+  auto* r = dynamic_cast<OusterStage*>(replay.value()->stages().front().stage.get());
+  ASSERT_TRUE(s != nullptr && r != nullptr);
+  {
+#if AG_COUNT_ALLOC
+    test_alloc::AllocationWindow w;
+#endif
+    s->step(kNsPerS);
+#if AG_COUNT_ALLOC
+    EXPECT_EQ(w.allocations(), 0u) << "step() allocated";
+#endif
+  }
+  r->step(kNsPerS);
+  EXPECT_EQ(link.queued(), 0u);
+  EXPECT_EQ(s->counters().packets, 64u);
+  EXPECT_EQ(s->counters().decode_errors, 0u);
+  ASSERT_EQ(s->counters().scans, 1u);
+  const LidarScanMsg& a = s->last_scan();
+  const LidarScanMsg& b = r->last_scan();
+  ASSERT_EQ(a.count, 16749u);
+  ASSERT_EQ(a.count, b.count);
+  for (std::uint32_t i = 0; i < a.count; ++i) {
+    ASSERT_EQ(a.points[i].range, b.points[i].range) << i;
+    ASSERT_EQ(a.points[i].x, b.points[i].x) << i;
+    ASSERT_EQ(a.points[i].ring, b.points[i].ring) << i;
+  }
+  EXPECT_DOUBLE_EQ(a.sensor_in_body.z, 0.62);
+  s->step(kNsPerS + kNsPerS / 20);  // nothing more sent: nothing more published, no error
+  EXPECT_EQ(s->counters().scans, 1u);
+  EXPECT_EQ(s->counters().source_errors, 0u);
 }
 
 }  // namespace

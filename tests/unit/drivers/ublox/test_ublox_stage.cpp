@@ -5,7 +5,10 @@
 
 #include <cmath>
 #include <fstream>
+#include <iterator>
 #include <memory>
+#include <span>
+#include <vector>
 
 #include "airground/drivers/gps/ublox/stage.hpp"
 #include "airground/platform/role_instance.hpp"
@@ -96,6 +99,53 @@ TEST(UbloxStage, NmeaFallbackAndConfigErrors) {
   const Status st = cfg.set("gps.source=usb");
   ASSERT_FALSE(st.ok());
   EXPECT_NE(st.error().message.find("gps.source"), std::string::npos) << st.error().message;
+}
+
+}  // namespace
+}  // namespace ag::ublox
+
+namespace ag::ublox {
+namespace {
+
+// The simulator's backend (source: sim): the real receiver's bytes through the in-process link give the
+// fixes the recording gives; bytes past the link's capacity are dropped and counted (a UART overrun); a
+// robot the simulator gave no receiver is a configuration error naming it.
+TEST(UbloxStage, TheSimulatorsReceiverGivesWhatTheSameBytesGiveFromARecording) {
+  SimClock clock(0);
+  auto none = make_role(clock, {"gps.source=sim"});
+  ASSERT_FALSE(none.ok());
+  EXPECT_NE(none.error().message.find("gps.source is sim but the simulator gave robot 'uav' no receiver"), std::string::npos)
+      << none.error().message;
+  std::ifstream in(kLog, std::ios::binary);
+  std::vector<std::uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_GT(bytes.size(), 1000u);
+  SimSerialLink link(bytes.size());
+  EXPECT_EQ(link.write(bytes), bytes.size());
+  EXPECT_EQ(link.write(std::span<const std::uint8_t>(bytes.data(), 10)), 0u) << "full: an overrun";
+  EXPECT_EQ(link.dropped(), 10u);
+  const std::vector<std::string> datum = {"gps.datum_lat_deg=47.12900", "gps.datum_lon_deg=15.21194", "gps.datum_height_m=860.0",
+                                          "gps.max_bytes_per_step=65536"};
+  ASSERT_TRUE(register_sim_gps("uav", &link));
+  std::vector<std::string> sim_sets = datum, replay_sets = datum;
+  sim_sets.push_back("gps.source=sim");
+  replay_sets.push_back("gps.source=replay");
+  replay_sets.push_back("gps.replay=" + kLog);
+  auto sim = make_role(clock, sim_sets);
+  auto replay = make_role(clock, replay_sets);
+  unregister_sim_gps("uav");
+  ASSERT_TRUE(sim.ok()) << sim.error().message;
+  ASSERT_TRUE(replay.ok()) << replay.error().message;
+  auto* s = dynamic_cast<UbloxStage*>(sim.value()->stages().front().stage.get());
+  auto* r = dynamic_cast<UbloxStage*>(replay.value()->stages().front().stage.get());
+  ASSERT_TRUE(s != nullptr && r != nullptr);
+  s->step(kNsPerS);
+  r->step(kNsPerS);
+  EXPECT_EQ(link.queued(), 0u);
+  EXPECT_EQ(s->counters().nav_pvt, 10u);
+  EXPECT_EQ(s->counters().fixes_published, r->counters().fixes_published);
+  EXPECT_EQ(s->last_fix().east_m, r->last_fix().east_m);
+  EXPECT_EQ(s->last_fix().north_m, r->last_fix().north_m);
+  EXPECT_EQ(s->last_fix().h_accuracy_m, r->last_fix().h_accuracy_m);
 }
 
 }  // namespace

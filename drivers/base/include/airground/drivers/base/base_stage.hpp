@@ -56,7 +56,7 @@ struct BaseStageSettings {
   std::string odometry_channel{chan::kWheelOdometry.name};
 };
 inline constexpr ParamField<BaseStageSettings> kBaseStageOwnFields[] = {
-    field::text("can_backend", &BaseStageSettings::can_backend, "socketcan", "socketcan|cannelloni|replay|inprocess", "CAN bus: SocketCAN (the robot), the cannelloni UDP bridge, a recorded candump log, or the simulator's in-process link"),
+    field::text("can_backend", &BaseStageSettings::can_backend, "socketcan", "socketcan|cannelloni|replay|sim", "CAN bus: SocketCAN (the robot), the cannelloni UDP bridge, a recorded candump log, or the simulator's ODrives (in-process)"),
     field::text("can_interface", &BaseStageSettings::can_interface, "can0", "", "SocketCAN interface of the motor controllers"),
     field::text("can_replay_path", &BaseStageSettings::can_replay_path, "", "", "candump log replayed when can_backend is replay"),
     field::integer("can_bridge_port", &BaseStageSettings::can_bridge_port, 0, 65535, "", "local UDP port of the cannelloni bridge"),

@@ -25,6 +25,14 @@ class OdriveSimulator {
   void step(TimeNs now) noexcept;
   void inject_error(int axis, std::uint32_t axis_error) noexcept;
   void set_silent(int axis, bool silent) noexcept { silent_[static_cast<std::size_t>(axis)] = silent; }
+  // A wheel on the shaft (the simulator's vehicle): from now on the encoder reports this position and
+  // velocity [turns, turns/s] (what the wheel did: slip, a blocked wheel), not the controller's own ramp.
+  void set_shaft(int axis, double pos_turns, double vel_turns_s) noexcept {
+    const auto i = static_cast<std::size_t>(axis);
+    shaft_[i] = true;
+    shaft_pos_[i] = pos_turns;
+    shaft_vel_[i] = vel_turns_s;
+  }
   [[nodiscard]] double pos_turns(int axis) const noexcept { return pos_[static_cast<std::size_t>(axis)]; }
   [[nodiscard]] double vel_turns_s(int axis) const noexcept { return vel_[static_cast<std::size_t>(axis)]; }
   [[nodiscard]] double input_vel(int axis) const noexcept { return input_[static_cast<std::size_t>(axis)]; }
@@ -38,6 +46,8 @@ class OdriveSimulator {
   std::array<double, 2> pos_{}, vel_{}, input_{};
   std::array<std::uint32_t, 2> state_{1, 1}, error_{0, 0};
   std::array<bool, 2> silent_{false, false};
+  std::array<bool, 2> shaft_{false, false};
+  std::array<double, 2> shaft_pos_{}, shaft_vel_{};
   TimeNs last_{-1}, next_hb_{0}, next_enc_{0};
   std::uint64_t commands_{0};
 };

@@ -49,7 +49,7 @@ class InProcessCanLink {
   std::array<Queue, 2> q_{};  // q_[s]: frames waiting for side s
 };
 
-// Links the simulator provides for a robot's base stage (can_backend: inprocess), by robot name.
+// Links the simulator provides for a robot's base stage (can_backend: sim), by robot name.
 void register_inprocess_link(std::string_view robot, InProcessCanLink* link);
 void unregister_inprocess_link(std::string_view robot);
 [[nodiscard]] InProcessCanLink* find_inprocess_link(std::string_view robot);

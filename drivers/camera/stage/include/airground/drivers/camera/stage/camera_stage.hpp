@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "airground/messages/channels.hpp"
+#include "airground/drivers/camera/stage/sim_camera.hpp"
 #include "airground/messages/messages.hpp"
 #include "airground/drivers/camera/frame_stream/frame_stream.hpp"
 #include "airground/drivers/camera/v4l2/camera.hpp"
@@ -37,7 +38,7 @@ struct CameraSettings {
   std::string vo_channel{chan::kVisualOdometryRecorded.name};
 };
 inline constexpr ParamField<CameraSettings> kCameraStageFields[] = {
-    field::text("source", &CameraSettings::source, "v4l2", "v4l2|replay|none", "images from the camera (V4L2), a frame-stream recording or FIFO (replay), or none"),
+    field::text("source", &CameraSettings::source, "v4l2", "v4l2|replay|sim|none", "images from the camera (V4L2), a frame-stream recording or FIFO (replay), the simulator's camera, or none"),
     field::text("device", &CameraSettings::device, "/dev/video0", "", "V4L2 capture device"),
     field::integer("width", &CameraSettings::width, 16, 4096, "px", "capture width asked of the device (the device may round it); resampled to 640"),
     field::integer("height", &CameraSettings::height, 16, 4096, "px", "capture height asked of the device; resampled to 400 (keep 16:10 or the image is stretched)"),
@@ -102,12 +103,13 @@ class CameraStage final : public Stage {
   [[nodiscard]] const CameraImageMsg& last_image() const noexcept { return *img_; }
 
  private:
-  enum class Source : std::uint8_t { kNone, kV4l2, kReplay };
+  enum class Source : std::uint8_t { kNone, kV4l2, kReplay, kSim };
   enum class Pending : std::uint8_t { kNothing, kImage, kVo };
   bool open_camera(TimeNs now, bool retry);
   bool open_replay(TimeNs now, bool retry);
   void step_v4l2(TimeNs now) noexcept;
   void step_replay(TimeNs now) noexcept;
+  void step_sim(TimeNs now) noexcept;
   void note_replay_faults(TimeNs now) noexcept;
   void note_device(TimeNs now) noexcept;
 
@@ -127,6 +129,7 @@ class CameraStage final : public Stage {
   std::vector<std::uint8_t> bgr_;
   AreaResampler resample_;
   std::uint32_t seq_{0};
+  SimCameraLink* sim_{nullptr};  // source: sim
   // replay
   std::string replay_path_;
   std::unique_ptr<FrameStreamReader> reader_;

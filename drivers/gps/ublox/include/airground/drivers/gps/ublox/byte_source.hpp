@@ -7,6 +7,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "airground/platform/result.hpp"
@@ -64,5 +65,34 @@ class ReplayFile final : public ByteSource {
   std::size_t start_{0}, pos_{0}, chunk_{64};
   std::string error_;
 };
+
+// The simulator's receiver (the stage's `source: sim`): what the simulated receiver writes on its UART,
+// handed to the robot's gps stage in-process. The ring (capacity bytes) is allocated once; write() takes
+// what fits and counts the rest dropped, as a UART's FIFO overruns; the source's read() never blocks.
+// The simulator's world stage writes and the gps stage reads, never at once (the lockstep executor).
+class SimSerialLink {
+ public:
+  explicit SimSerialLink(std::size_t capacity = 16384);
+  SimSerialLink(const SimSerialLink&) = delete;
+  SimSerialLink& operator=(const SimSerialLink&) = delete;
+  // The receiver sends these bytes; returns how many fitted.
+  std::size_t write(std::span<const std::uint8_t> bytes) noexcept;
+  // The stage's side (it must not outlive the link).
+  [[nodiscard]] std::unique_ptr<ByteSource> open_source();
+  [[nodiscard]] std::uint64_t dropped() const noexcept { return dropped_; }
+  [[nodiscard]] std::size_t queued() const noexcept { return size_; }
+
+ private:
+  friend class SimSerialSource;
+  long read(std::span<std::uint8_t> buf) noexcept;
+  std::vector<std::uint8_t> ring_;
+  std::size_t head_{0}, size_{0};
+  std::uint64_t dropped_{0};
+};
+
+// Links the simulator provides for its robots' gps stages, by robot name; false when taken.
+[[nodiscard]] bool register_sim_gps(std::string_view robot, SimSerialLink* link);
+void unregister_sim_gps(std::string_view robot);
+[[nodiscard]] SimSerialLink* find_sim_gps(std::string_view robot);
 
 }  // namespace ag::ublox

@@ -40,7 +40,7 @@ struct UbloxSettings {
   std::string gps_channel{chan::kGps.name};
 };
 inline constexpr ParamField<UbloxSettings> kUbloxStageFields[] = {
-    field::text("source", &UbloxSettings::source, "serial", "serial|replay|none", "bytes from the receiver (serial port), a recording (replay), or no receiver"),
+    field::text("source", &UbloxSettings::source, "serial", "serial|replay|sim|none", "bytes from the receiver (serial port), a recording (replay), the simulator's receiver, or no receiver"),
     field::text("device", &UbloxSettings::device, "/dev/ttyACM0", "", "serial device of the receiver"),
     field::integer("baud", &UbloxSettings::baud, 9600, 921600, "Bd", "serial speed"),
     field::text("replay", &UbloxSettings::replay, "", "", "recorded stream to replay when source is replay"),

@@ -35,7 +35,7 @@ struct OusterSettings {
   std::string classes{"none"};
 };
 inline constexpr ParamField<OusterSettings> kOusterStageFields[] = {
-    field::text("source", &OusterSettings::source, "udp", "udp|pcap|none", "packets from the sensor (UDP), a capture (pcap replay), or no lidar"),
+    field::text("source", &OusterSettings::source, "udp", "udp|pcap|sim|none", "packets from the sensor (UDP), a capture (pcap replay), the simulator's sensor (its metadata too), or no lidar"),
     field::text("metadata", &OusterSettings::metadata, "", "", "the sensor's metadata JSON (get_metadata / the SDK's .json)"),
     field::text("pcap", &OusterSettings::pcap, "", "", "capture to replay when source is pcap"),
     field::text("bind_address", &OusterSettings::bind_address, "0.0.0.0", "", "IPv4 address the UDP sockets bind"),

@@ -1,0 +1,66 @@
+// The simulator's camera link.
+#include "airground/drivers/camera/stage/sim_camera.hpp"
+
+#include <map>
+#include <mutex>
+#include <string>
+
+namespace ag::camera {
+
+SimCameraLink::SimCameraLink(std::size_t capacity) {
+  slots_.resize(capacity == 0 ? 1 : capacity);
+  for (auto& s : slots_) s = std::make_unique<CameraImageMsg>();
+}
+
+CameraImageMsg* SimCameraLink::begin_frame() noexcept {
+  if (size_ == slots_.size()) {
+    ++dropped_;
+    open_ = false;
+    return nullptr;
+  }
+  open_ = true;
+  return slots_[(head_ + size_) % slots_.size()].get();
+}
+
+void SimCameraLink::commit() noexcept {
+  if (!open_) return;
+  open_ = false;
+  ++size_;
+  ++frames_;
+}
+
+const CameraImageMsg* SimCameraLink::front() const noexcept { return size_ == 0 ? nullptr : slots_[head_].get(); }
+
+void SimCameraLink::pop() noexcept {
+  if (size_ == 0) return;
+  head_ = (head_ + 1) % slots_.size();
+  --size_;
+}
+
+namespace {
+std::mutex& links_mutex() {
+  static std::mutex m;
+  return m;
+}
+std::map<std::string, SimCameraLink*, std::less<>>& links() {
+  static std::map<std::string, SimCameraLink*, std::less<>> l;
+  return l;
+}
+}  // namespace
+
+bool register_sim_camera(std::string_view robot, SimCameraLink* link) {
+  std::lock_guard<std::mutex> g(links_mutex());
+  return links().emplace(std::string(robot), link).second;
+}
+void unregister_sim_camera(std::string_view robot) {
+  std::lock_guard<std::mutex> g(links_mutex());
+  const auto it = links().find(robot);
+  if (it != links().end()) links().erase(it);
+}
+SimCameraLink* find_sim_camera(std::string_view robot) {
+  std::lock_guard<std::mutex> g(links_mutex());
+  const auto it = links().find(robot);
+  return it == links().end() ? nullptr : it->second;
+}
+
+}  // namespace ag::camera
