@@ -30,7 +30,7 @@ constexpr StageSpec kUavStages[] = {
      "nadir camera: V4L2 capture (or a frame-stream replay with its VO) on 'camera' and 'visual_odometry'", {}, true, "source=sim"},
     // The autopilot's attitude (the VO's gravity): ATTITUDE at 50 Hz over MAVLink, ~0.1 ms of parsing a step.
     {"autopilot", &mavlink::AutopilotStage::make, 50.0, 2'000, 38, -1, mavlink::AutopilotStage::kParams,
-     "PX4 / ArduPilot attitude over MAVLink (TELEM2 serial, UDP onboard link or a .tlog), on 'attitude' in REP-103", {}, true},
+     "PX4 / ArduPilot attitude over MAVLink (TELEM2 serial, UDP onboard link or a .tlog), on 'attitude' in REP-103", {}, true, "source=sim"},
     {"gps", &ublox::UbloxStage::make, 20.0, 2'000, 35, -1, ublox::UbloxStage::kParams,
      "u-blox GNSS: UBX NAV-PVT (NMEA GGA fallback) from the serial port or a recording, on 'gps' in the map frame", {}, true, "source=sim"},
     // Monocular keyframe VO on every frame with the autopilot's attitude as gravity: ~5 ms a frame

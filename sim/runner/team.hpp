@@ -44,6 +44,7 @@
 #include "airground/drivers/gpio/gpio_line.hpp"
 #include "airground/drivers/gps/ublox/byte_source.hpp"
 #include "airground/drivers/lidar/ouster/sim_source.hpp"
+#include "autopilot_device.hpp"
 #include "camera_prefetch.hpp"
 #include "gnss_device.hpp"
 #include "ouster_device.hpp"
@@ -98,20 +99,23 @@ struct SimLidar {
   bool registered_{false};
 };
 
-// The quadrotor's camera and u-blox as its camera and gps stages (`source: sim`) see them: rendered
-// frames and NAV-PVT bytes on in-process links registered under the robot's name while it exists.
+// The quadrotor's camera, u-blox and PX4 as its camera, gps and autopilot stages (`source: sim`) see
+// them: rendered frames, NAV-PVT bytes and MAVLink on in-process links registered under the robot's name
+// while it exists.
 struct SimUavDevices {
   explicit SimUavDevices(std::string robot);
   SimUavDevices(const SimUavDevices&) = delete;
   SimUavDevices& operator=(const SimUavDevices&) = delete;
   ~SimUavDevices();
-  [[nodiscard]] bool registered() const noexcept { return camera_registered_ && gnss_registered_; }
+  [[nodiscard]] bool registered() const noexcept { return camera_registered_ && gnss_registered_ && autopilot_registered_; }
   std::string robot;
   camera::SimCameraLink camera;
   ublox::SimSerialLink gnss;
+  mavlink::SimAutopilotLink autopilot;
+  SimPx4 px4{autopilot};
 
  private:
-  bool camera_registered_{false}, gnss_registered_{false};
+  bool camera_registered_{false}, gnss_registered_{false}, autopilot_registered_{false};
 };
 
 // A ground robot's wheels as its base stage (`can_backend: sim`) sees them: its two ODrives on an
@@ -235,7 +239,6 @@ struct Uav {
   std::uint32_t image_seq{0};
   std::vector<TruthSample> truth{};
   AttitudeSimulator attitude{};  // the autopilot's ATTITUDE (PX4 EKF2 error model, attitude.yaml)
-  RingWriter<AttitudeMsg, kAttitudeRing> attitude_out{};
   std::uint64_t attitudes{0};
 };
 

@@ -31,11 +31,13 @@ SimLidar::~SimLidar() {
 }
 
 SimUavDevices::SimUavDevices(std::string r)
-    : robot(std::move(r)), camera_registered_(camera::register_sim_camera(robot, &camera)), gnss_registered_(ublox::register_sim_gps(robot, &gnss)) {}
+    : robot(std::move(r)), camera_registered_(camera::register_sim_camera(robot, &camera)), gnss_registered_(ublox::register_sim_gps(robot, &gnss)),
+      autopilot_registered_(mavlink::register_sim_autopilot(robot, &autopilot)) {}
 
 SimUavDevices::~SimUavDevices() {
   if (camera_registered_) camera::unregister_sim_camera(robot);
   if (gnss_registered_) ublox::unregister_sim_gps(robot);
+  if (autopilot_registered_) mavlink::unregister_sim_autopilot(robot);
 }
 
 SimBase::SimBase(std::string r, const Clock& clock, const base::BaseParams& p)
@@ -510,7 +512,7 @@ Result<double> set_up_uav(Team& t, const Models& m, RoleFactory& roles, const st
   for (const std::string& kv : sim_backend_settings(uav_role())) uav_extra.push_back(kv);
   for (const std::string& kv : datum_keys(w.header.datum)) uav_extra.push_back(kv);
   uav_extra.insert(uav_extra.end(), opt.uav_config.begin(), opt.uav_config.end());
-  // The simulator is the quadrotor's camera (and its VO) and the autopilot: it writes their channels.
+  // The device stages run on the simulated devices (the oracle VO, when named, writes the VO's channel).
   RoleDescription uav_desc = uav_role();
   u->vo_oracle = opt.oracle("vo");
   u->labels_oracle = labels_oracle;
@@ -518,7 +520,7 @@ Result<double> set_up_uav(Team& t, const Models& m, RoleFactory& roles, const st
     if ((!st.device || !st.sim_backend.empty()) && !(u->vo_oracle && st.name == "vo")) t.uav_stages.push_back(st);
   t.uav_devices = std::make_unique<SimUavDevices>("uav");
   if (!t.uav_devices->registered())
-    return Error::make(ErrorCode::kInvalidArgument, "uav: another team in this process has a simulated camera or receiver of that name");
+    return Error::make(ErrorCode::kInvalidArgument, "uav: another team in this process has a simulated camera, receiver or autopilot of that name");
   if (!u->vo_oracle && !t.uav_play)
     t.uav_stages.push_back(StageSpec{"sim_vo_tap", &SimVoTapStage::make, 10.0, 90'000, 1, -1, SimVoTapStage::kParams,
                                      "simulator: counts and logs the quadrotor's own odometry"});
@@ -540,9 +542,6 @@ Result<double> set_up_uav(Team& t, const Models& m, RoleFactory& roles, const st
     for (auto& slot : u->role->stages())
       if (auto* tap = dynamic_cast<SimVoTapStage*>(slot.stage.get())) tap->uav = u.get();
   }
-  auto att_w = u->role->channels().ring_writer(chan::kAttitude);
-  if (!att_w) return att_w.error();
-  u->attitude_out = att_w.value();
   u->attitude = AttitudeSimulator(m.attitude, opt.seed ^ std::uint64_t{0x61747431});
   if (opt.ugv_map == UgvMapSource::kOnline) {
     for (auto& slot : u->role->stages())

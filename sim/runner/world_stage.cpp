@@ -219,19 +219,11 @@ void publish_uav_sensors(Team& t, Uav& a, const Pose3& p, TimeNs now) {
     if (t.mcap) t.mcap->uav_gps(now, fix.lat_deg, fix.lon_deg, fix.height_m, fix.h_accuracy_m);
     if (a.gps_log) std::fprintf(a.gps_log.get(), "%.3f,%d,%.9f,%.9f,%.3f,%.3f,%.3f,%.3f,%.2f\n", to_seconds(now), static_cast<int>(fix.fix_type), fix.lat_deg, fix.lon_deg, fix.height_m, fix.east_m, fix.north_m, fix.up_m, fix.h_accuracy_m);
   }
+  t.uav_devices->px4.step(now);
   AttitudeSample as;
   if (a.attitude.sample(now, p, as)) {
     ++a.attitudes;
-    AttitudeMsg m;
-    m.stamp = as.stamp;
-    m.published = now;
-    m.roll = as.roll;
-    m.pitch = as.pitch;
-    m.yaw = as.yaw;
-    m.roll_rate = as.roll_rate;
-    m.pitch_rate = as.pitch_rate;
-    m.yaw_rate = as.yaw_rate;
-    (void)a.attitude_out.push(m);
+    t.uav_devices->px4.send_attitude(as);  // ATTITUDE over MAVLink to the quadrotor's autopilot stage
   }
   if (a.vo_oracle) {
     VoSample vs;

@@ -180,6 +180,7 @@ TEST_F(ShippedConfig, EveryRobotRunsTheShippedFileExceptTheKeysTheSimulatorMustS
     EXPECT_EQ(got[1].get_text("lidar.classes"), "none");
     EXPECT_EQ(got[1].get_text("lidar.source"), "sim") << "the robot's own lidar stage runs on the simulated Ouster";
     EXPECT_EQ(got[0].get_text("gps.source"), "sim") << "the quadrotor's own gps stage reads the simulated u-blox";
+    EXPECT_EQ(got[0].get_text("autopilot.source"), "sim") << "and its autopilot stage the simulated PX4's MAVLink";
     EXPECT_EQ(got[1].get_text("base.can_backend"), "sim") << "the robot's own base stage drives the simulated ODrives over CAN";
     EXPECT_EQ(got[1].get_real("lidar.mount_z_m"), RunOptions{}.lidar_mount_height_m) << "the simulated LiDAR is mounted where the file says";
     if (gossip) {

@@ -1,6 +1,9 @@
 // Serial port (termios), UDP socket and tlog replay.
 #include "airground/drivers/autopilot/mavlink/link.hpp"
 
+#include <map>
+#include <mutex>
+
 #include <arpa/inet.h>
 #include <fcntl.h>
 #include <poll.h>
@@ -162,6 +165,53 @@ long TlogReplay::read(std::span<std::uint8_t> buf, TimeNs& recorded_ns) noexcept
 void append_tlog_record(std::vector<std::uint8_t>& out, std::uint64_t unix_us, std::span<const std::uint8_t> frame) {
   for (int i = 7; i >= 0; --i) out.push_back(static_cast<std::uint8_t>(unix_us >> (8 * i)));
   out.insert(out.end(), frame.begin(), frame.end());
+}
+
+namespace {
+
+class SimLink final : public Link {
+ public:
+  explicit SimLink(SimAutopilotLink& l) : link_(l) {}
+  [[nodiscard]] long read(std::span<std::uint8_t> buf, TimeNs& recorded_ns) noexcept override {
+    recorded_ns = -1;
+    return static_cast<long>(link_.to_robot.read(buf));
+  }
+  [[nodiscard]] bool packetized() const noexcept override { return false; }
+  long write(std::span<const std::uint8_t> bytes) noexcept override { return static_cast<long>(link_.from_robot.write(bytes)); }
+  bool wait(TimeNs) noexcept override { return link_.to_robot.size() > 0; }  // the world wrote before this step
+  [[nodiscard]] const std::string& error() const noexcept override { return error_; }
+
+ private:
+  SimAutopilotLink& link_;
+  std::string error_;
+};
+
+std::mutex& sim_links_mutex() {
+  static std::mutex m;
+  return m;
+}
+std::map<std::string, SimAutopilotLink*, std::less<>>& sim_links() {
+  static std::map<std::string, SimAutopilotLink*, std::less<>> l;
+  return l;
+}
+
+}  // namespace
+
+std::unique_ptr<Link> SimAutopilotLink::open_link() { return std::make_unique<SimLink>(*this); }
+
+bool register_sim_autopilot(std::string_view robot, SimAutopilotLink* link) {
+  std::lock_guard<std::mutex> g(sim_links_mutex());
+  return sim_links().emplace(std::string(robot), link).second;
+}
+void unregister_sim_autopilot(std::string_view robot) {
+  std::lock_guard<std::mutex> g(sim_links_mutex());
+  const auto it = sim_links().find(robot);
+  if (it != sim_links().end()) sim_links().erase(it);
+}
+SimAutopilotLink* find_sim_autopilot(std::string_view robot) {
+  std::lock_guard<std::mutex> g(sim_links_mutex());
+  const auto it = sim_links().find(robot);
+  return it == sim_links().end() ? nullptr : it->second;
 }
 
 }  // namespace ag::mavlink

@@ -27,8 +27,8 @@ Status AutopilotStage::init(StageContext& ctx) {
   if (!w) return w.error();
   out_ = w.value();
   const std::string& src = cfg.source;
-  if (src != "serial" && src != "udp" && src != "replay" && src != "none")
-    return Error::make(ErrorCode::kConfig, "config error: " + where + "source must be serial, udp, replay or none, got '" + src + "'");
+  if (src != "serial" && src != "udp" && src != "replay" && src != "sim" && src != "none")
+    return Error::make(ErrorCode::kConfig, "config error: " + where + "source must be serial, udp, replay, sim or none, got '" + src + "'");
   if (src == "replay" && cfg.replay.empty())
     return Error::make(ErrorCode::kConfig, "config error: " + where + "replay is empty but " + where + "source is replay: name the .tlog to play");
   max_bytes_ = cfg.max_bytes_per_step;
@@ -45,7 +45,13 @@ Status AutopilotStage::init(StageContext& ctx) {
     AG_LOG_ERROR("autopilot", "%s; no attitude from the autopilot (the robot keeps running)", why.c_str());
     return ok_status();
   };
-  if (src == "replay") {
+  if (src == "sim") {
+    SimAutopilotLink* sim = find_sim_autopilot(ctx.instance);
+    if (sim == nullptr)
+      return Error::make(ErrorCode::kConfig, "config error: " + where + "source is sim but the simulator gave robot '" +
+                                                 std::string(ctx.instance) + "' no autopilot");
+    link_ = sim->open_link();
+  } else if (src == "replay") {
     auto r = TlogReplay::open(cfg.replay);
     if (!r) return absent(where + "replay: " + r.error().message);
     link_ = std::move(r).value();

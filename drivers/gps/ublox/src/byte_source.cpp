@@ -79,7 +79,7 @@ long ReplayFile::read(std::span<std::uint8_t> buf) noexcept {
 class SimSerialSource final : public ByteSource {
  public:
   explicit SimSerialSource(SimSerialLink& l) : link_(l) {}
-  [[nodiscard]] long read(std::span<std::uint8_t> buf) noexcept override { return link_.read(buf); }
+  [[nodiscard]] long read(std::span<std::uint8_t> buf) noexcept override { return static_cast<long>(link_.uart_.read(buf)); }
   bool wait(TimeNs) noexcept override { return link_.queued() > 0; }  // the world wrote before this step
   [[nodiscard]] const std::string& error() const noexcept override { return error_; }
 
@@ -87,24 +87,6 @@ class SimSerialSource final : public ByteSource {
   SimSerialLink& link_;
   std::string error_;
 };
-
-SimSerialLink::SimSerialLink(std::size_t capacity) : ring_(capacity == 0 ? 1 : capacity, 0) {}
-
-std::size_t SimSerialLink::write(std::span<const std::uint8_t> bytes) noexcept {
-  const std::size_t n = std::min(bytes.size(), ring_.size() - size_);
-  for (std::size_t i = 0; i < n; ++i) ring_[(head_ + size_ + i) % ring_.size()] = bytes[i];
-  size_ += n;
-  dropped_ += bytes.size() - n;
-  return n;
-}
-
-long SimSerialLink::read(std::span<std::uint8_t> buf) noexcept {
-  const std::size_t n = std::min(buf.size(), size_);
-  for (std::size_t i = 0; i < n; ++i) buf[i] = ring_[(head_ + i) % ring_.size()];
-  head_ = (head_ + n) % ring_.size();
-  size_ -= n;
-  return static_cast<long>(n);
-}
 
 std::unique_ptr<ByteSource> SimSerialLink::open_source() { return std::make_unique<SimSerialSource>(*this); }
 

@@ -13,6 +13,8 @@
 #include <iterator>
 #include <memory>
 
+#include "airground/drivers/autopilot/mavlink/frames.hpp"
+#include "airground/drivers/autopilot/mavlink/link.hpp"
 #include "airground/drivers/autopilot/mavlink/stage.hpp"
 #include "airground/platform/role_instance.hpp"
 
@@ -289,6 +291,67 @@ TEST(AutopilotStage, ConfigurationErrorsNameTheKeyAndAbsentDevicesDoNotStopTheRo
   ASSERT_NE(none.stage, nullptr);
   EXPECT_FALSE(none.stage->active());
   EXPECT_EQ(none.stage->counters().device_errors, 0u);
+}
+
+}  // namespace
+}  // namespace ag::mavlink
+
+namespace ag::mavlink {
+namespace {
+
+// The simulator's backend (source: sim): a simulated PX4's HEARTBEAT and ATTITUDE frames through the
+// in-process TELEM2 link come out in REP-103, the stage's SET_MESSAGE_INTERVAL goes back over it, and a
+// robot the simulator gave no autopilot is a configuration error naming it.
+TEST(AutopilotStage, TheSimulatorsAutopilotTalksMavlinkBothWays) {
+  SimClock clock(0);
+  {
+    static const std::vector<ParamSection> schema = role_schema(kRole);
+    Config cfg = Config::defaults(schema);
+    ASSERT_TRUE(cfg.set("autopilot.source=sim").ok());
+    auto r = RoleInstance::create(kRole, cfg, clock, "uav");
+    ASSERT_FALSE(r.ok());
+    EXPECT_NE(r.error().message.find("autopilot.source is sim but the simulator gave robot 'uav' no autopilot"), std::string::npos)
+        << r.error().message;
+  }
+  SimAutopilotLink link;
+  ASSERT_TRUE(register_sim_autopilot("uav", &link));
+  Rig rig = make_rig(clock, {"autopilot.source=sim"});
+  unregister_sim_autopilot("uav");
+  ASSERT_NE(rig.stage, nullptr);
+  std::array<std::uint8_t, kMaxFrame> frame{};
+  Heartbeat hb;
+  hb.type = 2;
+  hb.autopilot = 12;  // PX4
+  (void)link.to_robot.write(std::span(frame.data(), encode_message(FrameHeader{2, 0, 0, 0, 1, 1, 0}, hb, frame)));
+  for (std::uint32_t k = 0; k < 3; ++k) {
+    Attitude a;
+    a.time_boot_ms = 100 + 20 * k;
+    a.roll = 0.1f;
+    a.pitch = -0.2f;
+    a.yaw = 0.3f;
+    a.yawspeed = 0.05f;
+    (void)link.to_robot.write(std::span(frame.data(), encode_message(FrameHeader{2, 0, 0, static_cast<std::uint8_t>(1 + k), 1, 1, 0}, a, frame)));
+  }
+  clock.set(kNsPerS);
+  rig.stage->step(clock.now());
+  rig.stage->step(clock.now() + 20 * kNsPerMs);
+  const AutopilotCounters& c = rig.stage->counters();
+  EXPECT_EQ(c.heartbeats, 1u);
+  EXPECT_EQ(c.attitude, 3u);
+  EXPECT_EQ(c.published, 3u);
+  const AttitudeMsg& m = rig.stage->last_attitude();
+  EXPECT_NEAR(m.roll, 0.1, 1e-7);
+  EXPECT_NEAR(m.pitch, 0.2, 1e-7);
+  EXPECT_NEAR(m.yaw, kPi / 2 - 0.3, 1e-6);
+  EXPECT_NEAR(m.yaw_rate, -0.05, 1e-7);
+  EXPECT_GT(link.from_robot.size(), 0u) << "the stage asked the autopilot for ATTITUDE at 50 Hz";
+  // And the simulator's frames convert back: FRD / NED -> FLU / ENU is its own inverse.
+  const EulerAttitude e{0.1, -0.2, 0.3, 0.01, 0.02, 0.03};
+  const EulerAttitude back = flu_enu_to_frd_ned(frd_ned_to_flu_enu(e));
+  EXPECT_NEAR(back.roll, e.roll, 1e-12);
+  EXPECT_NEAR(back.pitch, e.pitch, 1e-12);
+  EXPECT_NEAR(back.yaw, e.yaw, 1e-12);
+  EXPECT_NEAR(back.yaw_rate, e.yaw_rate, 1e-12);
 }
 
 }  // namespace

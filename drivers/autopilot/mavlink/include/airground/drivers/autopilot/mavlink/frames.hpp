@@ -16,6 +16,8 @@ struct EulerAttitude {
 [[nodiscard]] double wrap_pi(double a) noexcept;
 // FRD body in NED (MAVLink ATTITUDE) to FLU body in ENU (AttitudeMsg).
 [[nodiscard]] EulerAttitude frd_ned_to_flu_enu(const EulerAttitude& a) noexcept;
+// And back (a simulated autopilot's ATTITUDE): the map is its own inverse.
+[[nodiscard]] inline EulerAttitude flu_enu_to_frd_ned(const EulerAttitude& a) noexcept { return frd_ned_to_flu_enu(a); }
 // ZYX Euler angles of a unit quaternion (w, x, y, z) (normalised first); the rates are left at zero.
 [[nodiscard]] EulerAttitude euler_from_quaternion(double w, double x, double y, double z) noexcept;
 

@@ -10,8 +10,10 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
+#include "airground/drivers/serial/byte_ring.hpp"
 #include "airground/platform/result.hpp"
 #include "airground/platform/time.hpp"
 
@@ -104,6 +106,24 @@ class TlogReplay final : public Link {
   std::uint64_t records_{0}, bad_{0};
   std::string error_;
 };
+
+// The simulator's autopilot (the stage's `source: sim`): its TELEM2 UART in-process, both ways. The
+// simulated autopilot writes frames to_robot; the stage's requests land in from_robot (serial::ByteRing:
+// allocated once, an overrun counted). The stage reads a byte stream, as from a serial port.
+class SimAutopilotLink {
+ public:
+  explicit SimAutopilotLink(std::size_t capacity = 16384) : to_robot(capacity), from_robot(capacity) {}
+  SimAutopilotLink(const SimAutopilotLink&) = delete;
+  SimAutopilotLink& operator=(const SimAutopilotLink&) = delete;
+  // The stage's side (it must not outlive the link).
+  [[nodiscard]] std::unique_ptr<Link> open_link();
+  serial::ByteRing to_robot, from_robot;
+};
+
+// Links the simulator provides for its robots' autopilot stages, by robot name; false when taken.
+[[nodiscard]] bool register_sim_autopilot(std::string_view robot, SimAutopilotLink* link);
+void unregister_sim_autopilot(std::string_view robot);
+[[nodiscard]] SimAutopilotLink* find_sim_autopilot(std::string_view robot);
 
 // Appends one tlog record (the simulator's and the tests' writer).
 void append_tlog_record(std::vector<std::uint8_t>& out, std::uint64_t unix_us, std::span<const std::uint8_t> frame);

@@ -40,7 +40,7 @@ struct AutopilotSettings {
   std::string attitude_channel{chan::kAttitude.name};
 };
 inline constexpr ParamField<AutopilotSettings> kAutopilotStageFields[] = {
-    field::text("source", &AutopilotSettings::source, "serial", "serial|udp|replay|none", "the autopilot's serial port (TELEM2), its UDP onboard link, a .tlog recording, or no autopilot"),
+    field::text("source", &AutopilotSettings::source, "serial", "serial|udp|replay|sim|none", "the autopilot's serial port (TELEM2), its UDP onboard link, a .tlog recording, the simulator's autopilot, or no autopilot"),
     field::text("device", &AutopilotSettings::device, "/dev/ttyUSB0", "", "serial device wired to the autopilot's TELEM2"),
     field::integer("baud", &AutopilotSettings::baud, 57600, 3000000, "Bd", "serial speed (PX4 SER_TEL2_BAUD)"),
     field::text("udp_bind", &AutopilotSettings::udp_bind, "0.0.0.0", "", "udp: local IPv4 address to listen on"),

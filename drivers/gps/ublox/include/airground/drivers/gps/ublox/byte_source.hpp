@@ -10,6 +10,7 @@
 #include <string_view>
 #include <vector>
 
+#include "airground/drivers/serial/byte_ring.hpp"
 #include "airground/platform/result.hpp"
 #include "airground/platform/time.hpp"
 
@@ -66,28 +67,23 @@ class ReplayFile final : public ByteSource {
   std::string error_;
 };
 
-// The simulator's receiver (the stage's `source: sim`): what the simulated receiver writes on its UART,
-// handed to the robot's gps stage in-process. The ring (capacity bytes) is allocated once; write() takes
-// what fits and counts the rest dropped, as a UART's FIFO overruns; the source's read() never blocks.
-// The simulator's world stage writes and the gps stage reads, never at once (the lockstep executor).
+// The simulator's receiver (the stage's `source: sim`): what the simulated receiver writes on its UART
+// (a serial::ByteRing: allocated once, an overrun counted), handed to the robot's gps stage in-process.
 class SimSerialLink {
  public:
-  explicit SimSerialLink(std::size_t capacity = 16384);
+  explicit SimSerialLink(std::size_t capacity = 16384) : uart_(capacity) {}
   SimSerialLink(const SimSerialLink&) = delete;
   SimSerialLink& operator=(const SimSerialLink&) = delete;
   // The receiver sends these bytes; returns how many fitted.
-  std::size_t write(std::span<const std::uint8_t> bytes) noexcept;
+  std::size_t write(std::span<const std::uint8_t> bytes) noexcept { return uart_.write(bytes); }
   // The stage's side (it must not outlive the link).
   [[nodiscard]] std::unique_ptr<ByteSource> open_source();
-  [[nodiscard]] std::uint64_t dropped() const noexcept { return dropped_; }
-  [[nodiscard]] std::size_t queued() const noexcept { return size_; }
+  [[nodiscard]] std::uint64_t dropped() const noexcept { return uart_.dropped(); }
+  [[nodiscard]] std::size_t queued() const noexcept { return uart_.size(); }
 
  private:
   friend class SimSerialSource;
-  long read(std::span<std::uint8_t> buf) noexcept;
-  std::vector<std::uint8_t> ring_;
-  std::size_t head_{0}, size_{0};
-  std::uint64_t dropped_{0};
+  serial::ByteRing uart_;
 };
 
 // Links the simulator provides for its robots' gps stages, by robot name; false when taken.
