@@ -1,8 +1,7 @@
 // In-process CAN link.
 #include "airground/drivers/can/inprocess_bus.hpp"
+#include "airground/platform/device_registry.hpp"
 
-#include <map>
-#include <mutex>
 #include <string>
 
 namespace ag::can {
@@ -44,30 +43,13 @@ CanResult InProcessCanLink::Endpoint::receive(CanFrame& out) noexcept {
   return CanResult::kWouldBlock;
 }
 
-namespace {
-std::mutex& links_mutex() {
-  static std::mutex m;
-  return m;
-}
-std::map<std::string, InProcessCanLink*, std::less<>>& links() {
-  static std::map<std::string, InProcessCanLink*, std::less<>> l;
-  return l;
-}
-}  // namespace
-
+// A robot's link replaces the one it had (a test's rig made again under the same name).
 void register_inprocess_link(std::string_view robot, InProcessCanLink* link) {
-  std::lock_guard<std::mutex> g(links_mutex());
-  links()[std::string(robot)] = link;
+  auto& r = DeviceRegistry<InProcessCanLink>::instance();
+  r.remove(robot);
+  (void)r.add(robot, link);
 }
-void unregister_inprocess_link(std::string_view robot) {
-  std::lock_guard<std::mutex> g(links_mutex());
-  const auto it = links().find(robot);
-  if (it != links().end()) links().erase(it);
-}
-InProcessCanLink* find_inprocess_link(std::string_view robot) {
-  std::lock_guard<std::mutex> g(links_mutex());
-  const auto it = links().find(robot);
-  return it == links().end() ? nullptr : it->second;
-}
+void unregister_inprocess_link(std::string_view robot) { DeviceRegistry<InProcessCanLink>::instance().remove(robot); }
+InProcessCanLink* find_inprocess_link(std::string_view robot) { return DeviceRegistry<InProcessCanLink>::instance().find(robot); }
 
 }  // namespace ag::can

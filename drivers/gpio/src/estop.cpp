@@ -1,8 +1,7 @@
 // E-stop latch, LED patterns, fake-line registry.
 #include "airground/drivers/gpio/estop.hpp"
+#include "airground/platform/device_registry.hpp"
 
-#include <map>
-#include <mutex>
 #include <string>
 
 #include "airground/drivers/gpio/gpio_line.hpp"
@@ -68,30 +67,16 @@ LedPattern led_pattern_for(RoleState s) noexcept {
   return LedPattern::kDoubleFlash;
 }
 
-namespace {
-std::mutex& registry_mutex() {
-  static std::mutex m;
-  return m;
-}
-std::map<std::string, FakeLine*, std::less<>>& registry() {
-  static std::map<std::string, FakeLine*, std::less<>> r;
-  return r;
-}
-}  // namespace
-
+// A robot's line replaces the one it had under that name (a test's rig made again).
 void register_fake_line(std::string_view robot, std::string_view line, FakeLine* l) {
-  std::lock_guard<std::mutex> g(registry_mutex());
-  registry()[std::string(robot) + "/" + std::string(line)] = l;
+  auto& r = DeviceRegistry<FakeLine>::instance();
+  const std::string name = std::string(robot) + "/" + std::string(line);
+  r.remove(name);
+  (void)r.add(name, l);
 }
-void unregister_fake_lines(std::string_view robot) {
-  std::lock_guard<std::mutex> g(registry_mutex());
-  const std::string prefix = std::string(robot) + "/";
-  for (auto it = registry().begin(); it != registry().end();) it = it->first.rfind(prefix, 0) == 0 ? registry().erase(it) : std::next(it);
-}
+void unregister_fake_lines(std::string_view robot) { DeviceRegistry<FakeLine>::instance().remove_prefix(std::string(robot) + "/"); }
 FakeLine* find_fake_line(std::string_view robot, std::string_view line) {
-  std::lock_guard<std::mutex> g(registry_mutex());
-  const auto it = registry().find(std::string(robot) + "/" + std::string(line));
-  return it == registry().end() ? nullptr : it->second;
+  return DeviceRegistry<FakeLine>::instance().find(std::string(robot) + "/" + std::string(line));
 }
 
 }  // namespace ag::gpio

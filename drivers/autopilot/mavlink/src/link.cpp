@@ -1,8 +1,7 @@
 // Serial port (termios), UDP socket and tlog replay.
 #include "airground/drivers/autopilot/mavlink/link.hpp"
+#include "airground/platform/device_registry.hpp"
 
-#include <map>
-#include <mutex>
 
 #include <arpa/inet.h>
 #include <fcntl.h>
@@ -186,32 +185,13 @@ class SimLink final : public Link {
   std::string error_;
 };
 
-std::mutex& sim_links_mutex() {
-  static std::mutex m;
-  return m;
-}
-std::map<std::string, SimAutopilotLink*, std::less<>>& sim_links() {
-  static std::map<std::string, SimAutopilotLink*, std::less<>> l;
-  return l;
-}
 
 }  // namespace
 
 std::unique_ptr<Link> SimAutopilotLink::open_link() { return std::make_unique<SimLink>(*this); }
 
-bool register_sim_autopilot(std::string_view robot, SimAutopilotLink* link) {
-  std::lock_guard<std::mutex> g(sim_links_mutex());
-  return sim_links().emplace(std::string(robot), link).second;
-}
-void unregister_sim_autopilot(std::string_view robot) {
-  std::lock_guard<std::mutex> g(sim_links_mutex());
-  const auto it = sim_links().find(robot);
-  if (it != sim_links().end()) sim_links().erase(it);
-}
-SimAutopilotLink* find_sim_autopilot(std::string_view robot) {
-  std::lock_guard<std::mutex> g(sim_links_mutex());
-  const auto it = sim_links().find(robot);
-  return it == sim_links().end() ? nullptr : it->second;
-}
+bool register_sim_autopilot(std::string_view robot, SimAutopilotLink* link) { return DeviceRegistry<SimAutopilotLink>::instance().add(robot, link); }
+void unregister_sim_autopilot(std::string_view robot) { DeviceRegistry<SimAutopilotLink>::instance().remove(robot); }
+SimAutopilotLink* find_sim_autopilot(std::string_view robot) { return DeviceRegistry<SimAutopilotLink>::instance().find(robot); }
 
 }  // namespace ag::mavlink

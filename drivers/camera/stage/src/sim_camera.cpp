@@ -1,8 +1,7 @@
 // The simulator's camera link.
 #include "airground/drivers/camera/stage/sim_camera.hpp"
+#include "airground/platform/device_registry.hpp"
 
-#include <map>
-#include <mutex>
 #include <string>
 
 namespace ag::camera {
@@ -37,30 +36,8 @@ void SimCameraLink::pop() noexcept {
   --size_;
 }
 
-namespace {
-std::mutex& links_mutex() {
-  static std::mutex m;
-  return m;
-}
-std::map<std::string, SimCameraLink*, std::less<>>& links() {
-  static std::map<std::string, SimCameraLink*, std::less<>> l;
-  return l;
-}
-}  // namespace
-
-bool register_sim_camera(std::string_view robot, SimCameraLink* link) {
-  std::lock_guard<std::mutex> g(links_mutex());
-  return links().emplace(std::string(robot), link).second;
-}
-void unregister_sim_camera(std::string_view robot) {
-  std::lock_guard<std::mutex> g(links_mutex());
-  const auto it = links().find(robot);
-  if (it != links().end()) links().erase(it);
-}
-SimCameraLink* find_sim_camera(std::string_view robot) {
-  std::lock_guard<std::mutex> g(links_mutex());
-  const auto it = links().find(robot);
-  return it == links().end() ? nullptr : it->second;
-}
+bool register_sim_camera(std::string_view robot, SimCameraLink* link) { return DeviceRegistry<SimCameraLink>::instance().add(robot, link); }
+void unregister_sim_camera(std::string_view robot) { DeviceRegistry<SimCameraLink>::instance().remove(robot); }
+SimCameraLink* find_sim_camera(std::string_view robot) { return DeviceRegistry<SimCameraLink>::instance().find(robot); }
 
 }  // namespace ag::camera

@@ -1,5 +1,6 @@
 // Serial port (termios) and replay file.
 #include "airground/drivers/gps/ublox/byte_source.hpp"
+#include "airground/platform/device_registry.hpp"
 
 #include <algorithm>
 #include <cerrno>
@@ -7,8 +8,6 @@
 #include <fcntl.h>
 #include <fstream>
 #include <iterator>
-#include <map>
-#include <mutex>
 #include <poll.h>
 #include <unistd.h>
 
@@ -90,30 +89,8 @@ class SimSerialSource final : public ByteSource {
 
 std::unique_ptr<ByteSource> SimSerialLink::open_source() { return std::make_unique<SimSerialSource>(*this); }
 
-namespace {
-std::mutex& gps_links_mutex() {
-  static std::mutex m;
-  return m;
-}
-std::map<std::string, SimSerialLink*, std::less<>>& gps_links() {
-  static std::map<std::string, SimSerialLink*, std::less<>> l;
-  return l;
-}
-}  // namespace
-
-bool register_sim_gps(std::string_view robot, SimSerialLink* link) {
-  std::lock_guard<std::mutex> g(gps_links_mutex());
-  return gps_links().emplace(std::string(robot), link).second;
-}
-void unregister_sim_gps(std::string_view robot) {
-  std::lock_guard<std::mutex> g(gps_links_mutex());
-  const auto it = gps_links().find(robot);
-  if (it != gps_links().end()) gps_links().erase(it);
-}
-SimSerialLink* find_sim_gps(std::string_view robot) {
-  std::lock_guard<std::mutex> g(gps_links_mutex());
-  const auto it = gps_links().find(robot);
-  return it == gps_links().end() ? nullptr : it->second;
-}
+bool register_sim_gps(std::string_view robot, SimSerialLink* link) { return DeviceRegistry<SimSerialLink>::instance().add(robot, link); }
+void unregister_sim_gps(std::string_view robot) { DeviceRegistry<SimSerialLink>::instance().remove(robot); }
+SimSerialLink* find_sim_gps(std::string_view robot) { return DeviceRegistry<SimSerialLink>::instance().find(robot); }
 
 }  // namespace ag::ublox

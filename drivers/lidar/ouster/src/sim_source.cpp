@@ -1,9 +1,8 @@
 // The simulator's Ouster link.
 #include "airground/drivers/lidar/ouster/sim_source.hpp"
+#include "airground/platform/device_registry.hpp"
 
 #include <cstring>
-#include <map>
-#include <mutex>
 
 namespace ag::ouster {
 
@@ -61,30 +60,8 @@ PacketKind SimPacketLink::pop(std::span<std::uint8_t> buf, std::size_t& size, Ti
 
 std::unique_ptr<PacketSource> SimPacketLink::open_source() { return std::make_unique<SimPacketSource>(*this); }
 
-namespace {
-std::mutex& links_mutex() {
-  static std::mutex m;
-  return m;
-}
-std::map<std::string, SimPacketLink*, std::less<>>& links() {
-  static std::map<std::string, SimPacketLink*, std::less<>> l;
-  return l;
-}
-}  // namespace
-
-bool register_sim_lidar(std::string_view robot, SimPacketLink* link) {
-  std::lock_guard<std::mutex> g(links_mutex());
-  return links().emplace(std::string(robot), link).second;
-}
-void unregister_sim_lidar(std::string_view robot) {
-  std::lock_guard<std::mutex> g(links_mutex());
-  const auto it = links().find(robot);
-  if (it != links().end()) links().erase(it);
-}
-SimPacketLink* find_sim_lidar(std::string_view robot) {
-  std::lock_guard<std::mutex> g(links_mutex());
-  const auto it = links().find(robot);
-  return it == links().end() ? nullptr : it->second;
-}
+bool register_sim_lidar(std::string_view robot, SimPacketLink* link) { return DeviceRegistry<SimPacketLink>::instance().add(robot, link); }
+void unregister_sim_lidar(std::string_view robot) { DeviceRegistry<SimPacketLink>::instance().remove(robot); }
+SimPacketLink* find_sim_lidar(std::string_view robot) { return DeviceRegistry<SimPacketLink>::instance().find(robot); }
 
 }  // namespace ag::ouster
