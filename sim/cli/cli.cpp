@@ -10,7 +10,8 @@
 namespace ag::sim::cli {
 
 [[noreturn]] void usage_error(const std::string& msg) {
-  std::fprintf(stderr, "airground-sim: %s (see --help)\n", msg.c_str());
+  // A message that already names the command's --help does not get the general one as well.
+  std::fprintf(stderr, "airground-sim: %s%s\n", msg.c_str(), msg.find("--help)") == std::string::npos ? " (see --help)" : "");
   std::exit(2);
 }
 
