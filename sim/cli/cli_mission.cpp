@@ -140,8 +140,9 @@ const char kHilHelp[] =
     "airground-sim hil — hardware in the loop: the simulated world served to the real role binaries over\n"
     "the devices' wire protocols, in real time. Each ground robot's airground-ugv gets Ouster OS-1 packets on\n"
     "its lidar UDP port (the surface's albedo in the reflectivity byte) and its two ODrive controllers over\n"
-    "the cannelloni CAN-over-UDP bridge; airground-uav gets UBX NAV-PVT on a pseudo-terminal (its serial\n"
-    "port) and camera frames with visual odometry through the camera stage's frame-stream replay (a FIFO);\n"
+    "the cannelloni CAN-over-UDP bridge; airground-uav gets UBX NAV-PVT on a pseudo-terminal (the receiver's\n"
+    "serial port), a simulated PX4's HEARTBEAT and ATTITUDE on another (TELEM2) and RGB camera frames through\n"
+    "the camera stage's frame-stream replay (a FIFO), which its own VO tracks;\n"
     "airground-base serves the live page. The processes are configured only by the YAML files written to\n"
     "DIR/config/ and talk gossip over UDP on the loopback interface. The run ends when every ground robot\n"
     "reports 'done' to the base station (or at --max-duration).\n\n"
@@ -160,7 +161,9 @@ const char kHilHelp[] =
     "  --lidar-profile P      Ouster packet profile: LEGACY, RNG19_RFL8_SIG16_NIR16 (default),\n"
     "                         RNG19_RFL8_SIG16_NIR16_DUAL or RNG15_RFL8_NIR8\n"
     "  --seed S               sensor noise (1)\n"
-    "  --oracle labels        ablation: the true class in the frames and the reflectivity byte, used by the robots\n"
+    "  --oracle labels,vo     ablation (field mode without it): labels = the true class in the frames and the\n"
+    "                         reflectivity byte, used by the robots; vo = the simulator's odometry in the frame\n"
+    "                         stream, taken by the quadrotor's pose graph instead of its own VO\n"
     "  --quiet                no progress lines\n"
     "  --record none|mcap     DIR/recording.mcap (mcap, the default: truth, the poses the base heard, sensors) or nothing\n";
 

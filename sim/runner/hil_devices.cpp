@@ -1,5 +1,5 @@
 // The HIL run's wire bridges: Ouster packets over UDP and the ODrives on the cannelloni CAN bridge per
-// ground robot, UBX on a pseudo-terminal and the camera's frame stream on a FIFO for the quadrotor.
+// ground robot; for the quadrotor UBX and MAVLink on two pseudo-terminals and the camera's frame stream on a FIFO.
 #include <arpa/inet.h>
 #include <fcntl.h>
 #include <sys/socket.h>
@@ -48,22 +48,32 @@ Status open_ugv_devices(Ugv& u, const json& meta, const fs::path& meta_path, std
 }
 
 // A pseudo-terminal in raw mode (no echo, no line discipline).
-Status open_gps_pty(Run& run) {
+Status open_pty(Run& run, const char* name, Pty& p) {
   const int pty = ::posix_openpt(O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
-  if (pty < 0 || ::grantpt(pty) != 0 || ::unlockpt(pty) != 0) return Error::make(ErrorCode::kIo, std::string("pseudo-terminal: ") + std::strerror(errno));
-  run.pty = pty;
-  run.pty_path = ::ptsname(pty);
-  run.pty_slave = ::open(run.pty_path.c_str(), O_RDWR | O_NOCTTY | O_CLOEXEC);  // held open: no hang-up while the robot reopens
-  if (run.pty_slave >= 0) {
+  if (pty < 0 || ::grantpt(pty) != 0 || ::unlockpt(pty) != 0)
+    return Error::make(ErrorCode::kIo, std::string("pseudo-terminal for ") + name + ": " + std::strerror(errno));
+  p.fd = pty;
+  p.path = ::ptsname(pty);
+  p.slave = ::open(p.path.c_str(), O_RDWR | O_NOCTTY | O_CLOEXEC);  // held open: no hang-up while the robot reopens
+  if (p.slave >= 0) {
     termios tio{};
-    ::tcgetattr(run.pty_slave, &tio);
+    ::tcgetattr(p.slave, &tio);
     ::cfmakeraw(&tio);
-    ::tcsetattr(run.pty_slave, TCSANOW, &tio);
+    ::tcsetattr(p.slave, TCSANOW, &tio);
   }
+  const fs::path link = run.out / (std::string(name) + ".pty");
   std::error_code ec;
-  fs::remove(run.out / "gps.pty", ec);
-  fs::create_symlink(run.pty_path, run.out / "gps.pty", ec);
+  fs::remove(link, ec);
+  fs::create_symlink(p.path, link, ec);
   return ok_status();
+}
+
+void pump_autopilot(Run& run) {
+  std::array<std::uint8_t, 4096> buf{};
+  // What does not fit in the pty's buffer is lost, as bytes are on a UART nobody reads.
+  for (std::size_t n; (n = run.px4_link.to_robot.read(buf)) > 0;) (void)!::write(run.autopilot_pty.fd, buf.data(), n);
+  for (ssize_t n; (n = ::read(run.autopilot_pty.fd, buf.data(), buf.size())) > 0;)
+    (void)run.px4_link.from_robot.write(std::span<const std::uint8_t>(buf.data(), static_cast<std::size_t>(n)));
 }
 
 // The frame stream the uav's camera stage reads.
@@ -123,8 +133,10 @@ void fill_image(CameraImageMsg& m, const CameraFrame& cf, TimeNs now, std::uint3
 }
 
 void close_devices(Run& run) {
-  ::close(run.pty);
-  if (run.pty_slave >= 0) ::close(run.pty_slave);
+  for (Pty* p : {&run.gps_pty, &run.autopilot_pty}) {
+    if (p->fd >= 0) ::close(p->fd);
+    if (p->slave >= 0) ::close(p->slave);
+  }
   for (auto& u : run.ugvs) {
     ::close(u->udp);
     run.res.can_frames_in += u->odrive->commands_received();

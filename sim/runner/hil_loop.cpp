@@ -1,5 +1,5 @@
 // The HIL run's three threads: physics (200 Hz, never stalls), the camera (renders and writes frames)
-// and the sensor loop (GNSS, VO, LiDAR, and the mission as the base station sees it).
+// and the sensor loop (GNSS, attitude, LiDAR, the oracle VO, and the mission as the base station sees it).
 #include <arpa/inet.h>
 #include <sys/socket.h>
 #include <time.h>
@@ -64,7 +64,7 @@ std::vector<Pose3> truth_snapshot(Run& run, TimeNs now, TimeNs next_trail, Pose3
   qp = run.quad->pose();
   for (auto& u : run.ugvs) {
     Pose3 p = u->vehicle.pose3();
-    p.z += run.opt.lidar_mount_height_m;
+    p.z += run.lidar_mount_z_m;
     lidar_poses.push_back(p);
     if (now >= next_trail) u->truth_trail.emplace_back(u->vehicle.pose().x, u->vehicle.pose().y);
     u->history.emplace_back(now, u->vehicle.pose());
@@ -79,25 +79,30 @@ void record_truth(Run& run, const Pose3& qp, const std::vector<Pose3>& lidar_pos
   run.rec->uav_pose(t, qp);
   for (std::size_t k = 0; k < run.ugvs.size(); ++k) {
     Pose3 p = lidar_poses[k];
-    p.z -= run.opt.lidar_mount_height_m;
+    p.z -= run.lidar_mount_z_m;
     run.rec->ugv_pose(t, static_cast<int>(k), p, nullptr, run.ugvs[k]->has_est ? &run.ugvs[k]->est : nullptr);
   }
   run.rec->tick(t, nullptr);
 }
 
-// GNSS: UBX NAV-PVT on the serial line. Visual odometry: queued for the camera thread, which writes it
-// to the frame stream before each image.
-void send_gnss_and_vo(Run& run, TimeNs now, const Pose3& qp) {
+// GNSS: UBX NAV-PVT on the receiver's serial line. Attitude: the simulated PX4's ATTITUDE (and its
+// HEARTBEAT) on TELEM2. Visual odometry only with the vo oracle: queued for the camera thread, which
+// writes it to the frame stream before each image.
+void send_gnss_attitude_vo(Run& run, TimeNs now, const Pose3& qp) {
   GpsFix fix;
   if (run.gps->sample(now, qp, fix)) {
     if (run.rec) {
       std::lock_guard<std::mutex> lk(run.rec_mu);
       run.rec->uav_gps(monotonic_now() - run.rec0, fix.lat_deg, fix.lon_deg, fix.height_m, fix.h_accuracy_m);
     }
-    if (send_nav_pvt(run.pty, now, fix)) ++run.res.ubx_messages;
+    if (send_nav_pvt(run.gps_pty.fd, now, fix)) ++run.res.ubx_messages;
   }
+  run.px4.step(now);
+  AttitudeSample as;
+  if (run.attitude->sample(now, qp, as)) run.px4.send_attitude(as);
+  pump_autopilot(run);
   VoSample vs;
-  if (run.vo->sample(now, qp, vs)) {
+  if (run.vo && run.vo->sample(now, qp, vs)) {
     VoMsg m;
     m.stamp = vs.stamp;
     m.published = now;
@@ -268,7 +273,7 @@ void sensor_loop(Run& run) {
       due.next_rec += kNsPerS / 10;
       record_truth(run, qp, lidar_poses);
     }
-    send_gnss_and_vo(run, now, qp);
+    send_gnss_attitude_vo(run, now, qp);
     if (now >= due.next_lidar) lidar_revolution(run, now, lidar_poses, due.next_lidar);
     if (now >= due.next_state) {
       due.next_state += kStatePeriod;
@@ -281,7 +286,8 @@ void sensor_loop(Run& run) {
       due.next_progress += 5 * kNsPerS;
       print_progress(run, now, qp);
     }
-    const TimeNs wake = std::min({due.next_lidar, due.next_state, now + 20 * kNsPerMs});
+    // Every 10 ms at least: the autopilot's 50 Hz ATTITUDE comes out on its own grid.
+    const TimeNs wake = std::min({due.next_lidar, due.next_state, now + 10 * kNsPerMs});
     if (wake > monotonic_now()) sleep_until(wake);
   }
 }

@@ -65,7 +65,8 @@ void write_json(const Run& run, const RunOptions& oracle_list) {
   j["rates_hz"] = {{"lidar", static_cast<double>(res.lidar_revolutions) / secs}, {"camera", static_cast<double>(res.camera_frames) / secs}};
   j["traffic"] = {{"lidar_packets", res.lidar_packets}, {"lidar_revolutions", res.lidar_revolutions}, {"lidar_revolutions_skipped", res.lidar_revolutions_skipped},
                   {"camera_frames_skipped", res.camera_frames_skipped}, {"ubx_nav_pvt", res.ubx_messages}, {"camera_frames", res.camera_frames},
-                  {"camera_frames_dropped", res.camera_frames_dropped}, {"vo_records", res.vo_records}, {"can_commands_received", res.can_frames_in}};
+                  {"camera_frames_dropped", res.camera_frames_dropped}, {"vo_records", res.vo_records}, {"mavlink_frames", res.mavlink_frames},
+                  {"mavlink_bytes_in", res.mavlink_bytes_in}, {"can_commands_received", res.can_frames_in}};
   for (const HilRobot& r : res.robots)
     j["robots"].push_back({{"name", r.name}, {"exit_code", r.exit_code}, {"state", r.final_state}, {"distance_m", r.distance_m},
                            {"final_error_m", r.final_error_m}, {"mean_error_m", r.mean_error_m}, {"max_error_m", r.max_error_m}, {"collisions", r.collisions}});
@@ -144,10 +145,8 @@ void collect_results(Run& run) {
 }
 
 void write_report(const Run& run) {
-  // HIL always hands the pose graph the simulator's odometry in the frame stream: the vo oracle.
   RunOptions oracle_list;
   oracle_list.oracles = run.opt.oracles;
-  if (!oracle_list.oracle("vo")) oracle_list.oracles.emplace_back("vo");
   write_json(run, oracle_list);
   write_markdown(run, oracle_list);
   write_trajectories(run);

@@ -109,16 +109,17 @@ Settings common_settings(const Run& run, int id, const std::string& name, std::s
 Settings ugv_shared_settings(const Run& run) {
   const mission::Area a = world_area(run.world);
   const mission::MissionParameters& mp = run.mf.params;
-  return Settings{
-      // The Ouster gives no class: the shipped geometric labeller, or the truth in the reflectivity byte.
-      {"localization.labels", run.labels_oracle ? "gt" : "geometric"},
+  Settings s{
       {"localization.area_x0_m", num(a.x0)}, {"localization.area_y0_m", num(a.y0)}, {"localization.area_x1_m", num(a.x1)}, {"localization.area_y1_m", num(a.y1)},
       {"planner.area_x0_m", num(a.x0)}, {"planner.area_y0_m", num(a.y0)}, {"planner.area_x1_m", num(a.x1)}, {"planner.area_y1_m", num(a.y1)},
       {"base.can_backend", "cannelloni"}, {"base.estop_backend", "none"}, {"base.led_backend", "none"}, {"base.start_armed", "true"},
       {"mission.visit_radius_m", num(mp.visit_radius_m)}, {"mission.max_sigma_m", num(mp.max_sigma_m)},
       {"mission.claim_timeout_s", num(mp.claim_timeout_s)}, {"mission.idle_return_s", num(mp.idle_return_s)},
       {"mission.mission_end_s", num(mp.mission_end_s)},
-      {"mission.survey_end_s", num(mp.survey_end_s)}, {"comms.send_pose", "true"}, {"comms.deliver_map_tiles", "true"}};
+      {"mission.survey_end_s", num(mp.survey_end_s)}};
+  // The Ouster gives no class: the shipped geometric labeller, or (an ablation) the truth in the reflectivity byte.
+  if (run.labels_oracle) s.emplace_back("localization.labels", "gt");
+  return s;
 }
 
 // One role's YAML: its shipped configuration (built in from firmware_host/<role>/<role>.yaml) with the
@@ -144,7 +145,6 @@ Status write_ugv_yaml(Run& run, int i, const mission::TeamMember& tm, const Ugv&
   kv.insert(kv.end(), shared.begin(), shared.end());
   for (const auto& p : Settings{
            {"lidar.source", "udp"}, {"lidar.metadata", meta_path.string()}, {"lidar.bind_address", "127.0.0.1"},
-           {"lidar.mount_z_m", num(run.opt.lidar_mount_height_m)}, {"lidar.classes", run.labels_oracle ? "reflectivity" : "none"},
            {"localization.set_initial_pose", "true"}, {"localization.initial_x_m", num(tm.guess_x)}, {"localization.initial_y_m", num(tm.guess_y)},
            {"localization.initial_yaw_rad", num(tm.guess_yaw)}, {"localization.initial_sigma_m", num(std::max(0.5, tm.guess_sigma_m))},
            {"base.can_bridge_port", std::to_string(can_robot)}, {"base.can_bridge_remote", "127.0.0.1:" + std::to_string(can_sim)},
@@ -152,6 +152,7 @@ Status write_ugv_yaml(Run& run, int i, const mission::TeamMember& tm, const Ugv&
            {"base.odometry_log_path", (out / "logs" / ("odometry-" + u.name + ".csv")).string()},
            {"mission.priority", std::to_string(tm.priority)}, {"mission.start_x_m", num(tm.start_x)}, {"mission.start_y_m", num(tm.start_y)}})
     kv.push_back(p);
+  if (run.labels_oracle) kv.emplace_back("lidar.classes", "reflectivity");
   if (run.mf.type == mission::MissionType::kWaypoints && !tm.waypoints.empty()) {
     std::string wp;
     for (std::size_t k = 0; k < tm.waypoints.size(); ++k) wp += (k ? ";" : "") + num(tm.waypoints[k].x) + "," + num(tm.waypoints[k].y);
@@ -169,18 +170,22 @@ Status write_uav_yaml(Run& run) {
   const mission::MissionParameters& mp = run.mf.params;
   auto kv = common_settings(run, 0, "uav", 0);
   for (const auto& p : Settings{
-           {"gps.source", "serial"}, {"gps.device", run.pty_path}, {"gps.datum_lat_deg", num(w.header.datum.lat_deg)},
+           {"gps.source", "serial"}, {"gps.device", run.gps_pty.path}, {"gps.datum_lat_deg", num(w.header.datum.lat_deg)},
            {"gps.datum_lon_deg", num(w.header.datum.lon_deg)}, {"gps.datum_height_m", num(w.header.datum.height_m)},
+           {"autopilot.source", "serial"}, {"autopilot.device", run.autopilot_pty.path},
            {"camera.source", "replay"}, {"camera.replay", run.fifo.string()}, {"camera.stamps", "record"},
-           // HIL still hands the pose graph the simulator's odometry (an oracle, in the frame stream); the
-           // robot's own VO runs beside it on the same frames, on a channel nobody reads.
-           {"camera.vo_channel", "visual_odometry"}, {"vo.output_channel", "visual_odometry_own"},
-           // ErfNet with the shipped weights (the source tree's copy when not installed), or the frames' true classes.
-           {"segmentation.labels", run.labels_oracle ? "gt" : "erfnet"}, {"segmentation.weights", lockstep::erfnet_weights_path()},
-           {"comms.send_map_tiles", "true"},
+           // The shipped weights: the source tree's copy when not installed.
+           {"segmentation.weights", lockstep::erfnet_weights_path()},
            {"regions.area_x0_m", num(a.x0)}, {"regions.area_y0_m", num(a.y0)}, {"regions.area_x1_m", num(a.x1)}, {"regions.area_y1_m", num(a.y1)},
            {"regions.merge_distance_m", num(mp.merge_distance_m)}, {"regions.min_region_cells", std::to_string(mp.min_region_cells)}})
     kv.push_back(p);
+  // Ablations by name: the renderer's classes in the frames, the simulator's odometry to the pose graph
+  // (the robot's own VO then runs beside it on a channel nobody reads).
+  if (run.labels_oracle) kv.emplace_back("segmentation.labels", "gt");
+  if (run.vo_oracle) {
+    kv.emplace_back("camera.vo_channel", "visual_odometry");
+    kv.emplace_back("vo.output_channel", "visual_odometry_own");
+  }
   if (auto st = write_role_yaml(run.out / "config" / "uav.yaml", "uav (quadrotor)", uav_role(), kv); !st) return st.error();
   run.children.insert(run.children.begin(), RoleProcess{"uav", "uav", -1, run.out / "logs" / "uav.log"});
   return ok_status();

@@ -23,8 +23,10 @@
 #include "airground/messages/messages.hpp"
 #include "airground/drivers/base/diff_drive_base.hpp"
 #include "airground/drivers/base/odrive_sim.hpp"
+#include "airground/drivers/autopilot/mavlink/link.hpp"
 #include "airground/drivers/camera/frame_stream/frame_stream.hpp"
 #include "airground/drivers/can/cannelloni.hpp"
+#include "autopilot_device.hpp"
 #include "ouster_device.hpp"
 #include "airground/drivers/lidar/ouster/frame.hpp"
 #include "airground/drivers/lidar/ouster/metadata.hpp"
@@ -33,6 +35,7 @@
 #include "airground/platform/result.hpp"
 #include "airground/platform/role_table.hpp"
 #include "airground/platform/time.hpp"
+#include "airground/sim/attitude.hpp"
 #include "airground/sim/camera.hpp"
 #include "airground/sim/diff_drive.hpp"
 #include "airground/sim/gps.hpp"
@@ -96,6 +99,13 @@ struct Ugv {
   }
 };
 
+// A pseudo-terminal in raw mode: the simulator writes the master (fd), the robot opens `path`; the slave
+// is held open so that the robot's reopening never hangs the line up.
+struct Pty {
+  int fd{-1}, slave{-1};
+  std::string path;
+};
+
 // Everything one run holds, set up in order by run_hil and shared by its threads.
 struct Run {
   Run(const HilOptions& o, const World& w, const mission::MissionFile& m);
@@ -104,18 +114,23 @@ struct Run {
   const mission::MissionFile& mf;
   const fs::path out;
   const bool labels_oracle;          // --oracle labels: the true classes in the frames and the reflectivity byte
+  const bool vo_oracle;              // --oracle vo: the simulator's odometry in the frame stream, to the pose graph
+  double lidar_mount_z_m{0.5};       // [m] where the shipped ugv.yaml mounts the LiDAR (lidar.mount_z_m)
   fs::path bin;                      // the role binaries
   fs::path key;                      // the team key
   std::vector<std::uint16_t> gossip;  // per process: uav, ugv1.., base
   std::uint16_t web_port{0};
   std::vector<RoleProcess> children;  // uav, ugv1.., base
   std::vector<std::unique_ptr<Ugv>> ugvs;
-  int pty{-1}, pty_slave{-1};        // the quadrotor's serial port
-  std::string pty_path;
+  Pty gps_pty;                       // the quadrotor's u-blox (DIR/gps.pty)
+  Pty autopilot_pty;                 // the quadrotor's PX4 TELEM2 (DIR/autopilot.pty)
+  mavlink::SimAutopilotLink px4_link;  // the simulated PX4's side, pumped to and from autopilot_pty
+  SimPx4 px4{px4_link};
   fs::path fifo;                     // the camera's frame stream
   std::optional<Quadrotor> quad;
   std::optional<GpsSimulator> gps;
-  std::optional<VisualOdometrySimulator> vo;
+  std::optional<VisualOdometrySimulator> vo;  // only with the vo oracle
+  std::optional<AttitudeSimulator> attitude;
   std::optional<CameraRenderer> camera;
   std::optional<LidarSimulator> lidar;
   // recording.mcap, written by the sensor loop and the camera thread in turn; log times from rec0.
@@ -165,11 +180,14 @@ void stop_roles(std::vector<RoleProcess>& children);
 // Writes the robot's Ouster metadata to meta_path (with its ports) and opens its lidar socket and CAN bridge.
 Status open_ugv_devices(Ugv& u, const json& meta, const fs::path& meta_path, std::uint16_t lidar_port, std::uint16_t imu_port,
                         std::uint16_t can_robot, std::uint16_t can_sim);
-// The quadrotor's serial port (run.pty, DIR/gps.pty) and camera FIFO (run.fifo).
-Status open_gps_pty(Run& run);
+// A raw pseudo-terminal, linked as DIR/<name>.pty: the quadrotor's serial ports.
+Status open_pty(Run& run, const char* name, Pty& p);
+// The quadrotor's camera FIFO (run.fifo).
 Status make_camera_fifo(Run& run);
 // One physics step of a ground robot: its ODrives turn the wheels.
 void step_base(Ugv& u, TimeNs now, double dt, const World& w);
+// The simulated PX4's frames to its serial port, and what the robot wrote there back to it.
+void pump_autopilot(Run& run);
 // A GNSS fix as UBX NAV-PVT on the serial line; true when all of it was written.
 bool send_nav_pvt(int pty, TimeNs now, const GpsFix& fix);
 // The robot's last scan as one revolution of Ouster packets from sensor pose sp; the packets sent.
@@ -178,7 +196,7 @@ std::uint64_t send_revolution(Ugv& u, const Pose3& sp, TimeNs now, TimeNs lidar_
 std::optional<camera::FrameStreamWriter> open_frame_stream(const fs::path& fifo);
 // A rendered frame as the camera stage's image message (classes only with the labels oracle).
 void fill_image(CameraImageMsg& m, const CameraFrame& cf, TimeNs now, std::uint32_t seq, bool labels_oracle);
-// Closes the serial port and the lidar sockets; counts the CAN commands the ODrives received.
+// Closes the serial ports and the lidar sockets; counts the CAN commands the ODrives received.
 void close_devices(Run& run);
 
 // hil_loop.cpp: the threads.

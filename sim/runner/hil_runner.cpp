@@ -1,7 +1,7 @@
 // airground-sim hil: the world served over the devices' wire protocols to the real role processes.
 // Two threads: the physics thread (200 Hz: the ODrive controllers on the CAN bridge, the bases, the
 // quadrotor) must never stall, or a robot sees its controllers fall silent; the sensor thread (this
-// one) renders and sends what is due (GPS, VO, camera, LiDAR) and watches the mission through the base.
+// one) sends what is due (GPS, attitude, LiDAR; the camera renders on a third) and watches the mission through the base.
 // The steps are in hil_roles.cpp, hil_devices.cpp, hil_loop.cpp and hil_report.cpp (hil_run.hpp).
 #include <sys/socket.h>
 
@@ -25,7 +25,8 @@ namespace hil {
 
 Run::Run(const HilOptions& o, const World& w, const mission::MissionFile& m)
     : opt(o), world(w), mf(m), out(o.out_dir),
-      labels_oracle(std::find(o.oracles.begin(), o.oracles.end(), "labels") != o.oracles.end()) {}
+      labels_oracle(std::find(o.oracles.begin(), o.oracles.end(), "labels") != o.oracles.end()),
+      vo_oracle(std::find(o.oracles.begin(), o.oracles.end(), "vo") != o.oracles.end()) {}
 
 namespace {
 
@@ -42,6 +43,7 @@ Status set_up_ugvs(Run& run, const json& meta) {
   auto shipped = Config::load_string(role_schema(ugv_role()), shipped_config_yaml("ugv"), "firmware_host/ugv/ugv.yaml (built into airground-sim)");
   if (!shipped) return shipped.error();
   const base::BaseParams bp = base::load_base_params(SectionView(shipped.value(), "base"));
+  run.lidar_mount_z_m = shipped.value().get_real("lidar.mount_z_m");  // and its LiDAR where the file mounts it
   const DiffDriveConfig dd = with_wheels(DiffDriveConfig{}, bp.wheel_radius_m, bp.track_m);
   const Settings shared = ugv_shared_settings(run);
   for (int i = 0; i < static_cast<int>(run.mf.team.size()); ++i) {
@@ -77,7 +79,8 @@ Status build_simulators(Run& run) {
     run.quad->set_waypoints(std::move(route).value());
   }
   run.gps.emplace(GpsConfig{}, w.header.datum, run.opt.seed ^ std::uint64_t{0x67707331});
-  run.vo.emplace(VoConfig{}, run.opt.seed ^ std::uint64_t{0x766f3031});
+  if (run.vo_oracle) run.vo.emplace(VoConfig{}, run.opt.seed ^ std::uint64_t{0x766f3031});
+  run.attitude.emplace(AttitudeConfig{}, run.opt.seed ^ std::uint64_t{0x61747431});
   auto raycaster = std::make_shared<HeightfieldRaycaster>(w);
   run.camera.emplace(w, cam_model, CameraShading{}, raycaster);
   auto beams = OusterBeamModel::from_metadata_json((run.out / "config" / ("ouster-" + run.ugvs.front()->name + ".json")).string(),
@@ -95,7 +98,7 @@ Status open_recording(Run& run) {
   TeamRecordingOptions ro;
   ro.scheduler_period_s = 0;  // the robots' stages run in their own processes (their hil_report.md timing)
   ro.mission = false;
-  ro.lidar_mount_height_m = run.opt.lidar_mount_height_m;
+  ro.lidar_mount_height_m = run.lidar_mount_z_m;
   auto r = TeamRecording::open((run.out / "recording.mcap").string(), run.world, true, static_cast<int>(run.ugvs.size()), run.opt.seed, ro);
   if (!r) {
     signal_roles(run.children, SIGTERM);
@@ -120,7 +123,8 @@ Status set_up(Run& run) {
   auto meta = ouster_metadata(run.opt.lidar_columns, run.opt.lidar_profile);
   if (!meta) return meta.error();
   if (auto st = set_up_ugvs(run, meta.value()); !st) return st.error();
-  if (auto st = open_gps_pty(run); !st) return st.error();
+  if (auto st = open_pty(run, "gps", run.gps_pty); !st) return st.error();
+  if (auto st = open_pty(run, "autopilot", run.autopilot_pty); !st) return st.error();
   if (auto st = make_camera_fifo(run); !st) return st.error();
   if (auto st = write_uav_yaml(run); !st) return st.error();
   if (auto st = write_base_yaml(run); !st) return st.error();
@@ -161,6 +165,8 @@ Result<HilResult> run_hil(const HilOptions& opt) {
   res.camera_frames_dropped = run.cam_dropped.load();
   res.camera_frames_skipped = run.cam_skipped.load();
   res.vo_records = run.vo_written.load();
+  res.mavlink_frames = run.px4.frames_sent();
+  res.mavlink_bytes_in = run.px4.bytes_received();
   run.stop.store(true);
   physics.join();
   hil::close_devices(run);

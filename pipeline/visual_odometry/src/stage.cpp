@@ -87,15 +87,25 @@ void VoStage::step(TimeNs now) noexcept {
     if (f.tracking) {
       ++c_.tracked;
       m.pose = to_pose3(f.body_in_segment);
+      if (f.new_segment) AG_LOG_INFO("vo", "vo: tracking (segment %u) from t=%.2f s, %d tracks", f.segment, to_seconds(img->stamp), f.tracked);
     } else {
       ++c_.lost;
+      if (was_tracking_) AG_LOG_WARN("vo", "vo: tracking lost at t=%.2f s (frame %llu): restarting", to_seconds(img->stamp), static_cast<unsigned long long>(c_.frames));
     }
+    was_tracking_ = f.tracking;
     c_.keyframes += f.keyframe ? 1 : 0;
     c_.segments += f.new_segment ? 1 : 0;
     m.published = clock_->now();
     if (out_.push(m) != 0) ++c_.frames_dropped_busy;
     camera_.pop();
   }
+}
+
+void VoStage::stop() noexcept {
+  using ull = unsigned long long;
+  AG_LOG_INFO("vo", "vo: frames=%llu tracked=%llu lost=%llu keyframes=%llu segments=%llu with_attitude=%llu without_attitude=%llu attitude_samples=%llu dropped_busy=%llu",
+              ull(c_.frames), ull(c_.tracked), ull(c_.lost), ull(c_.keyframes), ull(c_.segments), ull(c_.frames_with_attitude),
+              ull(c_.frames_without_attitude), ull(c_.attitude_samples), ull(c_.frames_dropped_busy));
 }
 
 }  // namespace ag::vo

@@ -163,6 +163,15 @@ VoFrame VisualOdometry::step(TimeNs stamp, const std::optional<Eigen::Matrix3d>&
   }
   const std::optional<Eigen::Matrix3d> prev_att = prev_attitude_;
   prev_attitude_ = R_wb;
+  // Frames need not come evenly (a camera drops frames when its reader is late): the motion guesses
+  // below are per frame, so they scale with this frame's interval over the one before it.
+  double dt_scale = 1.0;
+  if (last_stamp_ != 0 && stamp > last_stamp_) {
+    const TimeNs dt = stamp - last_stamp_;
+    if (last_dt_ > 0 && dt != last_dt_) dt_scale = std::clamp(static_cast<double>(dt) / static_cast<double>(last_dt_), 0.25, 4.0);
+    last_dt_ = dt;
+  }
+  last_stamp_ = stamp;
   VoFrame none;
   none.segment = segment_;
   if (!have_prev_) {
@@ -189,7 +198,7 @@ VoFrame VisualOdometry::step(TimeNs stamp, const std::optional<Eigen::Matrix3d>&
     const Eigen::Vector3d h = R_cc * Eigen::Vector3d(x.x(), x.y(), 1.0);
     const Eigen::Vector2d q = h.z() > 1e-6 ? p_.camera.distort_to_pixel(h.x() / h.z(), h.y() / h.z()) : Eigen::Vector2d(x.x(), x.y());
     rot_px_[i] = Pixel{static_cast<float>(q.x()), static_cast<float>(q.y())};
-    next_px_[i] = Pixel{rot_px_[i].u + mean_flow_.u, rot_px_[i].v + mean_flow_.v};
+    next_px_[i] = Pixel{rot_px_[i].u + static_cast<float>(dt_scale) * mean_flow_.u, rot_px_[i].v + static_cast<float>(dt_scale) * mean_flow_.v};
   }
   flow_.track(prev, pyr_[cur_], std::span<const Pixel>(prev_px_.data(), n), std::span<Pixel>(next_px_.data(), n),
               std::span<std::uint8_t>(ok_.data(), n));
@@ -247,7 +256,9 @@ VoFrame VisualOdometry::step(TimeNs stamp, const std::optional<Eigen::Matrix3d>&
     pred.R = (pose_.R * prev_pose_.R.transpose()) * pose_.R;
   }
   const Eigen::Vector3d c = pose_.centre();
-  const Eigen::Vector3d c_pred = have_prev_pose_ ? Eigen::Vector3d(2 * c - prev_pose_.centre()) : c;
+  const Eigen::Vector3d c_pred = !have_prev_pose_ ? c
+                                 : dt_scale == 1.0 ? Eigen::Vector3d(2 * c - prev_pose_.centre())
+                                                   : Eigen::Vector3d(c + dt_scale * (c - prev_pose_.centre()));
   pred.t = -pred.R * c_pred;
   int inliers = 0;
   if (!track_pose(g, pred, inliers)) {

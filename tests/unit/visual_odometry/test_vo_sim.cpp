@@ -184,6 +184,26 @@ TEST(VisualOdometrySim, TracksAStraightLineWithoutAttitude) {
   EXPECT_LE(s.dir_p95, 5.0);
 }
 
+// A camera whose reader is late drops frames (HIL on a busy machine delivers 2-3 of its 5 Hz): the
+// frames come 0.2 to 0.6 s apart, and the motion guesses must follow the interval, not the count.
+TEST(VisualOdometrySim, TracksFramesThatComeUnevenly) {
+  const std::vector<Shot>& all = turn_flight();
+  std::vector<Shot> shots;
+  constexpr std::size_t kGaps[] = {1, 3, 1, 2, 1, 3, 2, 1};
+  for (std::size_t i = 0, k = 0; i < all.size(); i += kGaps[k++ % std::size(kGaps)]) shots.push_back(all[i]);
+  ASSERT_GT(shots.size(), 60U);
+  const Scores s = run(shots, true, shots.size());
+  std::printf("uneven frames, %zu of %zu: tracked %.3f, %llu segments, %llu keyframes, rotation p95 %.3f deg, direction p95 %.2f deg\n",
+              shots.size(), all.size(), s.tracked_fraction, static_cast<unsigned long long>(s.segments),
+              static_cast<unsigned long long>(s.keyframes), s.rot_p95, s.dir_p95);
+  // With the guesses per frame it tracked 0.864 in 5 segments. What still breaks it is the corner: the
+  // quadrotor yaws, and 0.6 s apart a 15x15 window has turned more than Lucas-Kanade's shift-only model
+  // follows.
+  EXPECT_GE(s.tracked_fraction, 0.90);
+  EXPECT_LE(s.segments, 3U) << "tracking losses where the frames came late";
+  EXPECT_LE(s.dir_p95, 3.0);
+}
+
 TEST(VisualOdometrySim, TheSameFramesGiveTheSamePoses) {
   const std::vector<Shot>& shots = turn_flight();
   const Scores a = run(shots, true, 80), b = run(shots, true, 80);

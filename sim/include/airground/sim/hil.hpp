@@ -1,10 +1,11 @@
 // Hardware in the loop: the simulated world served to the unmodified role binaries over the wire
 // protocols of the real devices, in real time. Per ground robot: Ouster OS-1 packets (RNG19_RFL8_SIG16_NIR16,
-// the ground-truth class in the reflectivity byte) to its lidar UDP port, and its two ODrive controllers
+// the surface's albedo in the reflectivity byte) to its lidar UDP port, and its two ODrive controllers
 // (CAN Simple over the cannelloni UDP bridge: Set_Input_Vel in, Heartbeat and Get_Encoder_Estimates
-// out) moving the simulated base. For the quadrotor: UBX NAV-PVT bytes on a pseudo-terminal (its serial
-// port) and the camera frames with their visual odometry through the camera stage's frame-stream replay
-// seam (a FIFO). airground-uav, airground-ugv (one per team member) and airground-base run as separate
+// out) moving the simulated base. For the quadrotor: UBX NAV-PVT bytes on a pseudo-terminal (the
+// receiver's serial port), a simulated PX4's MAVLink (HEARTBEAT, ATTITUDE) on a second one (TELEM2),
+// and the camera's RGB frames through the camera stage's frame-stream replay seam (a FIFO); the
+// quadrotor's own VO stage tracks them. airground-uav, airground-ugv (one per team member) and airground-base run as separate
 // processes configured only by the YAML files written into the output folder, and talk gossip to each
 // other over real UDP on the loopback interface. The base station's /api/state tells when the mission
 // is over; each process's final stage timing is read from its log and reported against its budget.
@@ -28,12 +29,13 @@ struct HilOptions {
   std::uint64_t seed{1};
   int lidar_columns{1024};          // 512, 1024 or 2048 (the sensor's lidar_mode, at 10 Hz)
   std::string lidar_profile{"RNG19_RFL8_SIG16_NIR16"};  // the Ouster packet profile sent (any the driver supports)
-  double lidar_mount_height_m{0.6};
   double camera_hz{5};
   bool progress{true};
   // Ground truth for the robots by name (RunOptions::oracles), an ablation: "labels" puts the true class
   // in the frames and in the Ouster reflectivity byte, and the robots use it (segmentation.labels and
-  // localization.labels gt). Without it the reflectivity byte is the surface's albedo.
+  // localization.labels gt); "vo" writes the simulator's odometry into the frame stream and the pose
+  // graph takes it instead of the quadrotor's own VO. Without them the reflectivity byte is the
+  // surface's albedo and the frames carry RGB only.
   std::vector<std::string> oracles{};
 };
 
@@ -62,6 +64,8 @@ struct HilResult {
   std::uint64_t lidar_revolutions{0}, lidar_revolutions_skipped{0};  // per ground robot; skipped: cast too late
   std::uint64_t camera_frames_skipped{0};                            // the render took longer than the period
   std::uint64_t can_frames_in{0}, can_frames_out{0};
+  std::uint64_t mavlink_frames{0};           // HEARTBEAT and ATTITUDE written to the autopilot's serial port
+  std::uint64_t mavlink_bytes_in{0};         // what the uav's autopilot stage sent back (SET_MESSAGE_INTERVAL)
 };
 
 // Runs the mission; writes DIR/config/*.yaml, DIR/logs/*.log, DIR/hil.json, DIR/hil_report.md,

@@ -52,6 +52,8 @@ class VoStage final : public Stage {
 
   Status init(StageContext& ctx) override;
   void step(TimeNs now) noexcept override;
+  // Logs the counters once ("vo: frames=... tracked=..."), as the pose graph's user wants to see them.
+  void stop() noexcept override;
 
   [[nodiscard]] const VoStageCounters& counters() const noexcept { return c_; }
   [[nodiscard]] const VisualOdometry& odometry() const noexcept { return *vo_; }
@@ -70,6 +72,7 @@ class VoStage final : public Stage {
   std::size_t history_head_{0}, history_size_{0};
   TimeNs max_gap_{0}, max_wait_{0};
   int frames_per_step_{2};
+  bool was_tracking_{false};
   VoStageCounters c_;
 };
 

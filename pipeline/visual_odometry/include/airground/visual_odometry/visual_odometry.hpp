@@ -158,6 +158,7 @@ class VisualOdometry {
   bool have_prev_pose_{false};
   std::optional<Eigen::Matrix3d> prev_attitude_;  // autopilot R_wb at the previous frame
   Pixel mean_flow_{};                  // last frame's median image motion (the next guess)
+  TimeNs last_stamp_{0}, last_dt_{0};  // the previous frame's stamp and the interval before it
   VoStats stats_;
 };
 
