@@ -20,15 +20,23 @@ Status open_uav_cache(Team& t) {
   const fs::path path = uav_recording_path(opt.uav_cache, key);
   t.replay_info.file = path.string();
   std::error_code ec;
-  if (fs::exists(path, ec)) {
+  const auto replay = [&]() -> Status {
     auto r = UavRecordReader::open(path, key);
     if (!r) return r.error();
     t.uav_play = std::move(r).value();
     t.replay_info.mode = "replayed";
     return ok_status();
-  }
+  };
+  if (fs::exists(path, ec)) return replay();  // a finished recording appears whole (renamed into place)
   auto w = UavRecordWriter::create(path, key);
+  if (!w && w.error().code == ErrorCode::kUnavailable) {
+    // Another mission is recording this very quadrotor: fly it live here (the same results), record nothing.
+    t.replay_info.mode = "live";
+    t.replay_info.file = path.string() + " (being recorded by another mission)";
+    return ok_status();
+  }
   if (!w) return w.error();
+  if (fs::exists(path, ec)) return replay();  // finished by the mission that held the lock a moment ago
   t.uav_rec = std::move(w).value();
   t.replay_info.mode = "recorded";
   return ok_status();

@@ -1,7 +1,12 @@
 // The quadrotor's recording: its zstd record stream, the final raster beside it, and the tap that writes it.
 #include "uav_recording.hpp"
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
 #include <zstd.h>
+
+#include <cerrno>
 
 #include <cinttypes>
 #include <cstring>
@@ -54,6 +59,14 @@ Result<std::unique_ptr<UavRecordWriter>> UavRecordWriter::create(const std::file
   w->part_ += ".part";
   std::error_code ec;
   std::filesystem::create_directories(final_path.parent_path(), ec);
+  std::filesystem::path lock = final_path;
+  lock += ".lock";
+  w->lock_fd_ = ::open(lock.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (w->lock_fd_ < 0) return Error::make(ErrorCode::kIo, "cannot open " + lock.string() + ": " + std::strerror(errno));
+  if (::flock(w->lock_fd_, LOCK_EX | LOCK_NB) != 0) {
+    if (errno == EWOULDBLOCK) return Error::make(ErrorCode::kUnavailable, "another process is recording " + final_path.string());
+    return Error::make(ErrorCode::kIo, "cannot lock " + lock.string() + ": " + std::strerror(errno));
+  }
   w->f_ = std::fopen(w->part_.c_str(), "wb");
   if (w->f_ == nullptr) return Error::make(ErrorCode::kIo, "cannot write the quadrotor recording " + w->part_.string() + ": " + std::strerror(errno));
   w->z_ = ZSTD_createCCtx();
@@ -78,6 +91,7 @@ UavRecordWriter::~UavRecordWriter() {
     std::error_code ec;
     std::filesystem::remove(part_, ec);
   }
+  if (lock_fd_ >= 0) ::close(lock_fd_);  // releases the flock
 }
 
 void UavRecordWriter::put(const void* p, std::size_t n) {

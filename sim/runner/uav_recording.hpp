@@ -29,6 +29,9 @@ enum class UavRecordKind : std::uint8_t { kTile = 1, kGossip = 2, kRegions = 3, 
 
 // Writes `<final>.part` while the run goes on; finish() adds the end record and the raster and renames
 // it to `final`. A writer destroyed unfinished removes its part file (a failed run leaves no recording).
+// One writer per recording: it holds an flock on `<final>.lock` from create() to its end (released by
+// the kernel if the process dies), and create() fails with kUnavailable while another process holds it
+// (two missions of a study starting the same quadrotor at once would otherwise write one part file).
 class UavRecordWriter {
  public:
   static Result<std::unique_ptr<UavRecordWriter>> create(const std::filesystem::path& final_path, std::uint64_t key);
@@ -48,6 +51,7 @@ class UavRecordWriter {
   void record(UavRecordKind kind, TimeNs t);
   void flush(bool end);
   std::filesystem::path final_, part_;
+  int lock_fd_{-1};
   std::FILE* f_{nullptr};
   ZSTD_CCtx_s* z_{nullptr};
   std::vector<std::uint8_t> in_, out_;

@@ -2,8 +2,12 @@
 // output, a second mission with the same world, seed and quadrotor replays it into the quadrotor's comms
 // stage, and the ground robots live through exactly the same mission: their true paths, LiDAR scans,
 // odometry, visits, the regions and everything the base station heard are the same, and the map's class
-// accuracy too, while the replay renders no camera frame. A truncated recording is refused at start.
+// accuracy too, while the replay renders no camera frame. A truncated recording is refused at start; a
+// second recorder of the same quadrotor flies it live instead.
+#include <fcntl.h>
 #include <gtest/gtest.h>
+#include <sys/file.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cstdlib>
@@ -122,6 +126,24 @@ TEST(UavReplay, AReplayedMissionEqualsTheLiveOneItWasRecordedFrom) {
   EXPECT_NE(bad.error().message.find(cut.string()), std::string::npos) << bad.error().message;
   EXPECT_NE(bad.error().message.find("truncated"), std::string::npos) << bad.error().message;
   EXPECT_FALSE(fs::exists(root / "broken_run" / "metrics.json"));
+
+  // A mission that starts while another one records the same quadrotor (a study's two slots on one seed)
+  // flies it live and writes nothing: one writer per recording, by an flock on <recording>.lock.
+  const fs::path busy = root / "busy";
+  fs::create_directories(busy);
+  const fs::path lock = busy / (recording.filename().string() + ".lock");
+  const int fd = ::open(lock.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  ASSERT_GE(fd, 0);
+  ASSERT_EQ(::flock(fd, LOCK_EX | LOCK_NB), 0);  // "the other mission"
+  MissionOptions o = options(root, "busy_run", busy);
+  o.max_duration_s = 10;
+  auto second = run_mission(o);
+  ::close(fd);
+  ASSERT_TRUE(second.ok()) << second.error().message;
+  EXPECT_EQ(second.value().uav_replay.mode, "live");
+  EXPECT_NE(second.value().uav_replay.file.find("being recorded by another mission"), std::string::npos) << second.value().uav_replay.file;
+  EXPECT_FALSE(fs::exists(busy / recording.filename()));
+  EXPECT_FALSE(fs::exists(busy / (recording.filename().string() + ".part"))) << "it wrote into the other mission's part file";
 }
 
 }  // namespace
