@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <string>
 
 #include "airground/sim/eval_mission.hpp"
@@ -46,6 +47,8 @@ const char kMissionHelp[] =
     "  --uav-cache DIR         record the quadrotor's mapping output into DIR the first time, replay it in later\n"
     "                          missions with the same world, seed, altitude and quadrotor settings (the study's;\n"
     "                          docs/simulator.md, \"Quadrotor replay\")\n"
+    "  --uav-cache-build EXE   replay the recordings in --uav-cache that the airground-sim EXE made (a build whose\n"
+    "                          quadrotor code is this one's); never records; the report names EXE\n"
     "  --web-port P            the base station serves its live page on http://localhost:P/ during the run\n"
     "  --pace X                hold the run to X times real time (to watch it on the page)\n"
     "  --record none|light|full  recordings (light)\n"
@@ -88,6 +91,9 @@ int mission_cmd(const Args& a) {
   o.parallel_robots = !a.has("serial-robots");
   o.web_port = static_cast<int>(number(a, "web-port", 0));
   o.uav_cache = a.get("uav-cache");
+  o.uav_cache_build = a.get("uav-cache-build");
+  if (!o.uav_cache_build.empty() && o.uav_cache.empty()) usage_error("--uav-cache-build needs --uav-cache DIR");
+  if (!o.uav_cache_build.empty() && !std::filesystem::is_regular_file(o.uav_cache_build)) usage_error("--uav-cache-build " + o.uav_cache_build + ": no such file");
   o.web_pace = number(a, "pace", 0);
   o.status_period_s = a.has("verbose") ? number(a, "verbose", 30) : 0;
   if (o.ugvs < 1 || o.ugvs > 32) usage_error("--ugvs must be 1..32");

@@ -52,6 +52,7 @@ constexpr const char* kStudyHelp =
     "  --uav-cache DIR|none   the quadrotor cache every mission shares (DIR/uav_cache): the first mission of a\n"
     "                         world, seed and altitude records its quadrotor's mapping, later ones replay it\n"
     "                         (same results, without the camera, VO, ErfNet and mapping); none: all live\n"
+    "  --uav-cache-build EXE  passed to every mission: replay the recordings the airground-sim EXE made\n"
     "  --report-only          run nothing: write the table and plots from the missions already done\n"
     "                         (also while another study process is still running into DIR)\n"
     "  --slurm SDIR           run nothing here: write SDIR/study.sbatch, a Slurm job array with one task per\n"
@@ -78,7 +79,7 @@ struct Options {
 Options parse(int argc, char** argv) {
   static const std::set<std::string> valued = {"world", "worlds", "ugvs", "comm-range", "seeds", "first-seed", "out", "jobs", "max-duration", "altitude",
                                                "lidar-columns", "set", "set-uav", "oracle", "slurm", "cpus-per-task",
-                                               "compute-time", "target-cpu", "uav-cache"};
+                                               "compute-time", "target-cpu", "uav-cache", "uav-cache-build"};
   Options o;
   for (int i = 2; i < argc; ++i) {
     const std::string s = argv[i];
@@ -220,6 +221,10 @@ std::vector<std::string> mission_args(const Options& o, const Cell& c, const std
   if (cache != "none") {
     args.emplace_back("--uav-cache");
     args.push_back(cache);
+  }
+  if (o.has("uav-cache-build")) {
+    args.emplace_back("--uav-cache-build");
+    args.push_back(fs::absolute(o.get("uav-cache-build")).string());
   }
   for (const char* key : {"set", "set-uav", "oracle", "compute-time", "target-cpu"})
     if (o.has(key))

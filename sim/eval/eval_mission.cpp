@@ -161,6 +161,7 @@ RunOptions team_run_options(const MissionOptions& o, const World& w, const std::
   r.oracles = o.oracles;
   r.compute_time = o.compute_time;
   r.uav_cache = o.uav_cache;
+  r.uav_cache_build = o.uav_cache_build;
   r.target_cpu = o.target_cpu;
   r.step_sampler = o.step_sampler;
   r.ugv_config = o.ugv_config;

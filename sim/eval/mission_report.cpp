@@ -182,6 +182,7 @@ bool write_mission_metrics(const fs::path& out, const MissionOptions& o, const M
   }
   j << "]"
     << ",\n  \"uav\": {\"mode\": \"" << m.uav_replay.mode << "\", \"recording\": " << nlohmann::json(m.uav_replay.file).dump()
+    << (m.uav_replay.build.empty() ? std::string() : ", \"recorded_by\": " + nlohmann::json(m.uav_replay.build).dump())
     << ", \"recording_end_s\": " << m.uav_replay.recording_end_s << ", \"last_output_s\": " << m.uav_replay.last_output_s
     << ", \"beyond_end_s\": " << m.uav_replay.beyond_end_s << "}"
     << ",\n  \"world\": " << nlohmann::json(o.world).dump()
@@ -215,7 +216,8 @@ bool write_mission_report(const fs::path& out, const MissionOptions& o, const Mi
      << " The survey was estimated at " << static_cast<int>(std::lround(m.survey_estimate_s)) << " s with its return; the cap was "
      << static_cast<int>(std::lround(m.time_cap_s)) << " s.\n\n";
   if (m.uav_replay.mode == "replayed")
-    md << "The quadrotor's mapping was replayed from `" << m.uav_replay.file << "` (recorded live with the same key; its comms stage and flight ran live"
+    md << "The quadrotor's mapping was replayed from `" << m.uav_replay.file << "` (recorded live with the same key"
+       << (m.uav_replay.build.empty() ? std::string() : " by the build `" + m.uav_replay.build + "`") << "; its comms stage and flight ran live"
        << (m.uav_replay.beyond_end_s > 0 ? ", and this mission ran " + std::to_string(static_cast<int>(m.uav_replay.beyond_end_s)) + " s past the recording's end" : std::string())
        << ").\n\n";
   else if (m.uav_replay.mode == "recorded")

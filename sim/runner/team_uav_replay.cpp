@@ -19,6 +19,7 @@ Status open_uav_cache(Team& t) {
   const std::uint64_t key = uav_replay_key(opt, *t.world);
   const fs::path path = uav_recording_path(opt.uav_cache, key);
   t.replay_info.file = path.string();
+  t.replay_info.build = opt.uav_cache_build;
   std::error_code ec;
   const auto replay = [&]() -> Status {
     auto r = UavRecordReader::open(path, key);
@@ -28,6 +29,9 @@ Status open_uav_cache(Team& t) {
     return ok_status();
   };
   if (fs::exists(path, ec)) return replay();  // a finished recording appears whole (renamed into place)
+  if (!opt.uav_cache_build.empty())
+    return Error::make(ErrorCode::kInvalidArgument, "--uav-cache-build " + opt.uav_cache_build + ": that build made no recording for this mission's world, seed, "
+                                             "altitude and quadrotor settings in " + opt.uav_cache + " (" + path.filename().string() + ")");
   auto w = UavRecordWriter::create(path, key);
   if (!w && w.error().code == ErrorCode::kUnavailable) {
     // Another mission is recording this very quadrotor: fly it live here (the same results), record nothing.

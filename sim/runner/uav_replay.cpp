@@ -60,7 +60,7 @@ class KeyHash {
 
 std::uint64_t uav_replay_key(const RunOptions& o, const World& w) {
   KeyHash h;
-  h.file("/proc/self/exe");  // any rebuild makes new recordings
+  h.file(o.uav_cache_build.empty() ? "/proc/self/exe" : o.uav_cache_build.c_str());  // any rebuild makes new recordings
   h.text(w.header.name);
   h.value(w.header.grid.resolution);
   h.value(w.header.grid.width);

@@ -163,10 +163,14 @@ bool ParticleFilter::wants_update() const noexcept {
   return !first_update_done_ || pending_dist_ >= p_.update_min_distance_m || pending_turn_ >= p_.update_min_turn_rad;
 }
 
-void ParticleFilter::apply_motion() noexcept {
-  const bool moved = pending_dist_ > 0.0 || pending_turn_ > 0.0;
-  const double sxy = moved ? std::max(p_.motion_sigma_xy_min_m, p_.motion_sigma_xy_per_m * pending_dist_) : 0.0;
-  const double syaw = p_.motion_sigma_yaw_per_m * pending_dist_ + p_.motion_sigma_yaw_per_rad * pending_turn_;
+void ParticleFilter::apply_motion(bool roughen) noexcept {
+  const bool moved = pending_dist_ > 0.0 || pending_turn_ > 0.0 || roughen;
+  double sxy = moved ? std::max(p_.motion_sigma_xy_min_m, p_.motion_sigma_xy_per_m * pending_dist_) : 0.0;
+  double syaw = p_.motion_sigma_yaw_per_m * pending_dist_ + p_.motion_sigma_yaw_per_rad * pending_turn_;
+  if (roughen) {
+    sxy = std::max(sxy, p_.lost_standing_sigma_xy_m);
+    syaw = std::max(syaw, p_.lost_standing_sigma_yaw_rad);
+  }
   for (std::size_t i = 0; i < n_; ++i) {
     const double c = std::cos(yaw_[i]), s = std::sin(yaw_[i]);
     x_[i] += c * pending_.x - s * pending_.y;
@@ -313,12 +317,20 @@ double ParticleFilter::pose_cost(const Pose2& pose, const ScanRenderPolar& rende
 }
 
 UpdateReport ParticleFilter::update(const ScanRenderPolar& render, const ClassDistanceFields& fields, bool force) noexcept {
+  return update_impl(render, fields, force, false);
+}
+
+UpdateReport ParticleFilter::update_standing(const ScanRenderPolar& render, const ClassDistanceFields& fields) noexcept {
+  return update_impl(render, fields, true, true);
+}
+
+UpdateReport ParticleFilter::update_impl(const ScanRenderPolar& render, const ClassDistanceFields& fields, bool force, bool roughen) noexcept {
   UpdateReport rep;
   if (est_.status == FilterStatus::kUninitialised || (!force && !wants_update())) return rep;
   if (render.angle_bins() > max_angle_bins_ || render.range_bins() > max_range_bins_) return rep;
   rep.updated = true;
   rep.moved_m = pending_dist_;
-  apply_motion();
+  apply_motion(roughen);
   first_update_done_ = true;
   ++est_.updates;
   ++updates_since_respread_;
@@ -380,7 +392,7 @@ UpdateReport ParticleFilter::update(const ScanRenderPolar& render, const ClassDi
   compute_estimate();
   est_.best_cost_m = best;
   const std::uint32_t before = est_.recoveries;
-  update_status(best, cost_valid);
+  update_status(best, cost_valid, roughen);
   rep.recovered = est_.recoveries != before;
   set_range_bin();
   return rep;
@@ -488,7 +500,7 @@ void ParticleFilter::set_range_bin() noexcept {
   est_.range_bin_m = range_bin_m_;
 }
 
-void ParticleFilter::update_status(double best_cost, bool cost_valid) noexcept {
+void ParticleFilter::update_status(double best_cost, bool cost_valid, bool standing) noexcept {
   if (est_.status == FilterStatus::kTracking) {
     const bool bad = est_.spread_m > p_.lost_spread_m ||
                      (cost_valid && cost_level_valid_ &&
@@ -510,7 +522,7 @@ void ParticleFilter::update_status(double best_cost, bool cost_valid) noexcept {
     attempt_ = 0;
   } else {
     converged_count_ = est_.spread_m < p_.converged_spread_m && cost_valid ? converged_count_ + 1 : 0;
-    if (converged_count_ >= p_.converged_updates) {
+    if (converged_count_ >= (standing ? p_.lost_standing_converged_updates : p_.converged_updates)) {
       est_.status = FilterStatus::kTracking;
       est_.cost_level_m = best_cost;
       cost_level_valid_ = true;

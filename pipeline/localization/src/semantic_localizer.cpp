@@ -47,10 +47,14 @@ void SemanticLocalizer::fill(LocalizationMsg& m) const noexcept {
 }
 
 UpdateReport SemanticLocalizer::on_scan(std::span<const ScanPoint> labelled, const ClassDistanceFields& fields, TimeNs stamp) noexcept {
-  if (!filter_.wants_update()) return {};
+  const bool moved = filter_.wants_update();
+  if (!moved && !standing_update_due()) return {};
   render_.render(labelled, filter_.range_bin_m());
-  const UpdateReport rep = filter_.update(render_, fields);
-  if (rep.updated) fused_.on_estimate(filter_.estimate(), gate_.gated_pose(), gate_.distance_m(), stamp);
+  const UpdateReport rep = moved ? filter_.update(render_, fields) : filter_.update_standing(render_, fields);
+  if (rep.updated) {
+    last_update_stamp_ = last_stamp_;
+    fused_.on_estimate(filter_.estimate(), gate_.gated_pose(), gate_.distance_m(), stamp);
+  }
   return rep;
 }
 

@@ -182,7 +182,20 @@ void DriveStage::step(TimeNs now) noexcept {
   if (local_in_.fresh()) local_ = local_in_.read();
   const bool tracking = pose_.status == LocalizationStatus::kTracking;
   const bool converging = pose_.status == LocalizationStatus::kInitialising && cfg_.initialising_speed_mps > 0;
-  const bool pose_ok = (tracking || converging) && now - pose_.stamp <= pose_timeout_;
+  // Lost: the localizer dead-reckons from its last good pose; go on along the route slowly for a while.
+  if (pose_.status != LocalizationStatus::kLost) {
+    coasting_ = false;
+    coast_m_ = 0.0;
+  } else if (!coasting_) {
+    coasting_ = true;
+    coast_last_ = pose_.pose;
+  } else {
+    coast_m_ += std::hypot(pose_.pose.x - coast_last_.x, pose_.pose.y - coast_last_.y);
+    coast_last_ = pose_.pose;
+  }
+  const bool coasting = coasting_ && cfg_.lost_speed_mps > 0 && coast_m_ < cfg_.lost_coast_m;
+  const bool pose_ok = (tracking || converging || coasting) && now - pose_.stamp <= pose_timeout_;
+  const double top_speed = tracking ? 1e9 : converging ? cfg_.initialising_speed_mps : cfg_.lost_speed_mps;
   const bool local_ok = local_.stamp > 0 && now - local_.stamp <= local_timeout_ && (local_.path_seq == path_seq_ || local_.reflex_stop);
   TwistCommand tw;
   if (local_ok && local_.reflex_stop) {
@@ -199,7 +212,7 @@ void DriveStage::step(TimeNs now) noexcept {
     if (local_ok && local_.state == static_cast<std::uint8_t>(TrackState::kFailed)) blocked_ = true;  // until a new route
     const Point2 lg{local_.goal.x, local_.goal.y};
     const bool steer = cfg_.steer_to_local_goal && local_ok && local_.valid && std::isfinite(lg.x) && std::isfinite(lg.y);
-    tw = (have_path_ && pose_ok && !blocked_) ? follow_->step(pose_.pose, dt, tracking ? 1e9 : cfg_.initialising_speed_mps, steer ? &lg : nullptr)
+    tw = (have_path_ && pose_ok && !blocked_) ? follow_->step(pose_.pose, dt, top_speed, steer ? &lg : nullptr)
                                               : follow_->stop(dt);
   }
   const DriveParams& dp = follow_->params();
@@ -266,7 +279,8 @@ void TrackerStage::step(TimeNs now) noexcept {
     scans_.pop();
     return;
   }
-  if (pose_.status == LocalizationStatus::kTracking || pose_.status == LocalizationStatus::kInitialising) {
+  if (pose_.status == LocalizationStatus::kTracking || pose_.status == LocalizationStatus::kInitialising ||
+      pose_.status == LocalizationStatus::kLost) {  // lost: the dead-reckoned pose, which the drive coasts on
     add_work(1.0);  // one scan tracked (compute-time model)
     (void)tracker_->update(std::span<const ScanReturn>(newest->points.data(), newest->count), newest->sensor_in_body, pose_.pose, cmd_.v_mps);
     const LocalGoal g = tracker_->local_goal(pose_.pose, now);

@@ -1,5 +1,5 @@
 // The particle filter on synthetic worlds: convergence from 16 m / 30 deg and tracking, geometric labels,
-// a partial aerial map, standing still with a drifting yaw, divergence and recovery, the cost formula
+// a partial aerial map, standing still with a drifting yaw, divergence and recovery (also standing), the cost formula
 // against a hand computation, the adaptive particle count, no update while standing, determinism.
 #include <gtest/gtest.h>
 
@@ -254,6 +254,72 @@ TEST(ParticleFilter, DivergenceIsDetectedAndRecovered) {
   for (std::size_t k = r.err.size() - 300; k < r.err.size(); ++k) err_end = std::max(err_end, r.err[k]);
   EXPECT_LT(err_end, 1.5);
   EXPECT_EQ(loc.pose().status, LocalizationStatus::kTracking);
+}
+
+// A robot that loses track stops (the drive stage halts without a tracking pose) and so would never move
+// again to give the filter an update: lost and standing, a scan is matched every lost_standing_update_s
+// anyway, so the re-spreads around the last good pose go on until it is tracking again, where it stands.
+// The study's 3-robot missions had a robot stand lost in this way from 312 s to the 5400 s cap.
+TEST(ParticleFilter, ALostRobotThatStopsIsMatchedAgainWhereItStands) {
+  struct Outcome {
+    bool lost{false}, back{false};
+    double back_after_s{-1}, err_m{-1};
+  };
+  auto run_lost_then_stand = [](double standing_update_s) {
+    World world(6);
+    // The odometry jumps 20 m sideways and 25 deg a third of the way (as in the test above): tracking is lost.
+    const std::size_t jump_at = world.truth.size() / 3;
+    for (std::size_t k = jump_at; k < world.odom.size(); ++k)
+      world.odom[k] = compose(world.odom[jump_at - 1], compose(Pose2{0.0, 20.0, 25.0 * kDeg}, between(world.odom[jump_at - 1], world.odom[k])));
+    GroundTruthLabeller gt;
+    const LocalizationChannels ch = LocalizationChannels::per_class();
+    ClassDistanceFields fields(DistanceFieldParams{}, ch, world.w.extent());
+    test::load_world(world.w, fields);
+    LocalizerParams p;
+    p.filter.lost_standing_update_s = standing_update_s;
+    SemanticLocalizer loc(p, ch, 31);
+    loc.initialise_gaussian(world.truth[0].pose, 1.0, 2.0 * kDeg, world.truth[0].stamp);
+    std::vector<ScanPoint> scan;
+    Outcome out;
+    std::size_t k = 0;
+    for (; k < world.truth.size() && !out.lost; ++k) {  // drive until it is lost ...
+      loc.on_odometry(world.odom[k], world.truth[k].stamp);
+      if (loc.wants_scan()) {
+        test::ray_cast(world.w, world.truth[k].pose, LidarModel{}, k, scan);
+        gt.label(scan, LidarModel{}.rings, LidarModel{}.columns);
+        loc.on_scan(scan, fields, world.truth[k].stamp);
+      }
+      out.lost = k > jump_at && loc.pose().status == LocalizationStatus::kLost;
+    }
+    if (!out.lost) return out;
+    // ... then stand there for 180 s (10 Hz odometry and scans, as the stage gets them)
+    const TruthSample at = world.truth[k - 1];
+    const Pose2 odom = world.odom[k - 1];
+    for (int i = 1; i <= 1800 && !out.back; ++i) {
+      const TimeNs t = at.stamp + from_seconds(i / 10.0);
+      loc.on_odometry(odom, t);
+      if (loc.wants_scan()) {
+        test::ray_cast(world.w, at.pose, LidarModel{}, k + static_cast<std::size_t>(i), scan);
+        gt.label(scan, LidarModel{}.rings, LidarModel{}.columns);
+        loc.on_scan(scan, fields, t);
+      }
+      if (loc.pose().status == LocalizationStatus::kTracking) {
+        out.back = true;
+        out.back_after_s = i / 10.0;
+        out.err_m = std::hypot(loc.pose().pose.x - at.pose.x, loc.pose().pose.y - at.pose.y);
+      }
+    }
+    return out;
+  };
+  const Outcome with = run_lost_then_stand(ParticleFilterParams{}.lost_standing_update_s);
+  std::printf("lost and standing: tracking again after %.1f s, %.2f m from the truth\n", with.back_after_s, with.err_m);
+  ASSERT_TRUE(with.lost) << "the odometry jump must lose track while driving";
+  ASSERT_TRUE(with.back) << "still lost after 180 s of standing";
+  EXPECT_LT(with.back_after_s, 120.0);
+  EXPECT_LT(with.err_m, 1.5);
+  const Outcome without = run_lost_then_stand(0.0);  // matched only after motion: lost for good
+  ASSERT_TRUE(without.lost);
+  EXPECT_FALSE(without.back) << "without the standing updates nothing can bring it back: the test can fail";
 }
 
 // The cost of a pose by hand: every bin's centre in the map by trigonometry, distances and classes by

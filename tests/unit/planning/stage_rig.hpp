@@ -32,6 +32,7 @@ struct Rig {
   LatestWriter<GoalMsg> goal_w;
   std::unique_ptr<MapTileMsg> tile = std::make_unique<MapTileMsg>();
   Pose2 pose{};
+  LocalizationStatus status{LocalizationStatus::kTracking};  // what the localizer says
 
   explicit Rig(const test::SyntheticWorld& w) {
     static const std::vector<ParamSection> schema = role_schema(kRole);
@@ -69,7 +70,7 @@ struct Rig {
   void publish_pose() {
     LocalizationMsg m;
     m.stamp = clock.now();
-    m.status = LocalizationStatus::kTracking;
+    m.status = status;
     m.pose = pose;
     loc_w.publish(m);
   }

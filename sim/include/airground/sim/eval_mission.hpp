@@ -45,6 +45,7 @@ struct MissionOptions {
   ComputeTimeMode compute_time{ComputeTimeMode::kModel};  // RunOptions::compute_time
   std::optional<TargetCpu> target_cpu{};                 // RunOptions::target_cpu (unset: the paper's computers)
   std::string uav_cache{};         // RunOptions::uav_cache: record the quadrotor's mapping once, replay it after
+  std::string uav_cache_build{};   // RunOptions::uav_cache_build: replay the recordings of that executable
   int web_port{0};                 // > 0: the base station serves its page on this port during the run
   double web_pace{0};              // > 0: hold the simulation to this many times real time (to watch it)
   std::function<void(double t_s)> during{};  // called at 5 Hz of simulated time while the mission runs (tests)

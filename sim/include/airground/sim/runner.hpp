@@ -154,6 +154,10 @@ struct RunOptions {
   // output there the first time and replays it in every later run with the same uav_replay_key (the
   // study's missions on one world, seed and altitude), skipping the camera, VO, ErfNet and the mapping.
   std::string uav_cache{};
+  // Replay the recordings another build of airground-sim made (its executable, hashed into the key in place
+  // of this one's): for a change that leaves the quadrotor's flight and mapping as they were. Only replays:
+  // a mission whose recording that build did not make is an error, and nothing is recorded under its key.
+  std::string uav_cache_build{};
   int map_tiles_per_tick{16};     // at most this many tiles pushed to one robot per physics step (and
                                   // never more than its ring takes: the rest follow on the next steps)
   double init_error_m{0};         // [m] the initial pose published at start is the truth moved this far (random direction by seed)
@@ -292,6 +296,7 @@ struct RobotSummary {
 struct UavReplayInfo {
   std::string mode{"live"};   // "live" (no cache), "recorded" (live, written to the cache), "replayed"
   std::string file{};         // the recording
+  std::string build{};        // the executable that recorded it, when another build's (RunOptions::uav_cache_build)
   double recording_end_s{0};  // [s] replayed: where the recording ends
   double last_output_s{0};    // [s] ... and its last map tile or region batch
   double beyond_end_s{0};     // [s] replayed: how long this run went on past the recording's end

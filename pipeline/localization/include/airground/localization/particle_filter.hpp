@@ -87,6 +87,15 @@ struct ParticleFilterParams {
   double recovery_growth{1.5};       // sigma x this at each further attempt
   double recovery_sigma_xy_max_m{25.0};
   double lost_drift_per_m{0.05};     // [m/m] the last good pose's uncertainty grows with the distance since
+  // Lost and standing: a scan is still matched this often (the caller's clock; SemanticLocalizer), so that
+  // the re-spreads go on: a robot that stops when it loses track would otherwise never be matched again
+  // (AMCL's no-motion update). Each such update first roughens the particles (no motion to spread them,
+  // and the same scan every time: without it the set collapses onto its first best guess), and it takes
+  // more converged updates to call it tracking, so the roughened set has settled. 0 s = never.
+  double lost_standing_update_s{1.0};
+  double lost_standing_sigma_xy_m{0.25};      // [m] roughening per standing update
+  double lost_standing_sigma_yaw_rad{0.02};   // [rad]
+  int lost_standing_converged_updates{15};    // converged standing updates before tracking again
   // The mission area [m, map frame] (the stage: its area_*): the robot is inside it, so a particle outside
   // has no weight. Over unmapped ground a particle's score is neutral, which beats a poor match on the
   // map: without the area a guess near the area's edge converged onto the nothing beyond it.
@@ -130,6 +139,13 @@ inline constexpr ParamField<ParticleFilterParams> kParticleFilterFields[] = {
     field::real("pf_recovery_growth", &ParticleFilterParams::recovery_growth, 1.0, 10.0, "", "sigma x this at each further attempt"),
     field::real("pf_recovery_sigma_xy_max_m", &ParticleFilterParams::recovery_sigma_xy_max_m, 0.1, 500.0, "m", "largest re-spread sigma"),
     field::real("pf_lost_drift_per_m", &ParticleFilterParams::lost_drift_per_m, 0.0, 1.0, "m/m", "last good pose uncertainty per metre since"),
+    field::real("pf_lost_standing_update_s", &ParticleFilterParams::lost_standing_update_s, 0.0, 60.0, "s",
+                "lost and standing: match a scan this often anyway, so the re-spreads go on (0 = never)"),
+    field::real("pf_lost_standing_sigma_xy_m", &ParticleFilterParams::lost_standing_sigma_xy_m, 0.0, 5.0, "m",
+                "... roughening the particles by this first"),
+    field::real("pf_lost_standing_sigma_yaw_rad", &ParticleFilterParams::lost_standing_sigma_yaw_rad, 0.0, 0.5, "rad", "... and this"),
+    field::integer("pf_lost_standing_converged_updates", &ParticleFilterParams::lost_standing_converged_updates, 1, 1000, "updates",
+                   "... and tracking again only after this many converged ones"),
 };
 inline constexpr auto kParticleFilterParamSpecs = param_specs(kParticleFilterFields);
 ParticleFilterParams load_particle_filter_params(const SectionView& s);
@@ -185,6 +201,9 @@ class ParticleFilter {
   // Applies the pending motion and weighs the particles against `fields` with `render` (made at
   // range_bin_m()). Does nothing unless wants_update() or `force`. Never allocates.
   UpdateReport update(const ScanRenderPolar& render, const ClassDistanceFields& fields, bool force = false) noexcept;
+  // Lost and standing (SemanticLocalizer, lost_standing_update_s): an update without motion whose
+  // particles are roughened by lost_standing_sigma_* first. Never allocates.
+  UpdateReport update_standing(const ScanRenderPolar& render, const ClassDistanceFields& fields) noexcept;
 
   [[nodiscard]] const FilterEstimate& estimate() const noexcept { return est_; }
   [[nodiscard]] FilterStatus status() const noexcept { return est_.status; }
@@ -209,11 +228,12 @@ class ParticleFilter {
   double evaluate(double x, double y, double yaw, const ScanRenderPolar& render, const ClassDistanceFields& fields,
                   int window, double& score, double& known_fraction, double& known_cost) noexcept;
   void prepare_angles(const ScanRenderPolar& render) noexcept;  // also the bins' offsets: once per render
-  void apply_motion() noexcept;
+  void apply_motion(bool roughen = false) noexcept;
+  UpdateReport update_impl(const ScanRenderPolar& render, const ClassDistanceFields& fields, bool force, bool roughen) noexcept;
   void resample() noexcept;
   std::size_t kld_count() noexcept;
   void compute_estimate() noexcept;
-  void update_status(double best_cost, bool cost_valid) noexcept;
+  void update_status(double best_cost, bool cost_valid, bool standing) noexcept;
   void respread(const Pose2& centre, double sigma_xy, double sigma_yaw) noexcept;
   void set_range_bin() noexcept;
 

@@ -15,6 +15,7 @@
 #include "airground/localization/particle_filter.hpp"
 #include "airground/localization/polar_render.hpp"
 #include "airground/localization/scan_labeller.hpp"
+#include "airground/platform/time.hpp"
 #include "airground/platform/param_binding.hpp"
 
 namespace ag::loc {
@@ -46,8 +47,9 @@ class SemanticLocalizer {
   // The odometry's cumulative pose (any fixed odometry frame) at `stamp`; call it with the odometry at a
   // scan's time before on_scan().
   void on_odometry(const Pose2& odom, TimeNs stamp) noexcept;
-  // The robot moved enough since the last update for a scan to be worth labelling and matching.
-  [[nodiscard]] bool wants_scan() const noexcept { return filter_.wants_update(); }
+  // The robot moved enough since the last update for a scan to be worth labelling and matching, or it is
+  // lost and lost_standing_update_s passed since the last update (at the last odometry stamp).
+  [[nodiscard]] bool wants_scan() const noexcept { return filter_.wants_update() || standing_update_due(); }
   // A labelled scan (sensor frame). Renders it and updates the filter when wants_scan(); never allocates.
   UpdateReport on_scan(std::span<const ScanPoint> labelled, const ClassDistanceFields& fields, TimeNs stamp) noexcept;
 
@@ -74,6 +76,12 @@ class SemanticLocalizer {
   ParticleFilter filter_;
   FusedPose fused_;
   TimeNs last_stamp_{0};
+  TimeNs last_update_stamp_{0};
+
+  [[nodiscard]] bool standing_update_due() const noexcept {
+    return filter_.status() == FilterStatus::kLost && p_.filter.lost_standing_update_s > 0.0 &&
+           last_stamp_ - last_update_stamp_ >= from_seconds(p_.filter.lost_standing_update_s);
+  }
 };
 
 }  // namespace ag::loc

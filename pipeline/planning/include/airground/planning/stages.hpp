@@ -3,7 +3,8 @@
 //            route on "planned_path" when the goal is new, the map changed, or replan_period_s passed.
 //   drive:   planned_path + localization -> path follower -> "wheel_command" every step; it stops
 //            (within its deceleration limits) without a tracking pose, a route or a goal, at once
-//            on the tracker's reflex, and until a new route when the tracker cancels the route.
+//            on the tracker's reflex, and until a new route when the tracker cancels the route; while
+//            the localizer converges, and for lost_coast_m after it loses track, it drives slowly.
 //   tracker: lidar_scan + localization + planned_path -> local tracker -> "local_goal" (the local
 //            goal, its state, the reflex). The drive stage does not yet steer to the local goal.
 // Everything is allocated in init(); step() never allocates and never blocks.
@@ -87,6 +88,8 @@ struct DriveSettings {
   double initialising_speed_mps{0.6};
   bool steer_to_local_goal{true};
   double reflex_turn_after_s{1.0};
+  double lost_speed_mps{0.5};
+  double lost_coast_m{15.0};
 };
 inline constexpr ParamField<DriveSettings> kDriveStageFields[] = {
     field::real("pose_timeout_s", &DriveSettings::pose_timeout_s, 0.05, 10.0, "s", "a localization older than this stops the robot"),
@@ -96,6 +99,10 @@ inline constexpr ParamField<DriveSettings> kDriveStageFields[] = {
     field::boolean("steer_to_local_goal", &DriveSettings::steer_to_local_goal, "steer at the local tracker's goal (clear of what the LiDAR sees) when it has one"),
     field::real("reflex_turn_after_s", &DriveSettings::reflex_turn_after_s, 0.0, 60.0, "s",
                 "under a reflex stop this long: turn on the spot toward the local goal (never forward); else it could stand facing a car for ever"),
+    field::real("lost_speed_mps", &DriveSettings::lost_speed_mps, 0.0, 5.0, "m/s",
+                "the localizer lost track: go on along the route on its dead-reckoned pose at most this fast (it finds itself "
+                "again only from new views: a robot that stops there stays lost); 0 = stop at once"),
+    field::real("lost_coast_m", &DriveSettings::lost_coast_m, 0.0, 500.0, "m", "... for at most this far from where it was lost, then stop"),
 };
 inline constexpr auto kDriveParamArray = param_specs(kDriveStageFields, kDriveFields);
 
@@ -124,6 +131,9 @@ class DriveStage final : public Stage {
   bool have_path_{false}, blocked_{false};
   TimeNs last_{-1}, pose_timeout_{0}, local_timeout_{0};
   TimeNs reflex_since_{-1}, reflex_hold_{0};
+  double coast_m_{0.0};   // [m] driven on the dead-reckoned pose since the localizer lost track
+  Pose2 coast_last_{};
+  bool coasting_{false};
   DriveSettings cfg_{};
   std::uint64_t reflex_stops_{0};
 };
