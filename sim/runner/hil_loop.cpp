@@ -8,6 +8,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <string>
 
 #include "hil_run.hpp"
 #include "worker_pool.hpp"
@@ -22,8 +24,9 @@ void sleep_until(TimeNs t) {
   ::clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
 }
 
-// GET http://127.0.0.1:port/path with a short timeout; empty on any failure (the base may be starting).
-std::string http_get(std::uint16_t port, const char* path) {
+// METHOD http://127.0.0.1:port/path (no body) with a short timeout: the status (0 on any failure: the
+// base may be starting) and the body.
+int http_request(const char* method, std::uint16_t port, const std::string& path, std::string& body) {
   const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
   if (fd < 0) return {};
   timeval tv{1, 0};
@@ -35,7 +38,7 @@ std::string http_get(std::uint16_t port, const char* path) {
   a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
   std::string out;
   if (::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0) {
-    const std::string req = std::string("GET ") + path + " HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n";
+    const std::string req = std::string(method) + " " + path + " HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Length: 0\r\nConnection: close\r\n\r\n";
     if (::send(fd, req.data(), req.size(), MSG_NOSIGNAL) == static_cast<ssize_t>(req.size())) {
       char buf[65536];
       for (;;) {
@@ -46,8 +49,29 @@ std::string http_get(std::uint16_t port, const char* path) {
     }
   }
   ::close(fd);
-  const auto body = out.find("\r\n\r\n");
-  return body == std::string::npos ? std::string() : out.substr(body + 4);
+  const auto head = out.find("\r\n\r\n");
+  if (head == std::string::npos || out.rfind("HTTP/1.1 ", 0) != 0) return 0;
+  body = out.substr(head + 4);
+  return std::atoi(out.c_str() + 9);
+}
+
+std::string http_get(std::uint16_t port, const char* path) {
+  std::string body;
+  return http_request("GET", port, path, body) == 200 ? body : std::string();
+}
+
+// The operator arms each ground robot from the base station once its page answers, as a user clicks
+// "arm" there (the shipped robots start with their wheels latched: base.start_armed false).
+void arm_from_base_station(Run& run) {
+  for (auto& up : run.ugvs) {
+    Ugv& u = *up;
+    if (u.armed_by_operator) continue;
+    std::string body;
+    if (http_request("POST", run.web_port, "/api/arm?robot=" + std::to_string(u.id), body) == 202) {
+      u.armed_by_operator = true;
+      ++run.res.arm_requests;
+    }
+  }
 }
 
 // When the sensor loop's periodic work is next due.
@@ -140,6 +164,7 @@ bool poll_base_state(Run& run, TimeNs now, TimeNs& done_seen) {
   const std::string body = http_get(run.web_port, "/api/state");
   if (body.empty()) return false;
   run.last_state = body;
+  arm_from_base_station(run);
   try {
     const json s = json::parse(body);
     const int n = static_cast<int>(run.mf.team.size());

@@ -65,7 +65,7 @@ void write_json(const Run& run, const RunOptions& oracle_list) {
   j["rates_hz"] = {{"lidar", static_cast<double>(res.lidar_revolutions) / secs}, {"camera", static_cast<double>(res.camera_frames) / secs}};
   j["traffic"] = {{"lidar_packets", res.lidar_packets}, {"lidar_revolutions", res.lidar_revolutions}, {"lidar_revolutions_skipped", res.lidar_revolutions_skipped},
                   {"camera_frames_skipped", res.camera_frames_skipped}, {"ubx_nav_pvt", res.ubx_messages}, {"camera_frames", res.camera_frames},
-                  {"camera_frames_dropped", res.camera_frames_dropped}, {"vo_records", res.vo_records}, {"mavlink_frames", res.mavlink_frames},
+                  {"camera_frames_dropped", res.camera_frames_dropped}, {"vo_records", res.vo_records}, {"mavlink_frames", res.mavlink_frames}, {"arm_requests", res.arm_requests},
                   {"mavlink_bytes_in", res.mavlink_bytes_in}, {"can_commands_received", res.can_frames_in}};
   for (const HilRobot& r : res.robots)
     j["robots"].push_back({{"name", r.name}, {"exit_code", r.exit_code}, {"state", r.final_state}, {"distance_m", r.distance_m},

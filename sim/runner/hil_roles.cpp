@@ -112,7 +112,7 @@ Settings ugv_shared_settings(const Run& run) {
   Settings s{
       {"localization.area_x0_m", num(a.x0)}, {"localization.area_y0_m", num(a.y0)}, {"localization.area_x1_m", num(a.x1)}, {"localization.area_y1_m", num(a.y1)},
       {"planner.area_x0_m", num(a.x0)}, {"planner.area_y0_m", num(a.y0)}, {"planner.area_x1_m", num(a.x1)}, {"planner.area_y1_m", num(a.y1)},
-      {"base.can_backend", "cannelloni"}, {"base.estop_backend", "none"}, {"base.led_backend", "none"}, {"base.start_armed", "true"},
+      {"base.can_backend", "cannelloni"}, {"base.estop_backend", "none"}, {"base.led_backend", "none"},
       {"mission.visit_radius_m", num(mp.visit_radius_m)}, {"mission.max_sigma_m", num(mp.max_sigma_m)},
       {"mission.claim_timeout_s", num(mp.claim_timeout_s)}, {"mission.idle_return_s", num(mp.idle_return_s)},
       {"mission.mission_end_s", num(mp.mission_end_s)},

@@ -87,6 +87,7 @@ struct Ugv {
   std::vector<double> errors;        // every poll's
   std::deque<std::pair<TimeNs, Pose2>> history;  // truth, the last 30 s
   std::string state{"-"};
+  bool armed_by_operator{false};  // the base station took our POST /api/arm for it
   [[nodiscard]] Pose2 truth_at(TimeNs t) const {
     Pose2 best = vehicle.pose();
     TimeNs best_dt = INT64_MAX;

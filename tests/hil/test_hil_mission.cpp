@@ -95,6 +95,21 @@ TEST(Hil, AShortMissionRunsToTheEndOverTheWireProtocols) {
     EXPECT_GT(with_att, frames * 9 / 10) << "frames without the autopilot's attitude: " << m[0];
   }
 
+  // The shipped ground robot starts with its wheels latched; the operator armed it from the base
+  // station's page (POST /api/arm), which sent the command over the radio to its comms stage.
+  {
+    EXPECT_EQ(tr.at("arm_requests").get<long>(), 1);
+    std::ifstream cfg(out / "config" / "ugv1.yaml");
+    std::ostringstream c;
+    c << cfg.rdbuf();
+    EXPECT_NE(c.str().find("start_armed: false"), std::string::npos) << "the shipped base.start_armed";
+    std::ifstream log(out / "logs" / "ugv1.log");
+    std::ostringstream buf;
+    buf << log.rdbuf();
+    EXPECT_NE(buf.str().find("operator command from robot 250: arm"), std::string::npos) << "ugv1's comms stage got the arm";
+    EXPECT_NE(buf.str().find("base: arm from the base station (radio)"), std::string::npos) << "ugv1's base stage took it";
+  }
+
   // What a person looks at, and the robot's own CAN recording.
   for (const char* file : {"hil_report.md", "trajectories.png", "base_state.json", "config/ugv1.yaml", "config/uav.yaml", "logs/ugv1.log"})
     EXPECT_TRUE(fs::exists(out / file)) << file;

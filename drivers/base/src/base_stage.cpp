@@ -146,6 +146,10 @@ Status BaseStage::init(StageContext& ctx) {
   if (!arm) return arm.error();
   arm_ = arm.value();
   ctx.channels.allow_unwritten(chan::kBaseArm);  // optional: an operator's re-arm request, when a tool sends one
+  auto radio_arm = ctx.channels.latest_reader(chan::kRadioArm);
+  if (!radio_arm) return radio_arm.error();
+  radio_arm_ = radio_arm.value();
+  ctx.channels.allow_unwritten(chan::kRadioArm);  // optional: the base station's arm over the radio (comms)
   auto odom = ctx.channels.ring_writer(chan::kWheelOdometry.with_name(cfg.odometry_channel));
   if (!odom) return odom.error();
   odom_out_ = odom.value();
@@ -160,21 +164,24 @@ void BaseStage::step(TimeNs now) noexcept {
     started_ = true;
     base_->arm(now);
   }
-  // Operator arm / re-arm.
+  // Operator arm / re-arm: a tool on the robot, or the base station over the radio.
   bool rearm = false;
-  if (arm_.fresh()) {
-    const BaseArmMsg& a = arm_.read();
-    if (a.stamp != last_arm_stamp_) {
-      last_arm_stamp_ = a.stamp;
-      ++c_.arm_requests;
-      if (a.arm) {
-        rearm = true;
-        if (base_->status().state == BaseState::kFault || base_->status().state == BaseState::kDisarmed) base_->arm(now);
-      } else {
-        base_->disarm(now);
-      }
+  const auto take_arm = [&](LatestReader<BaseArmMsg>& in, TimeNs& last, const char* from) {
+    if (!in.fresh()) return;
+    const BaseArmMsg& a = in.read();
+    if (a.stamp == last) return;
+    last = a.stamp;
+    ++c_.arm_requests;
+    AG_LOG_INFO("base", "%s from %s", a.arm ? "arm" : "disarm", from);
+    if (a.arm) {
+      rearm = true;
+      if (base_->status().state == BaseState::kFault || base_->status().state == BaseState::kDisarmed) base_->arm(now);
+    } else {
+      base_->disarm(now);
     }
-  }
+  };
+  take_arm(arm_, last_arm_stamp_, "base_arm");
+  take_arm(radio_arm_, last_radio_arm_stamp_, "the base station (radio)");
   // The e-stop first: it acts in this very step.
   bool asserted = false;
   const bool line_ok = !estop_missing_ && (estop_line_ == nullptr || estop_line_->get(asserted) == gpio::LineResult::kOk);

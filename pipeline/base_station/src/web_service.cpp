@@ -1,7 +1,10 @@
 #include "web_service.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <ctime>
 
@@ -56,8 +59,8 @@ std::vector<std::uint8_t> encode_tile_frame(const WebTile& t) {
 }
 
 WebService::WebService(const WebServiceParams& p, LatestValue<MissionModel>& snapshot, SpscRing<WebTile, kWebTileRing>& tiles,
-                       SpscRing<LogItem, kLogRing>& log, TimeNs start)
-    : p_(p), snapshot_(snapshot), tiles_in_(tiles), log_in_(log), start_(start), fox_(p.client_buffer_bytes, p.push_hz) {}
+                       SpscRing<LogItem, kLogRing>& log, SpscRing<OperatorRequest, kCommandRing>& commands, TimeNs start)
+    : p_(p), snapshot_(snapshot), tiles_in_(tiles), log_in_(log), commands_out_(commands), start_(start), fox_(p.client_buffer_bytes, p.push_hz) {}
 
 WebService::~WebService() {
   if (log_ != nullptr) std::fclose(log_);
@@ -163,7 +166,7 @@ std::string WebService::state_json(const MissionModel& m, TimeNs start, const ne
   const ModelCounters& k = m.counters;
   j.key("counters").begin_object().ku("records_in", k.records_in).ku("poses_in", k.poses_in).ku("tiles_in", k.tiles_in);
   j.ku("decode_errors", k.decode_errors).ku("stale_regions", k.stale_regions).ku("table_full", k.table_full);
-  j.ku("tiles_held_back", k.tiles_held_back).ku("log_dropped", k.log_dropped).ku("tiles_held", tiles_held);
+  j.ku("tiles_held_back", k.tiles_held_back).ku("log_dropped", k.log_dropped).ku("tiles_held", tiles_held).ku("commands_sent", k.commands_sent);
   j.ku("log_lines", log_lines).ku("log_errors", log_errors);
   if (k.decode_errors > 0)
     j.kv("last_error", error_name(static_cast<mission::DecodeError>(k.last_error))).kv("last_error_kind", to_string(static_cast<RecordKind>(k.last_error_kind)))
@@ -424,8 +427,40 @@ net::http::HttpResponse WebService::get(const net::http::HttpRequest& req) {
     if (path == a.path) return {200, a.mime, std::string(reinterpret_cast<const char*>(a.data), a.size), {}};
   if (path == "/api/state") return {200, "application/json", current_state(nullptr), {}};
   if (path == "/api/hello" || path == "/api/classes") return {200, "application/json", hello_json(), {}};
+  if (path == "/api/arm" || path == "/api/disarm")
+    return {405, "text/plain; charset=utf-8", "use POST " + std::string(path) + "?robot=N\n", "Allow: POST\r\n"};
   return {404, "text/plain; charset=utf-8",
           "not found: " + std::string(req.path) + "\n(try / , /api/state, the WebSocket /ws, or Foxglove's WebSocket (foxglove.websocket.v1) at /)\n", {}};
+}
+
+net::http::HttpResponse WebService::post(const net::http::HttpRequest& req) {
+  const bool arm = req.path == "/api/arm";
+  if (!arm && req.path != "/api/disarm")
+    return {404, "text/plain; charset=utf-8", "not found: POST " + req.path + "\n(POST /api/arm?robot=N or /api/disarm?robot=N)\n", {}};
+  // robot=N, 0..254, not this base station
+  long id = -1;
+  for (std::size_t pos = 0; pos <= req.query.size();) {
+    const std::size_t end = std::min(req.query.find('&', pos), req.query.size());
+    const std::string_view kv = std::string_view(req.query).substr(pos, end - pos);
+    if (kv.rfind("robot=", 0) == 0) {
+      const std::string v(kv.substr(6));
+      char* e = nullptr;
+      errno = 0;
+      const long n = std::strtol(v.c_str(), &e, 10);
+      id = (!v.empty() && e != nullptr && *e == '\0' && errno == 0) ? n : -2;
+    }
+    pos = end + 1;
+  }
+  if (id < 0 || id >= comms::kMaxRobots || id == p_.self)
+    return {400, "text/plain; charset=utf-8",
+            "bad request: " + req.path + " needs ?robot=N, a ground robot's robot.id (0..254, not the base station's own)\n", {}};
+  const OperatorRequest r{static_cast<comms::RobotId>(id), arm ? comms::OperatorCommand::kArm : comms::OperatorCommand::kDisarm, requests_ + 1};
+  if (!commands_out_.try_push(r)) return {503, "text/plain; charset=utf-8", "busy: the last commands are still on their way to the radio; try again\n", "Retry-After: 1\r\n"};
+  ++requests_;
+  AG_LOG_INFO("web", "operator: %s robot %ld (request %u)", arm ? "arm" : "disarm", id, r.request);
+  char body[128];
+  std::snprintf(body, sizeof body, "{\"robot\": %ld, \"command\": \"%s\", \"request\": %u}\n", id, arm ? "arm" : "disarm", r.request);
+  return {202, "application/json", body, {}};
 }
 
 }  // namespace ag::base_station

@@ -38,17 +38,21 @@ struct WebServiceParams {
   double push_hz{4.0};
   std::size_t client_buffer_bytes{4u << 20};
   bool foxglove{true};  // answer WebSocket clients that offer foxglove.websocket.v1 (at any path)
+  comms::RobotId self{comms::kNoRobot};  // the base station's robot.id (no command to itself)
 };
 
 class WebService final : public net::http::HttpServer::Handler {
  public:
   WebService(const WebServiceParams& p, LatestValue<MissionModel>& snapshot, SpscRing<WebTile, kWebTileRing>& tiles,
-             SpscRing<LogItem, kLogRing>& log, TimeNs start);
+             SpscRing<LogItem, kLogRing>& log, SpscRing<OperatorRequest, kCommandRing>& commands, TimeNs start);
   ~WebService() override;
   // Opens (appends to) the log file; an error names the path.
   Status open_log();
 
   net::http::HttpResponse get(const net::http::HttpRequest& req) override;
+  // POST /api/arm?robot=N, /api/disarm?robot=N: 202 and the command on its way to the team (the stage
+  // publishes it), 400 for a missing or bad robot id, 503 while the hand-over is full, 404 otherwise.
+  net::http::HttpResponse post(const net::http::HttpRequest& req) override;
   void ws_open(net::http::HttpServer& s, net::http::HttpServer::ClientId id) override;
   void ws_close(net::http::HttpServer::ClientId id) override;
   void ws_message(net::http::HttpServer& s, net::http::HttpServer::ClientId id, net::http::WsOpcode op,
@@ -92,6 +96,8 @@ class WebService final : public net::http::HttpServer::Handler {
   LatestValue<MissionModel>& snapshot_;
   SpscRing<WebTile, kWebTileRing>& tiles_in_;
   SpscRing<LogItem, kLogRing>& log_in_;
+  SpscRing<OperatorRequest, kCommandRing>& commands_out_;
+  std::uint32_t requests_{0};
   TimeNs start_;
   std::FILE* log_{nullptr};
   std::uint64_t log_lines_{0}, log_errors_{0};

@@ -31,6 +31,11 @@ Status WebStage::init(StageContext& ctx) {
   snapshot_ = std::make_unique<LatestValue<MissionModel>>();
   tiles_to_server_ = std::make_unique<SpscRing<WebTile, kWebTileRing>>();
   log_to_server_ = std::make_unique<SpscRing<LogItem, kLogRing>>();
+  commands_from_server_ = std::make_unique<SpscRing<OperatorRequest, kCommandRing>>();
+  out_msg_ = std::make_unique<comms::GossipPublishMsg>();
+  auto gout = ctx.channels.ring_writer(chan::kGossipOut);
+  if (!gout) return gout.error();
+  gossip_out_ = gout.value();
   model_->now = ctx.clock.now();
 
   WebServiceParams sp;
@@ -38,7 +43,8 @@ Status WebStage::init(StageContext& ctx) {
   sp.push_hz = cfg.push_hz;
   sp.client_buffer_bytes = static_cast<std::size_t>(cfg.client_buffer_kb) * 1024;
   sp.foxglove = cfg.foxglove;
-  service_ = std::make_unique<WebService>(sp, *snapshot_, *tiles_to_server_, *log_to_server_, ctx.clock.now());
+  sp.self = static_cast<comms::RobotId>(ctx.config.get_int("robot.id"));
+  service_ = std::make_unique<WebService>(sp, *snapshot_, *tiles_to_server_, *log_to_server_, *commands_from_server_, ctx.clock.now());
   if (auto st = service_->open_log(); !st) return st.error();
 
   net::http::HttpServerParams hp;
@@ -57,6 +63,20 @@ Status WebStage::init(StageContext& ctx) {
 
 void WebStage::step(TimeNs now) noexcept {
   MissionModel& m = *model_;
+  // The operator's commands: held in the server's ring while gossip_out is full.
+  while (const OperatorRequest* r = commands_from_server_->front()) {
+    if (gossip_out_.free_slots() == 0) break;
+    comms::GossipPublishMsg& g = *out_msg_;
+    g.stamp = now;
+    g.published = now;
+    g.topic = comms::command_topic(r->robot);
+    g.priority = 0;  // the kind's default
+    g.size = static_cast<std::uint32_t>(comms::encode_command(r->command, r->request, std::span<std::uint8_t>(g.payload.data(), g.payload.size())));
+    (void)gossip_out_.push(g);
+    ++m.counters.commands_sent;
+    ++m.seq;
+    commands_from_server_->pop();
+  }
   // Tiles: held in the channel while the server's hand-over is full (nothing is lost).
   for (std::size_t k = 0; k < tiles_per_step_; ++k) {
     MapTileMsg* t = tiles_.front();

@@ -237,7 +237,8 @@
       const cls = st === 'tracking' ? 'ok' : st === 'lost' ? 'bad' : 'warn';
       return `<tr><td><span class="dot" style="background:${robotColor(r.id)}"></span>${r.id}</td><td class="${cls}">${esc(st)}</td>` +
         `<td>${r.has_pose ? r.x.toFixed(1) + ', ' + r.y.toFixed(1) : ''}</td><td>${r.has_pose ? Math.max(r.sx, r.sy).toFixed(2) : ''}</td>` +
-        `<td>${goal}</td><td>${r.age_s.toFixed(1)} s ago</td></tr>`;
+        `<td>${goal}</td><td>${r.age_s.toFixed(1)} s ago</td>` +
+        `<td><button data-cmd="arm" data-robot="${r.id}">arm</button> <button data-cmd="disarm" data-robot="${r.id}">disarm</button></td></tr>`;
     }).join('');
     document.getElementById('regver').textContent = m.regions.list.length ? `(version ${m.regions.version})` : '';
     const visited = new Set(); for (const r of m.robots) for (const v of r.visited) visited.add(v.region);
@@ -277,6 +278,16 @@
     dirty = true;
   });
   canvas.addEventListener('dblclick', () => { userView = null; dirty = true; });
+  // The operator's arm / disarm of a ground robot's wheels: POST to the base station, which sends it over the radio.
+  document.querySelector('#robots tbody').addEventListener('click', (e) => {
+    const b = e.target.closest('button[data-cmd]');
+    if (!b) return;
+    const what = `${b.dataset.cmd} robot ${b.dataset.robot}`;
+    if (b.dataset.cmd === 'arm' && !window.confirm(`Arm robot ${b.dataset.robot}? Its wheels will drive.`)) return;
+    fetch(`/api/${b.dataset.cmd}?robot=${encodeURIComponent(b.dataset.robot)}`, {method: 'POST'})
+      .then(r => r.text().then(t => { document.getElementById('summary').title = `${what}: ${r.status} ${t}`; }))
+      .catch(err => { document.getElementById('summary').title = `${what}: ${err}`; });
+  });
   window.addEventListener('resize', () => { dirty = true; });
 
   function frame() { if (dirty) { dirty = false; draw(); } requestAnimationFrame(frame); }

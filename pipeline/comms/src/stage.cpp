@@ -110,6 +110,7 @@ Status CommsStage::init(StageContext& ctx) {
   send_pose_ = cfg.send_pose;
   send_tiles_ = cfg.send_map_tiles;
   deliver_tiles_ = cfg.deliver_map_tiles;
+  deliver_commands_ = cfg.deliver_commands;
   if (send_tiles_ && deliver_tiles_)
     return Error::make(ErrorCode::kConfig, where + "send_map_tiles and deliver_map_tiles: a robot either makes the map or receives it, not both");
   tiles_per_step_ = static_cast<std::size_t>(cfg.tiles_per_step);
@@ -179,6 +180,11 @@ Status CommsStage::init(StageContext& ctx) {
       return Error::make(ErrorCode::kConfig, where + "transport: inproc, but no link is registered for robot '" + std::string(ctx.instance) + "'");
     gp.mtu_bytes = std::min(gp.mtu_bytes, link_->mtu());
   }
+  // Operator commands the journal restored were given before this start: they never act again.
+  for (RecordStore::Slot s = 0; s < store_->size(); ++s) {
+    const RecordMeta& m = store_->meta(s);
+    if (m.key.topic == command_topic(self_) && m.key.origin < kMaxRobots) command_seen_[m.key.origin] = std::max(command_seen_[m.key.origin], m.seq);
+  }
   node_ = std::make_unique<GossipNode>(gp, key, *store_, epoch, journal_.get());
   node_->announce_all();  // what the journal restored reaches this robot's stages too
 
@@ -217,6 +223,11 @@ Status CommsStage::init(StageContext& ctx) {
   auto st = ctx.channels.latest_writer(chan::kCommsStats);
   if (!st) return st.error();
   stats_out_ = st.value();
+  if (deliver_commands_) {
+    auto arm = ctx.channels.latest_writer(chan::kRadioArm);
+    if (!arm) return arm.error();
+    arm_out_ = arm.value();
+  }
 
   return ok_status();
 }
@@ -255,6 +266,23 @@ void CommsStage::take_own(TimeNs now) noexcept {
   }
 }
 
+void CommsStage::take_command(const RecordMeta& m, std::span<const std::uint8_t> payload, TimeNs now) noexcept {
+  OperatorCommand c{};
+  std::uint32_t request = 0;
+  if (!decode_command(payload, c, request)) {
+    if (commands_bad_++ == 0) AG_LOG_WARN("comms", "an operator command from robot %u is malformed (%u bytes): ignored (counted)", m.key.origin, m.size);
+    return;
+  }
+  if (m.key.origin >= kMaxRobots || m.seq <= command_seen_[m.key.origin]) {
+    ++commands_stale_;
+    return;
+  }
+  command_seen_[m.key.origin] = m.seq;
+  ++commands_in_;
+  AG_LOG_INFO("comms", "operator command from robot %u: %s (request %u)", m.key.origin, c == OperatorCommand::kArm ? "arm" : "disarm", request);
+  arm_out_.publish(BaseArmMsg{now, now, c == OperatorCommand::kArm});
+}
+
 void CommsStage::deliver(TimeNs now) noexcept {
   std::size_t tiles = 0;
   RecordStore::Slot s;
@@ -279,6 +307,8 @@ void CommsStage::deliver(TimeNs now) noexcept {
         }
         ++tiles;
       }
+    } else if (kind == TopicKind::kCommand) {
+      if (deliver_commands_ && m.key.topic == command_topic(self_)) take_command(m, payload, now);
     } else if (kind == TopicKind::kPose) {
       TeamPose p;
       if (decode_pose(payload, p)) {
@@ -334,6 +364,9 @@ void CommsStage::publish_stats(TimeNs now) noexcept {
   s.tiles_out = tiles_out_n_;
   s.tiles_in = tiles_in_n_;
   s.tiles_bad = tiles_bad_;
+  s.commands_in = commands_in_;
+  s.commands_stale = commands_stale_;
+  s.commands_bad = commands_bad_;
   s.drops = g.drops;
   s.peers = 0;
   for (int r = 0; r < kMaxRobots && s.peers < kTeamMax; ++r) {

@@ -1,6 +1,6 @@
 // The web stage inside the real base role: a played mission arrives over the inproc link; the model,
 // /api/state, the WebSocket (hello, state, binary tiles) and the mission log all show it; malformed
-// records are counted and named.
+// records are counted and named; the operator's arm goes out over the radio.
 #include <gtest/gtest.h>
 
 #include <fstream>
@@ -158,6 +158,41 @@ TEST(WebStage, MalformedRecordsAreCountedNamedAndLogged) {
   EXPECT_NE(log.find("\"kind\":\"claim\",\"topic\":\"0x05000000\""), std::string::npos) << log;
   EXPECT_NE(log.find("\"error\":\"truncated\""), std::string::npos) << log;
   EXPECT_NE(log.find("\"error\":\"unknown format byte\""), std::string::npos) << log;
+}
+
+// The operator's arm (the page's button, or any HTTP tool): POST /api/arm?robot=N reaches robot N's store
+// over the radio as its command record; bad requests are refused and say why.
+TEST(WebStage, AnArmPostedToTheBaseStationReachesTheRobotOverTheRadio) {
+  TempDir dir;
+  MissionPlayer pl;
+  auto rig = BaseRig::make(dir);
+  ASSERT_NE(rig, nullptr);
+  TimeNs now = kNsPerS;
+  play(pl, *rig, now, 1.0);
+  auto post = [&](const std::string& target, const std::string& method = "POST") {
+    Client c(rig->web->port());
+    c.send(method + " " + target + " HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Length: 0\r\nConnection: close\r\n\r\n");
+    EXPECT_TRUE(c.read_to_close());
+    return c.buf;
+  };
+  const std::string ok = post("/api/arm?robot=1");
+  EXPECT_EQ(ok.find("HTTP/1.1 202 Accepted"), 0U) << ok;
+  EXPECT_NE(ok.find("\"command\": \"arm\""), std::string::npos) << ok;
+  EXPECT_EQ(post("/api/arm").find("HTTP/1.1 400"), 0U) << "no robot";
+  EXPECT_EQ(post("/api/arm?robot=x1").find("HTTP/1.1 400"), 0U);
+  EXPECT_EQ(post("/api/arm?robot=300").find("HTTP/1.1 400"), 0U);
+  EXPECT_EQ(post("/api/disarm?robot=200").find("HTTP/1.1 400"), 0U) << "the base station itself";
+  EXPECT_EQ(post("/api/arm?robot=1", "GET").find("HTTP/1.1 405"), 0U) << "a GET never arms";
+  EXPECT_EQ(post("/api/launch?robot=1").find("HTTP/1.1 404"), 0U);
+  play(pl, *rig, now, 3.0);
+  const comms::RecordStore::Slot s = pl.node(1).store().find(comms::RecordKey{200, comms::command_topic(1)});
+  ASSERT_NE(s, comms::RecordStore::kNoSlot) << "the command reached robot 1 over the radio";
+  comms::OperatorCommand c{};
+  std::uint32_t request = 0;
+  ASSERT_TRUE(comms::decode_command(pl.node(1).store().payload(s), c, request));
+  EXPECT_EQ(c, comms::OperatorCommand::kArm);
+  EXPECT_EQ(request, 1U);
+  EXPECT_EQ(rig->web->model().counters.commands_sent, 1U);
 }
 
 TEST(WebStage, AnUnwritableLogPathFailsInitNamingThePath) {

@@ -30,6 +30,8 @@ class Probe final : public Stage {
     records = ctx.channels.ring_reader(chan::kGossipIn).value();
     team = ctx.channels.latest_reader(chan::kTeamPoses).value();
     stats = ctx.channels.latest_reader(chan::kCommsStats).value();
+    arm = ctx.channels.latest_reader(chan::kRadioArm).value();
+    ctx.channels.allow_unwritten(chan::kRadioArm);
     return ok_status();
   }
   void step(TimeNs) noexcept override {}
@@ -37,6 +39,7 @@ class Probe final : public Stage {
   RingReader<GossipRecordMsg, kGossipRing> records;
   LatestReader<TeamPosesMsg> team;
   LatestReader<CommsStatsMsg> stats;
+  LatestReader<BaseArmMsg> arm;
 };
 
 inline constexpr StageSpec kRigStages[] = {

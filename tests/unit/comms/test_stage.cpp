@@ -1,6 +1,6 @@
 // The comms stage: a quadrotor's tiles reach a ground robot's localizer input, the ground robot's pose
 // and claims reach the quadrotor, stats per peer, the journal across a restart, config errors, and the
-// udp transport on loopback.
+// udp transport on loopback; an operator's command for one robot.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -149,6 +149,66 @@ TEST(CommsStage, ARestartedRobotGetsItsStoreBackFromTheJournalAndItsStagesSeeIt)
     }
   }
   EXPECT_EQ(delivered, 6) << "the localizer gets the restored map without any peer";
+}
+
+// The base station's arm / disarm for one robot: that robot's comms stage writes it to "radio_arm" once,
+// as it arrives; another robot's command, a malformed one and the one its journal held at a restart
+// never act.
+TEST(CommsStage, AnOperatorCommandReachesItsRobotsRadioArmOnceAndNeverAfterARestart) {
+  Pair p;
+  p.make_uav();  // robot 0 plays the base station here
+  p.make_ugv();
+  TimeNs now = kNsPerS;
+  auto run = [&](int steps) {
+    for (int k = 0; k < steps; ++k, now += 50 * kNsPerMs) {
+      p.uav->step(now);
+      p.ugv->step(now);
+    }
+  };
+  auto command = [&](RobotId robot, OperatorCommand c, std::uint32_t request, std::uint32_t size = kCommandPayloadBytes) {
+    GossipPublishMsg g;
+    g.stamp = now;
+    g.topic = command_topic(robot);
+    g.size = static_cast<std::uint32_t>(encode_command(c, request, std::span<std::uint8_t>(g.payload.data(), g.payload.size())));
+    g.size = size;
+    ASSERT_EQ(p.uav->out_w.push(g), 0U);
+  };
+  auto arms = [&]() {  // what reached "radio_arm" since the last look: -1 nothing, 0 disarm, 1 arm
+    if (!p.ugv->probe->arm.fresh()) return -1;
+    return p.ugv->probe->arm.read().arm ? 1 : 0;
+  };
+  auto stats = [&]() { return p.ugv->probe->stats.read(); };
+  run(20);
+  EXPECT_EQ(arms(), -1);
+  command(1, OperatorCommand::kArm, 1);
+  run(40);
+  EXPECT_EQ(arms(), 1);
+  EXPECT_EQ(stats().commands_in, 1U);
+  run(40);
+  EXPECT_EQ(arms(), -1) << "once";
+  command(7, OperatorCommand::kArm, 2);  // another robot's
+  run(40);
+  EXPECT_EQ(arms(), -1);
+  EXPECT_EQ(stats().commands_in, 1U);
+  command(1, OperatorCommand::kArm, 3, 3);  // malformed
+  run(40);
+  EXPECT_EQ(arms(), -1);
+  EXPECT_EQ(stats().commands_bad, 1U);
+  command(1, OperatorCommand::kDisarm, 4);
+  run(40);
+  EXPECT_EQ(arms(), 0);
+  EXPECT_EQ(stats().commands_in, 2U);
+  // The ground robot restarts with the disarm in its journal: it does not act on it again.
+  p.ugv.reset();
+  p.make_ugv();
+  ASSERT_TRUE(p.ugv);
+  run(40);
+  EXPECT_EQ(arms(), -1) << "a command the journal restored acted again";
+  EXPECT_EQ(stats().commands_in, 0U);
+  command(1, OperatorCommand::kArm, 5);  // a new one does
+  run(40);
+  EXPECT_EQ(arms(), 1);
+  EXPECT_EQ(stats().commands_in, 1U);
 }
 
 TEST(CommsStage, ConfigErrorsNameTheKey) {

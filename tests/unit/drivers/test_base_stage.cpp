@@ -33,7 +33,7 @@ struct Rig {
   BaseStage* base{nullptr};
   LatestWriter<PlannedPathMsg> path_w;
   LatestWriter<LocalizationMsg> loc_w;
-  LatestWriter<BaseArmMsg> arm_w;
+  LatestWriter<BaseArmMsg> arm_w, radio_arm_w;
   std::unique_ptr<PlannedPathMsg> path = std::make_unique<PlannedPathMsg>();
   Pose2 pose{};
 
@@ -55,6 +55,7 @@ struct Rig {
     path_w = role->channels().latest_writer(chan::kPlannedPath).value();
     loc_w = role->channels().latest_writer(chan::kLocalization).value();
     arm_w = role->channels().latest_writer(chan::kBaseArm).value();
+    radio_arm_w = role->channels().latest_writer(chan::kRadioArm).value();
   }
   ~Rig() {
     role.reset();
@@ -116,6 +117,27 @@ TEST(BaseStage, EStopZeroesTheWheelsInTheNextCycleAndLatchesUntilReArmed) {
   rig.tick();
   EXPECT_FALSE(rig.wheels_zero()) << "re-armed: driving again";
   EXPECT_EQ(rig.base->estop().assertions(), 1U);
+}
+
+// The shipped configuration starts latched (base.start_armed: false): the base station's arm over the
+// radio (comms -> "radio_arm") starts the wheels, its disarm stops them, and a re-arm drives again.
+TEST(BaseStage, TheBaseStationArmsAndDisarmsOverTheRadio) {
+  Rig rig({"base.start_armed=false"});
+  ASSERT_NE(rig.base, nullptr);
+  rig.send_straight_path();
+  for (int i = 0; i < 100; ++i) rig.tick();
+  EXPECT_TRUE(rig.wheels_zero()) << "not armed yet";
+  EXPECT_EQ(rig.base->estop().state(), gpio::EStopState::kLatched);
+  rig.radio_arm_w.publish(BaseArmMsg{rig.clock.now(), rig.clock.now(), true});
+  for (int i = 0; i < 100; ++i) rig.tick();
+  EXPECT_FALSE(rig.wheels_zero()) << "armed over the radio: driving";
+  EXPECT_GT(rig.base->published().left_cmd_mps, 0.3);
+  rig.radio_arm_w.publish(BaseArmMsg{rig.clock.now(), rig.clock.now(), false});
+  for (int i = 0; i < 5; ++i) rig.tick();
+  EXPECT_TRUE(rig.wheels_zero()) << "disarmed over the radio";
+  rig.radio_arm_w.publish(BaseArmMsg{rig.clock.now(), rig.clock.now(), true});
+  for (int i = 0; i < 100; ++i) rig.tick();
+  EXPECT_FALSE(rig.wheels_zero()) << "armed again";
 }
 
 TEST(BaseStage, ARearmWhileTheButtonIsStillPressedDoesNotDrive) {

@@ -28,6 +28,7 @@ std::string_view status_text(int s) noexcept {
   switch (s) {
     case 101: return "Switching Protocols";
     case 200: return "OK";
+    case 202: return "Accepted";
     case 400: return "Bad Request";
     case 404: return "Not Found";
     case 405: return "Method Not Allowed";
@@ -243,9 +244,16 @@ void HttpServer::handle_http(Conn& c) noexcept {
     c_.requests.fetch_add(1, std::memory_order_relaxed);
     c.last_request_ns = monotonic_now();
     c.in.erase(0, used);
+    if (req.method == "POST") {
+      HttpResponse resp = h_.post(req);
+      if (resp.status == 405) c_.not_allowed.fetch_add(1, std::memory_order_relaxed);
+      if (resp.status == 404) c_.not_found.fetch_add(1, std::memory_order_relaxed);
+      respond(c, resp, req.keep_alive());
+      continue;
+    }
     if (req.method != "GET") {
       c_.not_allowed.fetch_add(1, std::memory_order_relaxed);
-      respond(c, HttpResponse{405, "text/plain; charset=utf-8", "only GET is served\n", "Allow: GET\r\n"}, req.keep_alive());
+      respond(c, HttpResponse{405, "text/plain; charset=utf-8", "only GET and POST are served\n", "Allow: GET, POST\r\n"}, req.keep_alive());
       continue;
     }
     const bool wants_ws = req.header_has_token("upgrade", "websocket");

@@ -66,6 +66,8 @@ inline constexpr LatestTopic<LocalGoalMsg> kLocalGoal{"local_goal"};
 inline constexpr LatestTopic<WheelCommandMsg> kWheelCommand{"wheel_command"};
 // an operator's tool -> base driver (optional: allow_unwritten).
 inline constexpr LatestTopic<BaseArmMsg> kBaseArm{"base_arm"};
+// comms -> base driver: an operator's arm / disarm from the base station over the radio (optional).
+inline constexpr LatestTopic<BaseArmMsg> kRadioArm{"radio_arm"};
 // base driver -> nobody yet (tools, tests).
 inline constexpr LatestTopic<BaseStatusMsg> kBaseStatus{"base_status"};
 
@@ -89,12 +91,12 @@ constexpr bool names_distinct(const std::array<std::string_view, N>&... lists) n
 
 // The names declared here; the pipeline/ headers check theirs against these, and test_channel_topics
 // checks every list together with platform/'s "scheduler_status".
-inline constexpr std::array<std::string_view, 21> kNames{
+inline constexpr std::array<std::string_view, 22> kNames{
     kCamera.name,     kVisualOdometry.name, kVisualOdometryRecorded.name, kVisualOdometryOwn.name, kAttitude.name,
     kGps.name,        kKeyframes.name,      kKeyframesLabelled.name,      kKeyframePoses.name,     kMapStatus.name,
     kMapTiles.name,   kLidarScan.name,      kWheelOdometry.name,          kInitialPose.name,       kLocalization.name,
     kGoal.name,       kPlannedPath.name,    kLocalGoal.name,              kWheelCommand.name,      kBaseArm.name,
-    kBaseStatus.name,
+    kBaseStatus.name, kRadioArm.name,
 };
 static_assert(names_distinct(kNames), "two channels share a name");
 

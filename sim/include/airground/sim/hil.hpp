@@ -64,6 +64,7 @@ struct HilResult {
   std::uint64_t lidar_revolutions{0}, lidar_revolutions_skipped{0};  // per ground robot; skipped: cast too late
   std::uint64_t camera_frames_skipped{0};                            // the render took longer than the period
   std::uint64_t can_frames_in{0}, can_frames_out{0};
+  std::uint64_t arm_requests{0};             // POST /api/arm?robot=N the base station accepted (the operator's arm)
   std::uint64_t mavlink_frames{0};           // HEARTBEAT and ATTITUDE written to the autopilot's serial port
   std::uint64_t mavlink_bytes_in{0};         // what the uav's autopilot stage sent back (SET_MESSAGE_INTERVAL)
 };

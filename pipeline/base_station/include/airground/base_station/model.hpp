@@ -57,6 +57,7 @@ struct ModelCounters {
   std::uint64_t table_full{0};        // robots, failures or objects beyond the fixed tables
   std::uint64_t tiles_held_back{0};   // steps where the tile hand-over to the server was full
   std::uint64_t log_dropped{0};       // log entries the writer thread could not take (the model has them)
+  std::uint64_t commands_sent{0};     // operator commands (arm, disarm) published to the team
   std::uint8_t last_error_kind{0};    // RecordKind of the last record that failed to decode
   std::uint8_t last_error{0};         // its mission::DecodeError
   comms::RobotId last_error_origin{comms::kNoRobot};

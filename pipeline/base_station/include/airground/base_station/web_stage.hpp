@@ -3,7 +3,8 @@
 // and /ws, Foxglove's WebSocket protocol (foxglove.websocket.v1, src/foxglove_service.hpp), and writes
 // the mission log (JSON lines).
 //   "team_poses" (latest), "map_tiles" (ring; comms.deliver_map_tiles must be on), "gossip_in" (ring),
-//   "comms_stats" (latest).
+//   "comms_stats" (latest); out: "gossip_out" (the operator's arm / disarm for a robot, from the page's
+//   buttons or POST /api/arm?robot=N, /api/disarm?robot=N).
 // step() never allocates and never blocks: the model goes to the server thread through a triple
 // buffer, tiles and log entries through SPSC rings; sockets and the log file live on the server thread.
 #pragma once
@@ -75,6 +76,15 @@ struct LogItem {
 inline constexpr std::size_t kWebTileRing = 64;
 inline constexpr std::size_t kLogRing = 1024;
 
+// An operator's command from the page or a tool (POST /api/arm?robot=N, /api/disarm?robot=N) on its
+// way from the server thread to the stage, which publishes it to the team (gossip, TopicKind::kCommand).
+struct OperatorRequest {
+  comms::RobotId robot{comms::kNoRobot};
+  comms::OperatorCommand command{comms::OperatorCommand::kArm};
+  std::uint32_t request{0};  // counted by the server from 1
+};
+inline constexpr std::size_t kCommandRing = 16;
+
 class WebService;
 
 class WebStage final : public Stage {
@@ -100,7 +110,10 @@ class WebStage final : public Stage {
   std::unique_ptr<LatestValue<MissionModel>> snapshot_;
   std::unique_ptr<SpscRing<WebTile, kWebTileRing>> tiles_to_server_;
   std::unique_ptr<SpscRing<LogItem, kLogRing>> log_to_server_;
+  std::unique_ptr<SpscRing<OperatorRequest, kCommandRing>> commands_from_server_;
   std::unique_ptr<WebService> service_;
+  RingWriter<comms::GossipPublishMsg, comms::kGossipRing> gossip_out_;
+  std::unique_ptr<comms::GossipPublishMsg> out_msg_;
   std::unique_ptr<net::http::HttpServer> server_;
   LatestReader<comms::TeamPosesMsg> team_;
   LatestReader<comms::CommsStatsMsg> stats_;

@@ -3,7 +3,9 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
+#include <span>
 #include <string_view>
 
 #include "airground/comms/topics.hpp"
@@ -61,6 +63,28 @@ struct TeamPosesMsg {
   std::array<TeamPose, kTeamMax> robots{};
 };
 
+// The command topic's payload (TopicKind::kCommand, index = the robot it is for): command u8
+// (OperatorCommand), request u32 (the operator's count, little-endian): 5 bytes. The record's stamp is
+// when the operator gave it (the base station's clock): a robot acts on it only while it is fresh
+// (comms.command_max_age_s), so a command never acts again after the robot restarts.
+enum class OperatorCommand : std::uint8_t { kArm = 1, kDisarm = 2 };
+inline constexpr std::size_t kCommandPayloadBytes = 5;
+[[nodiscard]] constexpr Topic command_topic(RobotId robot) noexcept { return make_topic(TopicKind::kCommand, robot); }
+inline std::size_t encode_command(OperatorCommand c, std::uint32_t request, std::span<std::uint8_t> out) noexcept {
+  if (out.size() < kCommandPayloadBytes) return 0;
+  out[0] = static_cast<std::uint8_t>(c);
+  for (int i = 0; i < 4; ++i) out[static_cast<std::size_t>(1 + i)] = static_cast<std::uint8_t>(request >> (8 * i));
+  return kCommandPayloadBytes;
+}
+// False for a payload of another size or an unknown command.
+inline bool decode_command(std::span<const std::uint8_t> in, OperatorCommand& c, std::uint32_t& request) noexcept {
+  if (in.size() != kCommandPayloadBytes || (in[0] != 1 && in[0] != 2)) return false;
+  c = static_cast<OperatorCommand>(in[0]);
+  request = 0;
+  for (int i = 0; i < 4; ++i) request |= static_cast<std::uint32_t>(in[static_cast<std::size_t>(1 + i)]) << (8 * i);
+  return true;
+}
+
 struct CommsPeerRow {
   RobotId robot{kNoRobot};
   std::uint64_t datagrams_in{0}, bytes_in{0}, records_in{0};
@@ -80,6 +104,7 @@ struct CommsStatsMsg {
   std::uint64_t journal_appends{0}, journal_errors{0};
   std::uint64_t link_send_failures{0}, budget_waits{0};
   std::uint64_t tiles_out{0}, tiles_in{0}, tiles_bad{0};  // map tiles published, delivered, undecodable
+  std::uint64_t commands_in{0}, commands_stale{0}, commands_bad{0};  // operator commands for this robot: acted on, too old, undecodable
   std::array<std::uint64_t, static_cast<std::size_t>(DropReason::kCount)> drops{};
   std::uint32_t peers{0};
   std::array<CommsPeerRow, kTeamMax> peer{};

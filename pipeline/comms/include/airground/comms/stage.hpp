@@ -50,6 +50,7 @@ struct CommsSettings {
   double pose_period_s{1.0};  // [s]
   bool send_pose{false}, send_map_tiles{false}, deliver_map_tiles{false};
   int tiles_per_step{8};
+  bool deliver_commands{true};
 };
 inline constexpr ParamField<CommsSettings> kCommsStageFields[] = {
     field::text("transport", &CommsSettings::transport, "none", "udp|inproc|none",
@@ -74,6 +75,8 @@ inline constexpr ParamField<CommsSettings> kCommsStageFields[] = {
     field::boolean("send_map_tiles", &CommsSettings::send_map_tiles, "share the tiles on 'map_tiles' (the quadrotor)"),
     field::boolean("deliver_map_tiles", &CommsSettings::deliver_map_tiles, "write the team's tiles to 'map_tiles' (ground robots)"),
     field::integer("tiles_per_step", &CommsSettings::tiles_per_step, 1, 1024, "tiles", "map tiles encoded or decoded per step"),
+    field::boolean("deliver_commands", &CommsSettings::deliver_commands,
+                   "write the base station's arm / disarm for this robot to 'radio_arm' (once each as it arrives; never one the journal held at start-up)"),
 };
 inline constexpr auto kCommsStageParams = param_specs(kCommsStageFields);
 
@@ -98,6 +101,7 @@ class CommsStage final : public Stage {
  private:
   void take_own(TimeNs now) noexcept;
   void deliver(TimeNs now) noexcept;
+  void take_command(const RecordMeta& m, std::span<const std::uint8_t> payload, TimeNs now) noexcept;
   void publish_stats(TimeNs now) noexcept;
 
   RobotId self_{0};
@@ -110,7 +114,7 @@ class CommsStage final : public Stage {
   std::unique_ptr<MapTileMsg> tile_;
   std::vector<std::uint8_t> buf_;
   JournalReport report_;
-  bool send_pose_{false}, send_tiles_{false}, deliver_tiles_{false};
+  bool send_pose_{false}, send_tiles_{false}, deliver_tiles_{false}, deliver_commands_{false};
   std::size_t tiles_per_step_{8};
   TimeNs pose_period_{kNsPerS};
   TimeNs last_pose_{-1};
@@ -122,6 +126,9 @@ class CommsStage final : public Stage {
   RingWriter<MapTileMsg, kMapTileRing> tiles_out_;
   LatestWriter<TeamPosesMsg> team_out_;
   LatestWriter<CommsStatsMsg> stats_out_;
+  LatestWriter<BaseArmMsg> arm_out_;
+  std::array<std::uint64_t, kMaxRobots> command_seen_{};  // per origin: the newest command seq acted on or restored
+  std::uint64_t commands_in_{0}, commands_stale_{0}, commands_bad_{0};
   std::unique_ptr<GossipRecordMsg> rec_;
   std::unique_ptr<TeamPosesMsg> team_;
   std::unique_ptr<CommsStatsMsg> stats_;

@@ -22,6 +22,7 @@ enum class TopicKind : std::uint8_t {
   kFailures = 6,    // goals the robot failed to reach (index = goal)
   kStatus = 7,      // health, battery, mode (index 0)
   kApp = 8,         // anything else a stage publishes through the generic channel (index free)
+  kCommand = 9,     // an operator's command to one robot (index = that robot's id; messages.hpp)
 };
 
 using Topic = std::uint32_t;
@@ -31,7 +32,7 @@ constexpr Topic make_topic(TopicKind k, std::uint32_t index) noexcept {
 }
 constexpr TopicKind topic_kind(Topic t) noexcept { return static_cast<TopicKind>(t >> 24); }
 constexpr std::uint32_t topic_index(Topic t) noexcept { return t & 0xFFFFFFu; }
-constexpr bool topic_kind_known(Topic t) noexcept { return (t >> 24) >= 1 && (t >> 24) <= 8; }
+constexpr bool topic_kind_known(Topic t) noexcept { return (t >> 24) >= 1 && (t >> 24) <= 9; }
 
 // A tile index (tx, ty) in [-2048, 2047]^2 (±65 km at 32 m tiles) packed into 24 bits.
 inline constexpr std::int32_t kTileIndexLimit = 2048;
@@ -48,6 +49,7 @@ constexpr std::int32_t tile_topic_ty(Topic t) noexcept { return static_cast<std:
 // Default priority per kind: what travels first when the link is thin (higher first).
 constexpr std::uint8_t default_priority(TopicKind k) noexcept {
   switch (k) {
+    case TopicKind::kCommand: return 7;
     case TopicKind::kFailures: return 7;
     case TopicKind::kClaims: return 6;
     case TopicKind::kPose: return 5;

@@ -1,6 +1,6 @@
 // The base stage: the ground robot's wheels. Every step it reads the e-stop line (an asserted or
 // unreadable e-stop zeroes the wheels in that same step and latches until released and re-armed on
-// "base_arm"), takes the newest "wheel_command", runs the CAN driver (watchdog: zero velocity when no
+// "base_arm" or "radio_arm"), takes the newest "wheel_command", runs the CAN driver (watchdog: zero velocity when no
 // fresh command arrived within command_timeout_s), publishes the wheel odometry and "base_status", and
 // drives the status LED (on: running, slow blink: fault, fast blink: e-stop).
 // Backends: CAN over SocketCAN, the cannelloni CAN-over-UDP bridge, a recorded candump log (replay:
@@ -119,11 +119,11 @@ class BaseStage final : public Stage {
   gpio::DigitalLine* led_{nullptr};
   gpio::EStopLatch latch_{false};
   LatestReader<WheelCommandMsg> cmd_;
-  LatestReader<BaseArmMsg> arm_;
+  LatestReader<BaseArmMsg> arm_, radio_arm_;
   RingWriter<WheelOdometryMsg, kWheelOdometryRing> odom_out_;
   LatestWriter<BaseStatusMsg> status_out_;
   BaseStatusMsg status_{};
-  TimeNs last_cmd_stamp_{-1}, last_arm_stamp_{-1};
+  TimeNs last_cmd_stamp_{-1}, last_arm_stamp_{-1}, last_radio_arm_stamp_{-1};
   bool started_{false};
   BaseStageCounters c_;
   void note_device(TimeNs now) noexcept;

@@ -70,6 +70,8 @@ class HttpServer {
    public:
     virtual ~Handler() = default;
     virtual HttpResponse get(const HttpRequest& req) = 0;
+    // A POST without a body (its arguments in the query); 405 unless the handler takes POST.
+    virtual HttpResponse post(const HttpRequest& /*req*/) { return {405, "text/plain; charset=utf-8", "only GET is served\n", "Allow: GET\r\n"}; }
     // A WebSocket client connected (after the 101 was queued): send it what it needs to start.
     virtual void ws_open(HttpServer& server, ClientId id) = 0;
     virtual void ws_close(ClientId /*id*/) {}
