@@ -122,6 +122,7 @@ void ParticleFilter::initialise_gaussian(const Pose2& guess, double sigma_xy_m, 
   pending_ = {};
   pending_dist_ = pending_turn_ = 0.0;
   first_update_done_ = false;
+  driven_m_ = 0.0;
   has_last_good_ = false;
   cost_level_valid_ = false;
   attempt_ = 0;
@@ -330,6 +331,7 @@ UpdateReport ParticleFilter::update_impl(const ScanRenderPolar& render, const Cl
   if (render.angle_bins() > max_angle_bins_ || render.range_bins() > max_range_bins_) return rep;
   rep.updated = true;
   rep.moved_m = pending_dist_;
+  driven_m_ += pending_dist_;
   apply_motion(roughen);
   first_update_done_ = true;
   ++est_.updates;

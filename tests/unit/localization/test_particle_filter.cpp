@@ -322,6 +322,55 @@ TEST(ParticleFilter, ALostRobotThatStopsIsMatchedAgainWhereItStands) {
   EXPECT_FALSE(without.back) << "without the standing updates nothing can bring it back: the test can fail";
 }
 
+// A robot that reaches its goal on the estimate of a filter that is still converging stops there:
+// standing updates as when lost, once it has driven pf_converging_standing_after_m; on the start pad
+// (nothing driven yet) none, as before. The HIL mission's first waypoint ended like this (18 m driven on
+// a sparse map); here the robot stops after 2 m (the threshold set to 1.5 m), before it converged.
+TEST(ParticleFilter, ARobotThatStopsBeforeItConvergedConvergesWhereItStands) {
+  auto run = [](double after_m, bool& stopped_converging) {
+    const World world(2);
+    GeometricLabeller gt(GeometricLabelParams{}, 64, 1024);  // the shipped ground robot's labeller
+    const LocalizationChannels ch = LocalizationChannels::two_class();
+    ClassDistanceFields fields(DistanceFieldParams{}, ch, world.w.extent());
+    test::load_world(world.w, fields);
+    LocalizerParams p;
+    p.filter.converging_standing_after_m = after_m;
+    SemanticLocalizer loc(p, ch, 11);
+    loc.initialise_disc(bad_guess(world.truth[0].pose), 20.0, 35.0 * kDeg, world.truth[0].stamp);
+    std::vector<ScanPoint> scan;
+    std::size_t k = 0;
+    for (; k < world.truth.size() && loc.filter().driven_m() < 2.0; ++k) {
+      loc.on_odometry(world.odom[k], world.truth[k].stamp);
+      if (loc.wants_scan()) {
+        test::ray_cast(world.w, world.truth[k].pose, LidarModel{}, k, scan);
+        gt.label(scan, LidarModel{}.rings, LidarModel{}.columns);
+        loc.on_scan(scan, fields, world.truth[k].stamp);
+      }
+    }
+    stopped_converging = loc.pose().status == LocalizationStatus::kInitialising;
+    const TruthSample at = world.truth[k - 1];
+    for (int i = 1; i <= 1200; ++i) {  // 120 s standing
+      const TimeNs t = at.stamp + from_seconds(i / 10.0);
+      loc.on_odometry(world.odom[k - 1], t);
+      if (loc.wants_scan()) {
+        test::ray_cast(world.w, at.pose, LidarModel{}, k + static_cast<std::size_t>(i), scan);
+        gt.label(scan, LidarModel{}.rings, LidarModel{}.columns);
+        loc.on_scan(scan, fields, t);
+      }
+      if (loc.pose().status == LocalizationStatus::kTracking)
+        return std::hypot(loc.pose().pose.x - at.pose.x, loc.pose().pose.y - at.pose.y);
+    }
+    return -1.0;  // still converging
+  };
+  bool converging = false;
+  const double err = run(1.5, converging);
+  ASSERT_TRUE(converging) << "not converged after 2 m: the case under test";
+  std::printf("stopped after 2 m still converging: tracking where it stands, %.2f m from the truth\n", err);
+  ASSERT_GE(err, 0.0) << "still converging after 120 s of standing";
+  EXPECT_LT(err, 1.5);
+  EXPECT_LT(run(1e6, converging), 0.0) << "without the standing updates it never converges there: the test can fail";
+}
+
 // The cost of a pose by hand: every bin's centre in the map by trigonometry, distances and classes by
 // the fields' accessors, bins on unknown cells left out.
 double hand_cost(const Pose2& p, const ScanRenderPolar& r, const ClassDistanceFields& f, double* known_fraction) {

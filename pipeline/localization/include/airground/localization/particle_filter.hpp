@@ -96,6 +96,10 @@ struct ParticleFilterParams {
   double lost_standing_sigma_xy_m{0.25};      // [m] roughening per standing update
   double lost_standing_sigma_yaw_rad{0.02};   // [rad]
   int lost_standing_converged_updates{15};    // converged standing updates before tracking again
+  // Still converging but already driven this far since the initial guess, and standing (a robot that
+  // reached its goal on the converging estimate stops there): standing updates as when lost. Not on the
+  // start pad before the first drive (there the robot waits for goals, and motion converges it better).
+  double converging_standing_after_m{5.0};
   // The mission area [m, map frame] (the stage: its area_*): the robot is inside it, so a particle outside
   // has no weight. Over unmapped ground a particle's score is neutral, which beats a poor match on the
   // map: without the area a guess near the area's edge converged onto the nothing beyond it.
@@ -146,6 +150,8 @@ inline constexpr ParamField<ParticleFilterParams> kParticleFilterFields[] = {
     field::real("pf_lost_standing_sigma_yaw_rad", &ParticleFilterParams::lost_standing_sigma_yaw_rad, 0.0, 0.5, "rad", "... and this"),
     field::integer("pf_lost_standing_converged_updates", &ParticleFilterParams::lost_standing_converged_updates, 1, 1000, "updates",
                    "... and tracking again only after this many converged ones"),
+    field::real("pf_converging_standing_after_m", &ParticleFilterParams::converging_standing_after_m, 0.0, 10000.0, "m",
+                "still converging after driving this far since the initial guess: standing updates too (0 = from the start)"),
 };
 inline constexpr auto kParticleFilterParamSpecs = param_specs(kParticleFilterFields);
 ParticleFilterParams load_particle_filter_params(const SectionView& s);
@@ -207,6 +213,8 @@ class ParticleFilter {
 
   [[nodiscard]] const FilterEstimate& estimate() const noexcept { return est_; }
   [[nodiscard]] FilterStatus status() const noexcept { return est_.status; }
+  // [m] the odometry's distance applied in updates since the initial guess.
+  [[nodiscard]] double driven_m() const noexcept { return driven_m_; }
   [[nodiscard]] std::size_t size() const noexcept { return n_; }
   [[nodiscard]] Pose2 particle(std::size_t i) const noexcept { return {x_[i], y_[i], yaw_[i]}; }
   [[nodiscard]] double weight(std::size_t i) const noexcept { return w_[i]; }
@@ -257,6 +265,7 @@ class ParticleFilter {
   double pending_dist_{0};    // [m] path length
   double pending_turn_{0};    // [rad] total |dyaw|
   bool first_update_done_{false};
+  double driven_m_{0.0};
   double range_bin_m_{4.0};
   FilterEstimate est_{};
   int converged_count_{0};

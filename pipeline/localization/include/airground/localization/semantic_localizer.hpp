@@ -48,7 +48,8 @@ class SemanticLocalizer {
   // scan's time before on_scan().
   void on_odometry(const Pose2& odom, TimeNs stamp) noexcept;
   // The robot moved enough since the last update for a scan to be worth labelling and matching, or it is
-  // lost and lost_standing_update_s passed since the last update (at the last odometry stamp).
+  // lost (or still converging after converging_standing_after_m of driving) and lost_standing_update_s
+  // passed since the last update (at the last odometry stamp).
   [[nodiscard]] bool wants_scan() const noexcept { return filter_.wants_update() || standing_update_due(); }
   // A labelled scan (sensor frame). Renders it and updates the filter when wants_scan(); never allocates.
   UpdateReport on_scan(std::span<const ScanPoint> labelled, const ClassDistanceFields& fields, TimeNs stamp) noexcept;
@@ -79,8 +80,9 @@ class SemanticLocalizer {
   TimeNs last_update_stamp_{0};
 
   [[nodiscard]] bool standing_update_due() const noexcept {
-    return filter_.status() == FilterStatus::kLost && p_.filter.lost_standing_update_s > 0.0 &&
-           last_stamp_ - last_update_stamp_ >= from_seconds(p_.filter.lost_standing_update_s);
+    const bool stuck = filter_.status() == FilterStatus::kLost ||
+                       (filter_.status() == FilterStatus::kInitialising && filter_.driven_m() >= p_.filter.converging_standing_after_m);
+    return stuck && p_.filter.lost_standing_update_s > 0.0 && last_stamp_ - last_update_stamp_ >= from_seconds(p_.filter.lost_standing_update_s);
   }
 };
 
