@@ -87,10 +87,7 @@ Status make_camera_fifo(Run& run) {
 
 void step_base(Ugv& u, TimeNs now, double dt, const World& w) {
   u.odrive->step(now);
-  constexpr double kTwoPi = 2.0 * M_PI;
-  const double l = u.bp.left_sign * u.odrive->vel_turns_s(0) * kTwoPi / u.bp.gear_ratio;
-  const double r = u.bp.right_sign * u.odrive->vel_turns_s(1) * kTwoPi / u.bp.gear_ratio;
-  u.vehicle.command_wheels(l, r);
+  u.vehicle.command_wheels(base::wheel_rad_s(u.bp, 0, u.odrive->vel_turns_s(0)), base::wheel_rad_s(u.bp, 1, u.odrive->vel_turns_s(1)));
   if (u.vehicle.step(dt, w)) ++u.collisions;
   const Pose2 p = u.vehicle.pose();
   u.distance_m += std::hypot(p.x - u.last_pose.x, p.y - u.last_pose.y);

@@ -52,10 +52,7 @@ SimBase::~SimBase() {
   gpio::unregister_fake_lines(robot);
 }
 
-double SimBase::wheel_rad_s(int axis) const noexcept {
-  const double sign = axis == 0 ? bp.left_sign : bp.right_sign;
-  return sign * odrive.vel_turns_s(axis) * 2.0 * kPi / bp.gear_ratio;
-}
+double SimBase::wheel_rad_s(int axis) const noexcept { return base::wheel_rad_s(bp, axis, odrive.vel_turns_s(axis)); }
 
 void SimBase::turn_shafts(double left_rad, double right_rad, double dt) noexcept {
   const double rad[2] = {left_rad, right_rad};

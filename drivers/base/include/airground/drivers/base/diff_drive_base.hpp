@@ -31,6 +31,11 @@ struct BaseParams {
   double max_wheel_speed_mps{2.0}; // [m/s] commands are clamped here
 };
 
+// [rad/s] wheel `axis` (0 left, 1 right) turns forward at, from its motor's velocity [turns/s].
+[[nodiscard]] inline double wheel_rad_s(const BaseParams& p, int axis, double motor_turns_s) noexcept {
+  return (axis == 0 ? p.left_sign : p.right_sign) * motor_turns_s * 2.0 * kPi / p.gear_ratio;
+}
+
 inline constexpr ParamField<BaseParams> kBaseFields[] = {
     field::integer("left_node_id", &BaseParams::left_node, 0, 0x3F, "", "CAN Simple node id of the left wheel's controller"),
     field::integer("right_node_id", &BaseParams::right_node, 0, 0x3F, "", "CAN Simple node id of the right wheel's controller"),
