@@ -22,7 +22,12 @@ function(airground_role_binary target)
   endif()
 endfunction()
 
+# A test executable. Its own sources get line tables only (-g1) in RelWithDebInfo: gdb and sanitizer
+# backtraces keep function, file and line, and those files compile about a third faster with objects an
+# eighth the size (measured on test_pose_graph_sim.cpp: 20.3 s -> 14.0 s, 21 -> 2.7 MB), which is most of
+# what `make test` builds. The code the robots run keeps full -g for its -dbgsym packages.
 function(airground_test_binary target)
+  target_compile_options(${target} PRIVATE $<$<CONFIG:RelWithDebInfo>:-g1>)
   if(AG_STATIC_TESTS AND NOT AG_SANITIZE)
     set_target_properties(${target} PROPERTIES AG_FULLY_STATIC ON)
     target_link_options(${target} PRIVATE -static)
