@@ -284,9 +284,11 @@ Result<cv::Mat> classes_from_values(const cv::Mat& values, const Legend& legend,
 
 // The ground robots' staging pad keeps this far inside the world's edges where the map has room: the
 // quadrotor's survey leaves a border out (the simulator's survey_margin_m, 20 m, so that its camera stays
-// over the world), and robots that start in it start off the map they localize in (an imported 200 m
-// map's pad 5 m from its edge never converged with the online map; with the true map it did).
-constexpr double kStagingInsetM = 30.0;
+// over the world), the robots' first guesses are up to 16 m off (mission --init-error), and a robot whose
+// guess lies over unmapped ground can settle on a wrong place. 20 + 16 + 4 m keeps every guess over the map.
+// Measured on a generated 200 m world's class raster imported: a pad 5 m in never converged with the
+// online map; 30 m in, a robot with seed 1's guess settled 46 m off, "tracking", and drove to the edge.
+constexpr double kStagingInsetM = 40.0;
 
 // The ground robots' staging pad: the most south-westerly open cell (road or dirt) with room around it,
 // kStagingInsetM inside every edge when the world has such a cell, else anywhere.

@@ -186,13 +186,14 @@ TEST(WorldImporter, ValueRaster) {
   EXPECT_EQ(cv::countNonZero(back->class_id != w.class_id), 0);
 }
 
-// The staging pad keeps 30 m inside the edges when the map has room there: the quadrotor's survey leaves a
-// 20 m border out, and robots starting in it would start off their map.
+// The staging pad keeps 40 m inside the edges when the map has room there: the quadrotor's survey leaves a
+// 20 m border out and the robots' guesses are up to 16 m off, so a pad nearer the edge has guesses off the map.
 TEST(WorldImporter, StagingPadKeepsClearOfTheBorderTheSurveyLeavesOut) {
   const fs::path d = dir_for("staging");
   cv::Mat v(200, 200, CV_8UC1, cv::Scalar(2));  // 100 m x 100 m of grass at 0.5 m
   v(cv::Rect(0, 0, 8, 200)).setTo(1);           // a road along the west edge (0-4 m)
-  v(cv::Rect(0, 120, 200, 16)).setTo(1);        // an 8 m road across, 32-40 m from the south edge
+  v(cv::Rect(0, 116, 200, 16)).setTo(1);        // an 8 m road across, 34-42 m from the south edge
+  v(cv::Rect(0, 84, 200, 16)).setTo(1);         // another, 50-58 m from the south edge
   ImportOptions o;
   o.classes_path = (d / "classes.png").string();
   ASSERT_TRUE(cv::imwrite(o.classes_path, v));
@@ -205,9 +206,9 @@ TEST(WorldImporter, StagingPadKeepsClearOfTheBorderTheSurveyLeavesOut) {
   const GridGeometry& g = w.grid();
   const double from_west = w.header.staging.x - g.origin_x, from_south = w.header.staging.y - (g.origin_y - g.size_y());
   EXPECT_EQ(w.class_at_xy(w.header.staging.x, w.header.staging.y), ClassId::kRoad);
-  EXPECT_GE(from_west, 30.0) << "not on the west edge's road, inside the border";
-  EXPECT_LE(from_west, 32.0) << "the most south-westerly cell that is clear of it";
-  EXPECT_NEAR(from_south, 36.0, 2.5) << "on the cross road";
+  EXPECT_GE(from_west, 40.0) << "not on the west edge's road, inside the border";
+  EXPECT_LE(from_west, 42.0) << "the most south-westerly cell that is clear of it";
+  EXPECT_NEAR(from_south, 54.0, 2.5) << "on the second cross road: the first is within 40 m of the south edge";
 }
 
 TEST(WorldImporter, SixteenBitGeoTiffTakesItsResolutionFromTheGeotransform) {
