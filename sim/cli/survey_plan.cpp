@@ -120,6 +120,7 @@ int survey_plan_cmd(int argc, char** argv) {
     std::fprintf(stderr, "airground-sim survey-plan: %s\n", route.error().message.c_str());
     return 1;
   }
+  if (const std::string off = staging_outside_survey(w, so); !off.empty()) std::fprintf(stderr, "airground-sim survey-plan: warning: %s\n", off.c_str());
   SurveyPlan plan;
   plan.route = route.value();
   plan.launch = uav_launch_pose(w);

@@ -486,6 +486,7 @@ Result<double> set_up_uav(Team& t, const Models& m, RoleFactory& roles, const st
   const UavSurveyOptions so{opt.uav_altitude_m, opt.survey_overlap, opt.uav_speed_mps, opt.survey_margin_m, opt.survey_x0, opt.survey_y0, opt.survey_x1, opt.survey_y1};
   auto route = uav_survey_route(w, so, hfov);
   if (!route) return route.error();
+  if (const std::string off = staging_outside_survey(w, so); !off.empty()) std::fprintf(stderr, "airground-sim: warning: %s\n", off.c_str());
   std::vector<Waypoint> wps = std::move(route).value();
   // The same route as an autopilot's mission (QGroundControl .plan), as a field team would load it.
   if (auto st = write_survey_plan((t.out / "survey.plan").string(), SurveyPlan{wps, start, w.header.datum, AutopilotFirmware::kPx4,

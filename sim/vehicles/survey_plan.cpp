@@ -5,7 +5,9 @@
 #include <nlohmann/json.hpp>
 
 #include <array>
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <limits>
 
@@ -52,6 +54,22 @@ Result<std::vector<Waypoint>> uav_survey_route(const World& w, const UavSurveyOp
                                                         std::to_string(g.size_x()) + " x " + std::to_string(g.size_y()) + " m world");
   return survey_lawnmower(g.origin_x + m, g.origin_y - g.size_y() + m, g.origin_x + g.size_x() - m, g.origin_y - m, o.altitude_m, o.overlap,
                           camera_hfov_rad, so);
+}
+
+std::string staging_outside_survey(const World& w, const UavSurveyOptions& o) {
+  const GridGeometry& g = w.grid();
+  const bool given = o.x1 > o.x0 && o.y1 > o.y0;
+  const double x0 = given ? o.x0 : g.origin_x + o.margin_m, x1 = given ? o.x1 : g.origin_x + g.size_x() - o.margin_m;
+  const double y0 = given ? o.y0 : g.origin_y - g.size_y() + o.margin_m, y1 = given ? o.y1 : g.origin_y - o.margin_m;
+  const Pose2& s = w.header.staging;
+  const double out = std::max({x0 - s.x, s.x - x1, y0 - s.y, s.y - y1});
+  if (!(out > 0)) return {};
+  char buf[320];
+  std::snprintf(buf, sizeof buf,
+                "the ground robots' staging pad (%.1f, %.1f) lies %.1f m outside the area the quadrotor surveys "
+                "(x %.1f..%.1f, y %.1f..%.1f m%s): they start off the map they localize in and may never converge",
+                s.x, s.y, out, x0, x1, y0, y1, given ? "" : ", the world less its survey margin");
+  return buf;
 }
 
 Result<std::string> survey_plan_json(const SurveyPlan& plan) {

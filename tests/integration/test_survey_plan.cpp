@@ -192,6 +192,29 @@ TEST(SurveyPlan, RunWritesTheSamePlanAndItsQuadrotorFliesTowardTheFirstWaypoint)
   EXPECT_LT(dist.back(), dist.front() - 5.0) << "4 s toward the first waypoint";
 }
 
+// The small world's pad lies 21.4 m from its south edge: inside the default 20 m survey margin, outside a
+// 25 m one, where the ground robots would start off their map; the plan is still written, with a warning.
+TEST(SurveyPlan, APadOutsideTheSurveyedAreaIsNamedAtStart) {
+  auto world = sim::load_world(world_dir());
+  ASSERT_TRUE(world) << world.error().message;
+  sim::UavSurveyOptions so;
+  EXPECT_EQ(sim::staging_outside_survey(world.value(), so), "");
+  so.margin_m = 25;
+  const std::string off = sim::staging_outside_survey(world.value(), so);
+  EXPECT_NE(off.find("staging pad (-70.0, -78.6) lies 3.6 m outside"), std::string::npos) << off;
+  so.x0 = -60, so.x1 = 60, so.y0 = -90, so.y1 = 60;  // an area of the user's: the pad is west of it
+  EXPECT_NE(sim::staging_outside_survey(world.value(), so).find("lies 10.0 m outside the area the quadrotor surveys (x -60.0..60.0"),
+            std::string::npos);
+
+  const auto inside = run({sim_bin(), "survey-plan", "--world", world_dir(), "--out", tmp("inside.plan")});
+  ASSERT_EQ(inside.exit_code, 0) << inside.err;
+  EXPECT_EQ(inside.err.find("warning"), std::string::npos) << inside.err;
+  const auto outside = run({sim_bin(), "survey-plan", "--world", world_dir(), "--margin", "25", "--out", tmp("outside.plan")});
+  ASSERT_EQ(outside.exit_code, 0) << outside.err;
+  EXPECT_NE(outside.err.find("warning: the ground robots' staging pad"), std::string::npos) << outside.err;
+  EXPECT_TRUE(fs::exists(tmp("outside.plan")));
+}
+
 TEST(SurveyPlan, BadOptionsAreUsageErrors) {
   const std::string out = tmp("bad.plan");
   const std::vector<std::vector<std::string>> bad = {

@@ -29,6 +29,11 @@ struct UavSurveyOptions {
 // its return to launch). Errors as survey_lawnmower's, and a margin that leaves no area.
 Result<std::vector<Waypoint>> uav_survey_route(const World& w, const UavSurveyOptions& o, double camera_hfov_rad);
 
+// Empty when the ground robots' staging pad lies inside the area the survey covers; else a warning that
+// names the pad, the area and by how far it is out: robots starting there start off the map they localize
+// in (a generated world can put its pad inside the survey's border; docs/simulator.md, "Staging pad").
+[[nodiscard]] std::string staging_outside_survey(const World& w, const UavSurveyOptions& o);
+
 enum class AutopilotFirmware : std::uint8_t { kPx4, kArduPilot };
 
 // What a plan file carries: the route in the map frame, the launch point, and how the autopilot flies it.
