@@ -46,6 +46,38 @@ ScenarioResult run(const World& world, const LocalizationChannels& ch, ScanLabel
   return test::run_scenario(loc, world.w, fields, world.truth, world.odom, labeller, LidarModel{}, seed);
 }
 
+// Step k of the world's drive: its odometry, and a labelled scan from the true pose when the filter wants one.
+void drive_step(SemanticLocalizer& loc, const World& world, const ClassDistanceFields& fields, ScanLabeller& labeller, std::size_t k,
+                std::vector<ScanPoint>& scan) {
+  loc.on_odometry(world.odom[k], world.truth[k].stamp);
+  if (!loc.wants_scan()) return;
+  test::ray_cast(world.w, world.truth[k].pose, LidarModel{}, k, scan);
+  labeller.label(scan, LidarModel{}.rings, LidarModel{}.columns);
+  loc.on_scan(scan, fields, world.truth[k].stamp);
+}
+
+// The robot stands where step k - 1 left it for up to `seconds`, with 10 Hz odometry and scans as the stage
+// gets them: the seconds until the filter tracks, or -1; *err_m then its distance from the truth.
+double stand_until_tracking(SemanticLocalizer& loc, const World& world, const ClassDistanceFields& fields, ScanLabeller& labeller,
+                            std::size_t k, double seconds, double* err_m) {
+  const TruthSample at = world.truth[k - 1];
+  std::vector<ScanPoint> scan;
+  for (int i = 1; i <= static_cast<int>(seconds * 10.0); ++i) {
+    const TimeNs t = at.stamp + from_seconds(i / 10.0);
+    loc.on_odometry(world.odom[k - 1], t);
+    if (loc.wants_scan()) {
+      test::ray_cast(world.w, at.pose, LidarModel{}, k + static_cast<std::size_t>(i), scan);
+      labeller.label(scan, LidarModel{}.rings, LidarModel{}.columns);
+      loc.on_scan(scan, fields, t);
+    }
+    if (loc.pose().status == LocalizationStatus::kTracking) {
+      *err_m = std::hypot(loc.pose().pose.x - at.pose.x, loc.pose().pose.y - at.pose.y);
+      return i / 10.0;
+    }
+  }
+  return -1.0;
+}
+
 TEST(ParticleFilter, ConvergesFrom16mAnd30DegreesAndTracks) {
   const World world(2);
   GroundTruthLabeller gt;
@@ -283,32 +315,12 @@ TEST(ParticleFilter, ALostRobotThatStopsIsMatchedAgainWhereItStands) {
     Outcome out;
     std::size_t k = 0;
     for (; k < world.truth.size() && !out.lost; ++k) {  // drive until it is lost ...
-      loc.on_odometry(world.odom[k], world.truth[k].stamp);
-      if (loc.wants_scan()) {
-        test::ray_cast(world.w, world.truth[k].pose, LidarModel{}, k, scan);
-        gt.label(scan, LidarModel{}.rings, LidarModel{}.columns);
-        loc.on_scan(scan, fields, world.truth[k].stamp);
-      }
+      drive_step(loc, world, fields, gt, k, scan);
       out.lost = k > jump_at && loc.pose().status == LocalizationStatus::kLost;
     }
     if (!out.lost) return out;
-    // ... then stand there for 180 s (10 Hz odometry and scans, as the stage gets them)
-    const TruthSample at = world.truth[k - 1];
-    const Pose2 odom = world.odom[k - 1];
-    for (int i = 1; i <= 1800 && !out.back; ++i) {
-      const TimeNs t = at.stamp + from_seconds(i / 10.0);
-      loc.on_odometry(odom, t);
-      if (loc.wants_scan()) {
-        test::ray_cast(world.w, at.pose, LidarModel{}, k + static_cast<std::size_t>(i), scan);
-        gt.label(scan, LidarModel{}.rings, LidarModel{}.columns);
-        loc.on_scan(scan, fields, t);
-      }
-      if (loc.pose().status == LocalizationStatus::kTracking) {
-        out.back = true;
-        out.back_after_s = i / 10.0;
-        out.err_m = std::hypot(loc.pose().pose.x - at.pose.x, loc.pose().pose.y - at.pose.y);
-      }
-    }
+    out.back_after_s = stand_until_tracking(loc, world, fields, gt, k, 180.0, &out.err_m);  // ... then stand there for 180 s
+    out.back = out.back_after_s >= 0.0;
     return out;
   };
   const Outcome with = run_lost_then_stand(ParticleFilterParams{}.lost_standing_update_s);
@@ -339,28 +351,11 @@ TEST(ParticleFilter, ARobotThatStopsBeforeItConvergedConvergesWhereItStands) {
     loc.initialise_disc(bad_guess(world.truth[0].pose), 20.0, 35.0 * kDeg, world.truth[0].stamp);
     std::vector<ScanPoint> scan;
     std::size_t k = 0;
-    for (; k < world.truth.size() && loc.filter().driven_m() < 2.0; ++k) {
-      loc.on_odometry(world.odom[k], world.truth[k].stamp);
-      if (loc.wants_scan()) {
-        test::ray_cast(world.w, world.truth[k].pose, LidarModel{}, k, scan);
-        gt.label(scan, LidarModel{}.rings, LidarModel{}.columns);
-        loc.on_scan(scan, fields, world.truth[k].stamp);
-      }
-    }
+    for (; k < world.truth.size() && loc.filter().driven_m() < 2.0; ++k) drive_step(loc, world, fields, gt, k, scan);
     stopped_converging = loc.pose().status == LocalizationStatus::kInitialising;
-    const TruthSample at = world.truth[k - 1];
-    for (int i = 1; i <= 1200; ++i) {  // 120 s standing
-      const TimeNs t = at.stamp + from_seconds(i / 10.0);
-      loc.on_odometry(world.odom[k - 1], t);
-      if (loc.wants_scan()) {
-        test::ray_cast(world.w, at.pose, LidarModel{}, k + static_cast<std::size_t>(i), scan);
-        gt.label(scan, LidarModel{}.rings, LidarModel{}.columns);
-        loc.on_scan(scan, fields, t);
-      }
-      if (loc.pose().status == LocalizationStatus::kTracking)
-        return std::hypot(loc.pose().pose.x - at.pose.x, loc.pose().pose.y - at.pose.y);
-    }
-    return -1.0;  // still converging
+    double err = -1.0;
+    stand_until_tracking(loc, world, fields, gt, k, 120.0, &err);
+    return err;  // -1: still converging after 120 s of standing
   };
   bool converging = false;
   const double err = run(1.5, converging);
