@@ -105,9 +105,11 @@ Result<T> model_config(const std::string& dir, const char* name, std::string_vie
   return load(model_mapping(root, section), p.string());
 }
 
-// "<section>.area_x0_m=..." .. "area_y1_m": the world's extent, the mission area the simulator gives a robot.
-std::vector<std::string> world_area_keys(const GridGeometry& g, const char* section) {
-  const double v[4] = {g.origin_x, g.origin_y - g.size_y(), g.origin_x + g.size_x(), g.origin_y};
+// The world's extent; "<section>.area_x0_m=..." .. "area_y1_m" for an area (the mission area the simulator gives a robot).
+MapRect world_rect(const GridGeometry& g) { return MapRect{g.origin_x, g.origin_y - g.size_y(), g.origin_x + g.size_x(), g.origin_y}; }
+
+std::vector<std::string> area_keys(const MapRect& a, const char* section) {
+  const double v[4] = {a.x0, a.y0, a.x1, a.y1};
   const char* keys[4] = {"area_x0_m", "area_y0_m", "area_x1_m", "area_y1_m"};
   std::vector<std::string> out;
   for (int k = 0; k < 4; ++k) {
@@ -117,6 +119,8 @@ std::vector<std::string> world_area_keys(const GridGeometry& g, const char* sect
   }
   return out;
 }
+
+std::vector<std::string> world_area_keys(const GridGeometry& g, const char* section) { return area_keys(world_rect(g), section); }
 
 // The ground robots' table: their role (without the devices the simulator is and, with the runner's
 // goals, without the mission manager), plus the simulator's probe, which also scores every robot's
@@ -148,8 +152,15 @@ std::vector<std::string> ugv_settings(const Team& t, const std::vector<std::stri
   if (!opt.gossip || opt.ugv_map != UgvMapSource::kNone) ugv_extra.emplace_back("comms.deliver_map_tiles=false");
   // The mission area is the world's: the planner's roadmap and the localizer's distance fields cover it
   // (the shipped +-500 m would drop an imported 1.9 km map's tiles outside it and never localize there).
-  for (const char* section : {"planner", "localization"})
-    for (const std::string& kv : world_area_keys(t.world->grid(), section)) ugv_extra.push_back(kv);
+  // The localizer's is the area the quadrotor surveys, where its map is (the fields keep the whole tiles
+  // that cover it): over the unsurveyed border a particle's score is neutral and beats a fair match on
+  // the map, and a robot whose guess reached it settled there, 40 m off (docs/localization.md).
+  for (const std::string& kv : world_area_keys(t.world->grid(), "planner")) ugv_extra.push_back(kv);
+  const bool quad_map = opt.uav && opt.ugv_map != UgvMapSource::kGroundTruth;
+  const MapRect loc_area = quad_map ? survey_area(*t.world, UavSurveyOptions{opt.uav_altitude_m, opt.survey_overlap, opt.uav_speed_mps, opt.survey_margin_m,
+                                                                             opt.survey_x0, opt.survey_y0, opt.survey_x1, opt.survey_y1})
+                                    : world_rect(t.world->grid());
+  for (const std::string& kv : area_keys(loc_area, "localization")) ugv_extra.push_back(kv);
   if (opt.ugv_survey_end && opt.uav) {
     char buf[96];
     std::snprintf(buf, sizeof buf, "mission.survey_end_s=%.1f", survey_time_s);

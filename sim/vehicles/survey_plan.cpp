@@ -56,11 +56,16 @@ Result<std::vector<Waypoint>> uav_survey_route(const World& w, const UavSurveyOp
                           camera_hfov_rad, so);
 }
 
-std::string staging_outside_survey(const World& w, const UavSurveyOptions& o) {
+MapRect survey_area(const World& w, const UavSurveyOptions& o) noexcept {
+  if (o.x1 > o.x0 && o.y1 > o.y0) return MapRect{o.x0, o.y0, o.x1, o.y1};
   const GridGeometry& g = w.grid();
+  return MapRect{g.origin_x + o.margin_m, g.origin_y - g.size_y() + o.margin_m, g.origin_x + g.size_x() - o.margin_m, g.origin_y - o.margin_m};
+}
+
+std::string staging_outside_survey(const World& w, const UavSurveyOptions& o) {
   const bool given = o.x1 > o.x0 && o.y1 > o.y0;
-  const double x0 = given ? o.x0 : g.origin_x + o.margin_m, x1 = given ? o.x1 : g.origin_x + g.size_x() - o.margin_m;
-  const double y0 = given ? o.y0 : g.origin_y - g.size_y() + o.margin_m, y1 = given ? o.y1 : g.origin_y - o.margin_m;
+  const MapRect a = survey_area(w, o);
+  const double x0 = a.x0, y0 = a.y0, x1 = a.x1, y1 = a.y1;
   const Pose2& s = w.header.staging;
   const double out = std::max({x0 - s.x, s.x - x1, y0 - s.y, s.y - y1});
   if (!(out > 0)) return {};

@@ -29,6 +29,10 @@ struct UavSurveyOptions {
 // its return to launch). Errors as survey_lawnmower's, and a margin that leaves no area.
 Result<std::vector<Waypoint>> uav_survey_route(const World& w, const UavSurveyOptions& o, double camera_hfov_rad);
 
+// The area the survey covers [m, map frame]: the given one, or the world less margin_m on every side.
+// The quadrotor's map exists there; the ground robots localize in it (team runner: localization.area_*).
+[[nodiscard]] MapRect survey_area(const World& w, const UavSurveyOptions& o) noexcept;
+
 // Empty when the ground robots' staging pad lies inside the area the survey covers; else a warning that
 // names the pad, the area and by how far it is out: robots starting there start off the map they localize
 // in (a generated world can put its pad inside the survey's border; docs/simulator.md, "Staging pad").
