@@ -122,6 +122,12 @@ std::vector<std::string> area_keys(const MapRect& a, const char* section) {
 
 std::vector<std::string> world_area_keys(const GridGeometry& g, const char* section) { return area_keys(world_rect(g), section); }
 
+// The quadrotor's survey as the run's options give it.
+UavSurveyOptions survey_options(const RunOptions& opt) {
+  return UavSurveyOptions{opt.uav_altitude_m, opt.survey_overlap, opt.uav_speed_mps, opt.survey_margin_m,
+                          opt.survey_x0,      opt.survey_y0,      opt.survey_x1,     opt.survey_y1};
+}
+
 // The ground robots' table: their role (without the devices the simulator is and, with the runner's
 // goals, without the mission manager), plus the simulator's probe, which also scores every robot's
 // localization for the summary.
@@ -157,9 +163,7 @@ std::vector<std::string> ugv_settings(const Team& t, const std::vector<std::stri
   // the map, and a robot whose guess reached it settled there, 40 m off (docs/localization.md).
   for (const std::string& kv : world_area_keys(t.world->grid(), "planner")) ugv_extra.push_back(kv);
   const bool quad_map = opt.uav && opt.ugv_map != UgvMapSource::kGroundTruth;
-  const MapRect loc_area = quad_map ? survey_area(*t.world, UavSurveyOptions{opt.uav_altitude_m, opt.survey_overlap, opt.uav_speed_mps, opt.survey_margin_m,
-                                                                             opt.survey_x0, opt.survey_y0, opt.survey_x1, opt.survey_y1})
-                                    : world_rect(t.world->grid());
+  const MapRect loc_area = quad_map ? survey_area(*t.world, survey_options(opt)) : world_rect(t.world->grid());
   for (const std::string& kv : area_keys(loc_area, "localization")) ugv_extra.push_back(kv);
   if (opt.ugv_survey_end && opt.uav) {
     char buf[96];
@@ -494,7 +498,7 @@ Result<double> set_up_uav(Team& t, const Models& m, RoleFactory& roles, const st
   auto u = std::make_unique<Uav>(Uav{Quadrotor(m.quad, start), GpsSimulator(m.gps, w.header.datum, opt.seed ^ std::uint64_t{0x67707331}),
                                      VisualOdometrySimulator(m.vo, opt.seed ^ std::uint64_t{0x766f3031}), CameraFrame{}, 0, 0, 0, 0, 0, {}, {}, {}, {}, {}, nullptr});
   const double hfov = 2.0 * std::atan(0.5 * m.camera.width / m.camera.fx);
-  const UavSurveyOptions so{opt.uav_altitude_m, opt.survey_overlap, opt.uav_speed_mps, opt.survey_margin_m, opt.survey_x0, opt.survey_y0, opt.survey_x1, opt.survey_y1};
+  const UavSurveyOptions so = survey_options(opt);
   auto route = uav_survey_route(w, so, hfov);
   if (!route) return route.error();
   if (const std::string off = staging_outside_survey(w, so); !off.empty()) std::fprintf(stderr, "airground-sim: warning: %s\n", off.c_str());

@@ -43,23 +43,22 @@ Pose3 uav_launch_pose(const World& w) noexcept {
   return Pose3{s.x, s.y, z, 0, 0, s.yaw};
 }
 
-Result<std::vector<Waypoint>> uav_survey_route(const World& w, const UavSurveyOptions& o, double camera_hfov_rad) {
-  SurveyOptions so;
-  so.speed_mps = o.speed_mps;
-  if (o.x1 > o.x0 && o.y1 > o.y0) return survey_lawnmower(o.x0, o.y0, o.x1, o.y1, o.altitude_m, o.overlap, camera_hfov_rad, so);
-  const GridGeometry& g = w.grid();
-  const double m = o.margin_m;
-  if (!(m >= 0) || 2 * m >= g.size_x() || 2 * m >= g.size_y())
-    return Error::make(ErrorCode::kInvalidArgument, "uav_survey_route: a margin of " + std::to_string(m) + " m leaves no area of the " +
-                                                        std::to_string(g.size_x()) + " x " + std::to_string(g.size_y()) + " m world");
-  return survey_lawnmower(g.origin_x + m, g.origin_y - g.size_y() + m, g.origin_x + g.size_x() - m, g.origin_y - m, o.altitude_m, o.overlap,
-                          camera_hfov_rad, so);
-}
-
 MapRect survey_area(const World& w, const UavSurveyOptions& o) noexcept {
   if (o.x1 > o.x0 && o.y1 > o.y0) return MapRect{o.x0, o.y0, o.x1, o.y1};
   const GridGeometry& g = w.grid();
   return MapRect{g.origin_x + o.margin_m, g.origin_y - g.size_y() + o.margin_m, g.origin_x + g.size_x() - o.margin_m, g.origin_y - o.margin_m};
+}
+
+Result<std::vector<Waypoint>> uav_survey_route(const World& w, const UavSurveyOptions& o, double camera_hfov_rad) {
+  SurveyOptions so;
+  so.speed_mps = o.speed_mps;
+  const GridGeometry& g = w.grid();
+  const double m = o.margin_m;
+  if (!(o.x1 > o.x0 && o.y1 > o.y0) && (!(m >= 0) || 2 * m >= g.size_x() || 2 * m >= g.size_y()))
+    return Error::make(ErrorCode::kInvalidArgument, "uav_survey_route: a margin of " + std::to_string(m) + " m leaves no area of the " +
+                                                        std::to_string(g.size_x()) + " x " + std::to_string(g.size_y()) + " m world");
+  const MapRect a = survey_area(w, o);
+  return survey_lawnmower(a.x0, a.y0, a.x1, a.y1, o.altitude_m, o.overlap, camera_hfov_rad, so);
 }
 
 std::string staging_outside_survey(const World& w, const UavSurveyOptions& o) {
