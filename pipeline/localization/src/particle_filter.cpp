@@ -46,6 +46,17 @@ std::uint64_t interleave16(std::uint32_t v) noexcept {  // bit k -> bit 2k
   return x;
 }
 
+// [m] How deep (x, y) lies inside a mapped obstacle region: the smallest free-space channel distance at
+// its cell; 0 on an unknown cell or outside the fields (no prior there).
+double obstacle_depth_m(const ClassDistanceFields& f, std::uint8_t free_mask, double x, double y) noexcept {
+  const std::uint8_t* cell = f.cells() + f.index_at(x, y) * static_cast<std::size_t>(f.stride());
+  if (cell[f.stride() - 1] == raw(ClassId::kUnknown)) return 0.0;
+  int d = 255;
+  for (int k = 0; k < f.channels().count(); ++k)
+    if ((free_mask >> static_cast<unsigned>(k)) & 1U) d = std::min(d, static_cast<int>(cell[k]));
+  return static_cast<double>(d) * f.quantum_m();
+}
+
 std::size_t next_pow2(std::size_t v) noexcept {
   std::size_t p = 1;
   while (p < v) p <<= 1U;
@@ -353,6 +364,7 @@ UpdateReport ParticleFilter::update_impl(const ScanRenderPolar& render, const Cl
     order_[i] = (interleave16(cx) | (interleave16(cyy) << 1U)) << 32U | i;
   }
   std::sort(order_.begin(), order_.begin() + static_cast<std::ptrdiff_t>(n_));
+  const std::uint8_t free_mask = p_.obstacle_penalty_per_m > 0.0 ? fields.channels().free_space_channels() : std::uint8_t{0};
   for (std::size_t k = 0; k < n_; ++k) {
     const std::size_t i = order_[k] & 0xFFFFFFFFULL;
     if (!p_.area.contains(x_[i], y_[i])) {  // outside the mission area: not where the robot can be
@@ -362,6 +374,13 @@ UpdateReport ParticleFilter::update_impl(const ScanRenderPolar& render, const Cl
     }
     double score = 0.0, kf = 0.0, ck = 0.0;
     yaw_[i] = wrap_angle(yaw_[i] + evaluate(x_[i], y_[i], yaw_[i], render, fields, window, score, kf, ck));
+    if (free_mask != 0U) {
+      const double deep = obstacle_depth_m(fields, free_mask, x_[i], y_[i]) - p_.obstacle_margin_m;
+      if (deep > 0.0) {
+        score -= p_.obstacle_penalty_per_m * deep;
+        ++est_.inside_obstacle;
+      }
+    }
     score_[i] = score;
     top = std::max(top, score);
     if (kf >= p_.min_known_fraction && ck < best) {

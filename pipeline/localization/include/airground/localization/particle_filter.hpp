@@ -104,6 +104,16 @@ struct ParticleFilterParams {
   // has no weight. Over unmapped ground a particle's score is neutral, which beats a poor match on the
   // map: without the area a guess near the area's edge converged onto the nothing beyond it.
   MapRect area{};
+  // Obstacle prior: the robot stands where its planner sends it, on cells the map calls traversable, so a
+  // particle deeper than obstacle_margin_m inside a mapped obstacle region (the distance from its cell to
+  // the nearest free-space cell, LocalizationChannels::free_space_channels) loses obstacle_penalty_per_m
+  // of log weight per metre beyond the margin at each update. The margin covers crowns over a road edge,
+  // the map's class errors at region borders and the estimate's own error. Along a tree-lined road, where
+  // the geometric labels look the same for tens of metres, a re-spread otherwise settled inside the tree
+  // block beside the road, "tracking", where the planner found no free cell (docs/localization.md).
+  // Unknown cells get no prior. 0 = off.
+  double obstacle_margin_m{2.0};
+  double obstacle_penalty_per_m{1.0};
 };
 
 inline constexpr ParamField<ParticleFilterParams> kParticleFilterFields[] = {
@@ -152,6 +162,10 @@ inline constexpr ParamField<ParticleFilterParams> kParticleFilterFields[] = {
                    "... and tracking again only after this many converged ones"),
     field::real("pf_converging_standing_after_m", &ParticleFilterParams::converging_standing_after_m, 0.0, 10000.0, "m",
                 "still converging after driving this far since the initial guess: standing updates too (0 = from the start)"),
+    field::real("pf_obstacle_margin_m", &ParticleFilterParams::obstacle_margin_m, 0.0, 25.0, "m",
+                "obstacle prior: a particle this deep inside a mapped obstacle region is still possible"),
+    field::real("pf_obstacle_penalty_per_m", &ParticleFilterParams::obstacle_penalty_per_m, 0.0, 20.0, "1/m",
+                "... beyond it, log weight lost per metre at each update (0 = no prior)"),
 };
 inline constexpr auto kParticleFilterParamSpecs = param_specs(kParticleFilterFields);
 ParticleFilterParams load_particle_filter_params(const SectionView& s);
@@ -176,6 +190,7 @@ struct FilterEstimate {
   std::uint64_t updates{0};
   std::uint32_t recoveries{0};         // re-spreads after divergence (total)
   std::uint64_t outside_area{0};       // particles found outside the mission area at an update (total; no weight)
+  std::uint64_t inside_obstacle{0};    // particles found beyond the obstacle margin at an update (total; penalised)
 };
 
 struct UpdateReport {
