@@ -26,7 +26,7 @@ LocalizationChannels LocalizationChannels::per_class(const ClassTable& table) {
     const int k = c.add_channel(info.name, info.localization_weight);
     c.count_scan_label(raw(info.id), k);
     c.add_map_source(raw(info.id), k);
-    if (info.traversability != Traversability::kBlocked) c.set_free_space(k);
+    if (info.traversability == Traversability::kBlocked) c.set_obstacle_space(k);
   }
   return c;
 }
@@ -35,7 +35,7 @@ LocalizationChannels LocalizationChannels::two_class(double ground_weight, doubl
   LocalizationChannels c;
   const int ground = c.add_channel("ground", ground_weight);
   const int obstacle = c.add_channel("obstacle", obstacle_weight);
-  c.set_free_space(ground);
+  c.set_obstacle_space(obstacle);
   for (const ClassId id : {ClassId::kRoad, ClassId::kDirt, ClassId::kGrass, ClassId::kWater}) {
     c.count_scan_label(raw(id), ground);
     c.add_map_source(raw(id), ground);

@@ -46,17 +46,6 @@ std::uint64_t interleave16(std::uint32_t v) noexcept {  // bit k -> bit 2k
   return x;
 }
 
-// [m] How deep (x, y) lies inside a mapped obstacle region: the smallest free-space channel distance at
-// its cell; 0 on an unknown cell or outside the fields (no prior there).
-double obstacle_depth_m(const ClassDistanceFields& f, std::uint8_t free_mask, double x, double y) noexcept {
-  const std::uint8_t* cell = f.cells() + f.index_at(x, y) * static_cast<std::size_t>(f.stride());
-  if (cell[f.stride() - 1] == raw(ClassId::kUnknown)) return 0.0;
-  int d = 255;
-  for (int k = 0; k < f.channels().count(); ++k)
-    if ((free_mask >> static_cast<unsigned>(k)) & 1U) d = std::min(d, static_cast<int>(cell[k]));
-  return static_cast<double>(d) * f.quantum_m();
-}
-
 std::size_t next_pow2(std::size_t v) noexcept {
   std::size_t p = 1;
   while (p < v) p <<= 1U;
@@ -98,6 +87,35 @@ ParticleFilter::ParticleFilter(const ParticleFilterParams& params, const PolarRe
   shift_known_.assign(shifts, 0.0);
   shift_known_cost_.assign(shifts, 0.0);
   range_bin_m_ = p_.range_bin_max_m;
+  // Obstacle prior: every cell offset within kRoomTableCells, nearest first.
+  for (int dr = -kRoomTableCells; dr <= kRoomTableCells; ++dr)
+    for (int dc = -kRoomTableCells; dc <= kRoomTableCells; ++dc)
+      if (dc * dc + dr * dr <= kRoomTableCells * kRoomTableCells)
+        room_.push_back({static_cast<std::int16_t>(dc), static_cast<std::int16_t>(dr), dc * dc + dr * dr});
+  std::stable_sort(room_.begin(), room_.end(), [](const RoomOffset& a, const RoomOffset& b) { return a.d2 < b.d2; });
+}
+
+double ParticleFilter::room_distance_m(const ClassDistanceFields& f, std::uint8_t obstacle_mask, double x, double y) const noexcept {
+  const double res = f.resolution_m();
+  const auto c0 = static_cast<std::int64_t>(std::floor((x - f.origin_x()) / res));
+  const auto r0 = static_cast<std::int64_t>(std::floor((y - f.origin_y()) / res));
+  const auto stride = static_cast<std::size_t>(f.stride());
+  const int clear_q = static_cast<int>(std::ceil(p_.obstacle_clearance_m / f.quantum_m() - 1e-9));
+  const double reach = p_.obstacle_max_depth_m / res;
+  const double reach2 = std::min(reach * reach, static_cast<double>(kRoomTableCells * kRoomTableCells));
+  for (const RoomOffset& o : room_) {
+    if (static_cast<double>(o.d2) > reach2) break;
+    const std::int64_t c = c0 + o.dc, r = r0 + o.dr;
+    const double d = std::sqrt(static_cast<double>(o.d2)) * res;
+    if (c < 0 || r < 0 || c >= f.width() || r >= f.height()) return d;  // outside the fields: unknown
+    const std::uint8_t* cell = f.cells() + static_cast<std::size_t>(r * f.width() + c) * stride;
+    if (cell[stride - 1] == raw(ClassId::kUnknown)) return d;
+    int clearance = 255;
+    for (int k = 0; k < f.channels().count(); ++k)
+      if ((obstacle_mask >> static_cast<unsigned>(k)) & 1U) clearance = std::min(clearance, static_cast<int>(cell[k]));
+    if (clearance >= clear_q) return d;
+  }
+  return p_.obstacle_max_depth_m;
 }
 
 std::size_t ParticleFilter::memory_bytes() const noexcept {
@@ -106,7 +124,7 @@ std::size_t ParticleFilter::memory_bytes() const noexcept {
     b += v->capacity() * sizeof(double);
   for (const auto* v : {&base_cos_, &base_sin_}) b += v->capacity() * sizeof(float);
   return b + (kld_keys_.capacity() + order_.capacity()) * sizeof(std::uint64_t) + kld_stamp_.capacity() * sizeof(std::uint32_t) +
-         (idx_.capacity() + bin_offset_.capacity()) * sizeof(std::int32_t);
+         (idx_.capacity() + bin_offset_.capacity()) * sizeof(std::int32_t) + room_.capacity() * sizeof(RoomOffset);
 }
 
 void ParticleFilter::respread(const Pose2& centre, double sigma_xy, double sigma_yaw) noexcept {
@@ -364,7 +382,7 @@ UpdateReport ParticleFilter::update_impl(const ScanRenderPolar& render, const Cl
     order_[i] = (interleave16(cx) | (interleave16(cyy) << 1U)) << 32U | i;
   }
   std::sort(order_.begin(), order_.begin() + static_cast<std::ptrdiff_t>(n_));
-  const std::uint8_t free_mask = p_.obstacle_penalty_per_m > 0.0 ? fields.channels().free_space_channels() : std::uint8_t{0};
+  const std::uint8_t obstacle_mask = p_.obstacle_penalty_per_m > 0.0 ? fields.channels().obstacle_space_channels() : std::uint8_t{0};
   for (std::size_t k = 0; k < n_; ++k) {
     const std::size_t i = order_[k] & 0xFFFFFFFFULL;
     if (!p_.area.contains(x_[i], y_[i])) {  // outside the mission area: not where the robot can be
@@ -374,8 +392,8 @@ UpdateReport ParticleFilter::update_impl(const ScanRenderPolar& render, const Cl
     }
     double score = 0.0, kf = 0.0, ck = 0.0;
     yaw_[i] = wrap_angle(yaw_[i] + evaluate(x_[i], y_[i], yaw_[i], render, fields, window, score, kf, ck));
-    if (free_mask != 0U) {
-      const double deep = obstacle_depth_m(fields, free_mask, x_[i], y_[i]) - p_.obstacle_margin_m;
+    if (obstacle_mask != 0U) {
+      const double deep = room_distance_m(fields, obstacle_mask, x_[i], y_[i]) - p_.obstacle_margin_m;
       if (deep > 0.0) {
         score -= p_.obstacle_penalty_per_m * deep;
         ++est_.inside_obstacle;

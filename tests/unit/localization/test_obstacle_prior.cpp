@@ -1,6 +1,7 @@
-// The particle filter's obstacle prior: a particle deeper than the margin inside a mapped obstacle region
-// loses obstacle_penalty_per_m of log weight per metre beyond it; on free ground, within the margin and on
-// unknown cells it loses nothing. The depth is checked against a brute-force search of the class raster.
+// The particle filter's obstacle prior: a particle farther than the margin from the nearest cell with the
+// planner's clearance loses obstacle_penalty_per_m of log weight per metre beyond it; with room, within
+// the margin and on unknown cells it loses nothing. The distance is checked against a brute-force search
+// of the class raster.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -15,44 +16,68 @@ namespace {
 using test::LidarModel;
 using test::SyntheticWorld;
 
-// [m] Distance from (x, y)'s cell centre to the nearest cell a ground robot can stand on, or unknown
-// (the two-class "ground" channel with unknown cells as sources); 0 on such a cell or outside the raster.
-double brute_depth(const SyntheticWorld& w, double x, double y) {
+bool is_obstacle(std::uint8_t k) {
+  return k == raw(ClassId::kTree) || k == raw(ClassId::kBuilding) || k == raw(ClassId::kVehicle);
+}
+
+// The room a robot has on each cell, by brute force over the class raster: true on an unknown cell, and on
+// a known cell at least `clearance` (cell centre to cell centre) from every obstacle and unknown cell (the
+// two-class obstacle channel, whose sources include the unknown).
+std::vector<char> room_grid(const SyntheticWorld& w, double clearance) {
+  std::vector<char> room(w.cls.size(), 0);
+  const int reach = static_cast<int>(std::ceil(clearance / w.resolution));
+  for (int r = 0; r < w.height; ++r)
+    for (int c = 0; c < w.width; ++c) {
+      const std::uint8_t k = w.cls[w.index(c, r)];
+      bool ok = k == raw(ClassId::kUnknown) || !is_obstacle(k);
+      if (k != raw(ClassId::kUnknown))
+        for (int dr = -reach; ok && dr <= reach; ++dr)
+          for (int dc = -reach; ok && dc <= reach; ++dc) {
+            if (std::hypot(dc, dr) * w.resolution >= clearance - 1e-9) continue;
+            const std::uint8_t n = w.inside(c + dc, r + dr) ? w.cls[w.index(c + dc, r + dr)] : raw(ClassId::kUnknown);
+            if (n == raw(ClassId::kUnknown) || is_obstacle(n)) ok = false;
+          }
+      room[w.index(c, r)] = ok ? 1 : 0;
+    }
+  return room;
+}
+
+// [m] From (x, y)'s cell to the nearest cell with room (outside the raster counts), capped at `cap`.
+double brute_room_distance(const SyntheticWorld& w, const std::vector<char>& room, double x, double y, double cap) {
   const int c0 = static_cast<int>(std::floor(x / w.resolution)), r0 = static_cast<int>(std::floor(y / w.resolution));
-  auto free_or_unknown = [&](int c, int r) {
-    if (!w.inside(c, r)) return true;
-    const auto k = static_cast<ClassId>(w.cls[w.index(c, r)]);
-    return k == ClassId::kUnknown || k == ClassId::kRoad || k == ClassId::kDirt || k == ClassId::kGrass || k == ClassId::kWater;
-  };
-  if (free_or_unknown(c0, r0)) return 0.0;
-  const int reach = 60;  // 30 m, beyond the fields' 25 m truncation
-  double best = 1e9;
+  const int reach = static_cast<int>(std::ceil(cap / w.resolution));
+  double best = cap;
   for (int r = r0 - reach; r <= r0 + reach; ++r)
     for (int c = c0 - reach; c <= c0 + reach; ++c)
-      if (free_or_unknown(c, r)) best = std::min(best, std::hypot(c - c0, r - r0) * w.resolution);
-  return std::min(best, DistanceFieldParams{}.truncation_m);
+      if (!w.inside(c, r) || room[w.index(c, r)]) best = std::min(best, std::hypot(c - c0, r - r0) * w.resolution);
+  return best;
 }
 
 }  // namespace
 
-TEST(ObstaclePrior, FreeSpaceChannelsAreTheClassesARobotCanStandOn) {
+TEST(ObstaclePrior, ObstacleChannelsAreTheRegionsOfTheClassesARobotCannotEnter) {
   const LocalizationChannels two = LocalizationChannels::two_class();
-  EXPECT_EQ(two.free_space_channels(), 1U) << "ground only, not obstacle or obstacle faces";
+  EXPECT_EQ(two.obstacle_space_channels(), 2U) << "the obstacle regions, not ground or the obstacle faces";
   const LocalizationChannels per = LocalizationChannels::per_class();
   for (int k = 0; k < per.count(); ++k) {
-    const bool free = (per.free_space_channels() >> k) & 1U;
+    const bool obstacle = (per.obstacle_space_channels() >> k) & 1U;
     const bool blocked = per.name(k) == "tree" || per.name(k) == "building" || per.name(k) == "vehicle" || per.name(k) == "water";
-    EXPECT_NE(free, blocked) << per.name(k);
+    EXPECT_EQ(obstacle, blocked) << per.name(k);
   }
 }
 
-// A 30 m building block and a 14 m unknown patch beside the robot's road; particles spread 25 m around it.
-// One update from the same seed with and without the prior, no resampling and no uniform mix: each
-// particle's log-weight change is the prior alone, -penalty x (depth - margin) beyond the margin.
-TEST(ObstaclePrior, ADeepParticleLosesThePenaltyPerMetreBeyondTheMarginAndNoOtherLosesAny) {
+// Beside the robot's road: a 30 m building block, a 28 m tree block that the map speckles with one-cell
+// grass holes every 1.5 m (as ErfNet's map speckles the crowns of a dense wood: no hole has the room of a
+// robot), and a 14 m unknown patch; particles spread 25 m around the robot. One update from the same seed
+// with and without the prior, no resampling and no uniform mix: each particle's log-weight change is the
+// prior alone, -penalty x (distance to room - margin) beyond the margin, the distance capped.
+TEST(ObstaclePrior, AParticleFarFromRoomLosesThePenaltyPerMetreBeyondTheMarginAndNoOtherLosesAny) {
   SyntheticWorld w = test::make_world(8, 8, 7);
   const Pose2 truth{w.road_x[3], w.road_y[3] + 4.0, 0.3};
   w.fill_rect(truth.x + 6.0, truth.y - 15.0, truth.x + 36.0, truth.y + 15.0, ClassId::kBuilding, 8.0F);
+  w.fill_rect(truth.x - 36.0, truth.y + 8.0, truth.x - 8.0, truth.y + 36.0, ClassId::kTree, 10.0F);
+  for (double y = truth.y + 9.0; y < truth.y + 35.0; y += 1.5)
+    for (double x = truth.x - 35.0; x < truth.x - 9.0; x += 1.5) w.fill_rect(x, y, x + 0.5, y + 0.5, ClassId::kGrass, 0.0F);
   SyntheticWorld aerial = w;
   aerial.fill_rect(truth.x - 20.0, truth.y - 7.0, truth.x - 6.0, truth.y + 7.0, ClassId::kUnknown, 0.0F);
   const LocalizationChannels ch = LocalizationChannels::two_class();
@@ -86,11 +111,12 @@ TEST(ObstaclePrior, ADeepParticleLosesThePenaltyPerMetreBeyondTheMarginAndNoOthe
   }
   ASSERT_EQ(logw[0].size(), logw[1].size());
   // The normalisation moves every log weight by the same amount: measure it on the particles with no prior.
+  const std::vector<char> room = room_grid(aerial, p.obstacle_clearance_m);
   std::vector<double> depth(where.size());
   double shift = 0.0;
-  int free = 0, deep = 0, on_unknown = 0;
+  int free = 0, deep = 0, on_unknown = 0, in_wood = 0;
   for (std::size_t i = 0; i < where.size(); ++i) {
-    depth[i] = brute_depth(aerial, where[i].x, where[i].y);
+    depth[i] = brute_room_distance(aerial, room, where[i].x, where[i].y, p.obstacle_max_depth_m);
     if (aerial.class_at(where[i].x, where[i].y) == raw(ClassId::kUnknown)) ++on_unknown;
     if (depth[i] == 0.0) {
       shift += logw[1][i] - logw[0][i];
@@ -104,14 +130,16 @@ TEST(ObstaclePrior, ADeepParticleLosesThePenaltyPerMetreBeyondTheMarginAndNoOthe
   for (std::size_t i = 0; i < where.size(); ++i) {
     const double expected = -p.obstacle_penalty_per_m * std::max(0.0, depth[i] - p.obstacle_margin_m);
     if (depth[i] > p.obstacle_margin_m + 0.3) ++deep;
-    // The fields quantise to 0.1 m; the depth sits on 0.5 m cells either way.
+    if (depth[i] >= p.obstacle_max_depth_m && aerial.class_at(where[i].x, where[i].y) == raw(ClassId::kTree)) ++in_wood;
+    // The fields quantise to 0.1 m, and both searches go cell to cell.
     worst = std::max(worst, std::abs(logw[1][i] - logw[0][i] - shift - expected));
     ASSERT_NEAR(logw[1][i] - logw[0][i] - shift, expected, 0.15)
         << "particle " << i << " at (" << where[i].x - truth.x << ", " << where[i].y - truth.y << ") from the robot, " << depth[i] << " m deep";
   }
-  std::printf("%zu particles: %d on free ground or unknown, %d deeper than the margin + 0.3 m, %llu penalised; worst error %.3f\n",
-              where.size(), free, deep, static_cast<unsigned long long>(counted), worst);
+  std::printf("%zu particles: %d with room or on unknown, %d beyond the margin + 0.3 m (%d in the wood at the cap), %llu penalised; worst error %.3f\n",
+              where.size(), free, deep, in_wood, static_cast<unsigned long long>(counted), worst);
   ASSERT_GT(deep, 100) << "the building block holds particles well inside it";
+  EXPECT_GT(in_wood, 20) << "the speckled wood's middle is as far from room as a solid block";
   EXPECT_GE(counted, static_cast<std::uint64_t>(deep));
   EXPECT_LE(counted, where.size() - static_cast<std::size_t>(free));
 }

@@ -104,16 +104,18 @@ struct ParticleFilterParams {
   // has no weight. Over unmapped ground a particle's score is neutral, which beats a poor match on the
   // map: without the area a guess near the area's edge converged onto the nothing beyond it.
   MapRect area{};
-  // Obstacle prior: the robot stands where its planner sends it, on cells the map calls traversable, so a
-  // particle deeper than obstacle_margin_m inside a mapped obstacle region (the distance from its cell to
-  // the nearest free-space cell, LocalizationChannels::free_space_channels) loses obstacle_penalty_per_m
-  // of log weight per metre beyond the margin at each update. The margin covers crowns over a road edge,
-  // the map's class errors at region borders and the estimate's own error. Along a tree-lined road, where
-  // the geometric labels look the same for tens of metres, a re-spread otherwise settled inside the tree
-  // block beside the road, "tracking", where the planner found no free cell (docs/localization.md).
-  // Unknown cells get no prior. 0 = off.
-  double obstacle_margin_m{2.0};
-  double obstacle_penalty_per_m{1.0};
+  // Obstacle prior: the robot stands where its planner sends it, on cells with the planner's clearance
+  // (roadmap min_clearance_m) from every mapped obstacle, or within its snap radius of one. So a particle
+  // farther than obstacle_margin_m from the nearest cell with obstacle_clearance_m of room (the obstacle
+  // channels' distance, LocalizationChannels::obstacle_space_channels; an unknown cell counts as room)
+  // loses obstacle_penalty_per_m of log weight per metre beyond the margin at each update, up to
+  // obstacle_max_depth_m. On the imported world's tree block, which ErfNet's map speckles with grass, a
+  // re-spread along the tree-lined road beside it otherwise settled inside the block, "tracking", where
+  // the planner found no free cell near the start (docs/localization.md). Unknown cells get no prior.
+  double obstacle_clearance_m{0.6};   // [m] the planner's min_clearance_m
+  double obstacle_margin_m{2.0};      // [m] the planner's snap radius
+  double obstacle_penalty_per_m{1.0}; // [1/m] 0 = no prior
+  double obstacle_max_depth_m{6.0};   // [m] the search for room stops here (and so does the penalty)
 };
 
 inline constexpr ParamField<ParticleFilterParams> kParticleFilterFields[] = {
@@ -162,10 +164,14 @@ inline constexpr ParamField<ParticleFilterParams> kParticleFilterFields[] = {
                    "... and tracking again only after this many converged ones"),
     field::real("pf_converging_standing_after_m", &ParticleFilterParams::converging_standing_after_m, 0.0, 10000.0, "m",
                 "still converging after driving this far since the initial guess: standing updates too (0 = from the start)"),
+    field::real("pf_obstacle_clearance_m", &ParticleFilterParams::obstacle_clearance_m, 0.0, 5.0, "m",
+                "obstacle prior: a cell with this much room from mapped obstacles is where the robot can be (the planner's min_clearance_m)"),
     field::real("pf_obstacle_margin_m", &ParticleFilterParams::obstacle_margin_m, 0.0, 25.0, "m",
-                "obstacle prior: a particle this deep inside a mapped obstacle region is still possible"),
+                "... and so is any point this close to one (the planner's snap radius)"),
     field::real("pf_obstacle_penalty_per_m", &ParticleFilterParams::obstacle_penalty_per_m, 0.0, 20.0, "1/m",
                 "... beyond it, log weight lost per metre at each update (0 = no prior)"),
+    field::real("pf_obstacle_max_depth_m", &ParticleFilterParams::obstacle_max_depth_m, 0.5, 15.0, "m",
+                "... up to this distance from room (the search stops there)"),
 };
 inline constexpr auto kParticleFilterParamSpecs = param_specs(kParticleFilterFields);
 ParticleFilterParams load_particle_filter_params(const SectionView& s);
@@ -190,7 +196,7 @@ struct FilterEstimate {
   std::uint64_t updates{0};
   std::uint32_t recoveries{0};         // re-spreads after divergence (total)
   std::uint64_t outside_area{0};       // particles found outside the mission area at an update (total; no weight)
-  std::uint64_t inside_obstacle{0};    // particles found beyond the obstacle margin at an update (total; penalised)
+  std::uint64_t inside_obstacle{0};    // particles found beyond the obstacle margin from room at an update (total; penalised)
 };
 
 struct UpdateReport {
@@ -256,6 +262,11 @@ class ParticleFilter {
   void resample() noexcept;
   std::size_t kld_count() noexcept;
   void compute_estimate() noexcept;
+  // Obstacle prior: [m] from (x, y) to the nearest cell with obstacle_clearance_m of room from the
+  // `obstacle_mask` channels' sources, or unknown (outside the fields is unknown), obstacle_max_depth_m
+  // when there is none that near. Exact on the fields' cells (the offset table, nearest first).
+  [[nodiscard]] double room_distance_m(const ClassDistanceFields& f, std::uint8_t obstacle_mask, double x, double y) const noexcept;
+  static constexpr int kRoomTableCells = 32;  // 16 m on 0.5 m cells, 8 m on 0.25 m
   void update_status(double best_cost, bool cost_valid, bool standing) noexcept;
   void respread(const Pose2& centre, double sigma_xy, double sigma_yaw) noexcept;
   void set_range_bin() noexcept;
@@ -275,7 +286,12 @@ class ParticleFilter {
   std::vector<std::int32_t> idx_;
   std::vector<std::int32_t> bin_offset_;  // per render bin: angle x padded range bins + range
   std::vector<float> base_cos_, base_sin_;
-  std::vector<double> shift_cost_, shift_known_, shift_known_cost_;  // per shift: score, known share, known cost
+  std::vector<double> shift_cost_, shift_known_, shift_known_cost_;
+  struct RoomOffset {
+    std::int16_t dc, dr;  // [cells]
+    std::int32_t d2;      // [cells^2]
+  };
+  std::vector<RoomOffset> room_;  // obstacle prior: the cell offsets within kRoomTableCells, nearest first  // per shift: score, known share, known cost
   Pose2 pending_{};           // accumulated motion since the last update (body frame then)
   double pending_dist_{0};    // [m] path length
   double pending_turn_{0};    // [rad] total |dyaw|

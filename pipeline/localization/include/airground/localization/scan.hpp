@@ -82,13 +82,13 @@ class LocalizationChannels {
   }
   // Bit k set: channel k is a surface channel.
   [[nodiscard]] std::uint8_t surface_channels() const noexcept { return surface_; }
-  // Free-space channels: their sources are the cells a ground robot can stand on, so the smallest of
-  // their distances at a known cell is how deep inside a mapped obstacle region that cell lies (the
-  // particle filter's obstacle prior). No bit set: no such channels, no prior.
-  void set_free_space(int channel) noexcept {
-    free_ = static_cast<std::uint8_t>(free_ | (1U << static_cast<unsigned>(channel)));
+  // Obstacle channels: their sources are the cells a ground robot cannot enter (region channels, not
+  // surface ones), so the smallest of their distances at a cell is its clearance, as the planner
+  // measures it (the particle filter's obstacle prior). No bit set: no such channels, no prior.
+  void set_obstacle_space(int channel) noexcept {
+    obstacle_ = static_cast<std::uint8_t>(obstacle_ | (1U << static_cast<unsigned>(channel)));
   }
-  [[nodiscard]] std::uint8_t free_space_channels() const noexcept { return free_; }
+  [[nodiscard]] std::uint8_t obstacle_space_channels() const noexcept { return obstacle_; }
 
  private:
   int count_{0};
@@ -97,7 +97,7 @@ class LocalizationChannels {
   double fine_max_bin_m_{0.0};
   std::array<std::uint8_t, 256> sources_{};
   std::uint8_t surface_{0};
-  std::uint8_t free_{0};
+  std::uint8_t obstacle_{0};
   std::array<float, kMaxChannels> weight_{};
   std::array<std::string, kMaxChannels> name_{};
 };
