@@ -262,6 +262,7 @@ class ParticleFilter {
   void resample() noexcept;
   std::size_t kld_count() noexcept;
   void compute_estimate() noexcept;
+  void build_room_table();  // the constructor's: room_ (obstacle_prior.cpp)
   // Obstacle prior: [m] from (x, y) to the nearest cell with obstacle_clearance_m of room from the
   // `obstacle_mask` channels' sources, or unknown (outside the fields is unknown), obstacle_max_depth_m
   // when there is none that near. Exact on the fields' cells (the offset table, nearest first).
