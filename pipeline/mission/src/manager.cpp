@@ -46,12 +46,25 @@ const MissionManager::KnownRegion* MissionManager::region(std::uint32_t id) cons
 }
 
 bool MissionManager::visited_by_anyone(std::uint32_t id) const noexcept {
+  const KnownRegion* r = region(id);
+  return visited_by_anyone(r != nullptr ? *r : KnownRegion{id, 0.0, 0.0, false});
+}
+
+bool MissionManager::visited_by_anyone(const KnownRegion& r) const noexcept {
+  // A mark counts while the region's goal (when it has one) stays within revisit_moved_m of where it was made.
+  const bool by_goal = r.valid && p_.revisit_moved_m > 0.0;
+  const double lim2 = p_.revisit_moved_m * p_.revisit_moved_m;
+  auto covers = [&](const VisitedEntry& e) noexcept {
+    if (e.region_id != r.id) return false;
+    const double dx = static_cast<double>(e.x) - r.x, dy = static_cast<double>(e.y) - r.y;
+    return !by_goal || dx * dx + dy * dy <= lim2;
+  };
   for (std::size_t i = 0; i < visited_.count; ++i)
-    if (visited_.entries[i].region_id == id) return true;
+    if (covers(visited_.entries[i])) return true;
   for (const Peer& q : peers_) {
     if (q.id == comms::kNoRobot) continue;
     for (std::size_t i = 0; i < q.visited.count; ++i)
-      if (q.visited.entries[i].region_id == id) return true;
+      if (covers(q.visited.entries[i])) return true;
   }
   return false;
 }
@@ -202,7 +215,7 @@ bool MissionManager::choose(TimeNs now) noexcept {
   bool best_takeover = false;
   for (std::size_t i = 0; i < n_regions_; ++i) {
     const KnownRegion& r = regions_[i];
-    if (!r.valid || visited_by_anyone(r.id)) continue;
+    if (!r.valid || visited_by_anyone(r)) continue;
     bool taken = false, takeover = false;
     for (const Peer& q : peers_) {
       if (q.id == comms::kNoRobot || !q.has_claim || q.claim.region_id != r.id || q.claim.state != ClaimState::kGoing) continue;
@@ -325,7 +338,7 @@ void MissionManager::tick(TimeNs now) noexcept {
       if (q.id != comms::kNoRobot && q.has_claim && q.claim.state == ClaimState::kGoing && q.claim.region_id == region_ && alive(q, now) &&
           peer_wins(q))
         lost_clash = true;
-    if (r != nullptr) other_visited = visited_by_anyone(region_);
+    if (r != nullptr) other_visited = visited_by_anyone(*r);
     const double d = tracking ? std::hypot(goal_x_ - loc_.pose.x, goal_y_ - loc_.pose.y) : best_dist_;
     if (lost_clash) {
       ++clashes_lost_;
@@ -453,7 +466,7 @@ void MissionManager::update_status(TimeNs now) noexcept {
   for (std::size_t i = 0; i < n_regions_; ++i)
     if (regions_[i].valid) {
       ++known;
-      if (visited_by_anyone(regions_[i].id)) ++vis;
+      if (visited_by_anyone(regions_[i])) ++vis;
     }
   s.regions_known = known;
   s.visited_team = vis;

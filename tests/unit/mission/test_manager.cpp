@@ -141,6 +141,33 @@ TEST(Manager, AVisitIsMarkedTheMarginInsideTheVisitRadius) {
   }
 }
 
+// The map grows a region after its visit (the rest of a row of parked cars is found) and its goal moves:
+// 25 m away, the old mark no longer counts and the robot goes to the new goal; 4 m away, it still counts.
+// With revisit_moved_m = 0 a mark counts for ever (the behaviour before). On the imported study world a
+// visit at the first part of a 35 m row of cars left the row's target unvisited for the rest of the mission.
+TEST(Manager, AVisitedRegionWhoseGoalMovedFarIsVisitedAgain) {
+  for (const auto& [revisit_m, moved_m, visits] : {std::tuple{10.0, 25.0, 2}, std::tuple{10.0, 4.0, 1}, std::tuple{0.0, 25.0, 1}}) {
+    Team t;
+    ManagerParams p = quick();
+    p.revisit_moved_m = revisit_m;
+    t.add(1, 1, 0, 0, p);
+    t.region(3, 10, 0);
+    t.publish_regions();
+    for (int i = 0; i < 100 && t.bots[0].m->own_visited().count == 0; ++i) t.step();
+    ASSERT_EQ(t.bots[0].m->own_visited().count, 1);
+    t.regions[0].goal_x = static_cast<float>(10.0 + moved_m);
+    t.publish_regions();
+    for (int i = 0; i < 300; ++i) t.step();
+    const VisitedRecord& v = t.bots[0].m->own_visited();
+    ASSERT_EQ(v.count, static_cast<std::size_t>(visits)) << "revisit " << revisit_m << " m, goal moved " << moved_m << " m";
+    EXPECT_TRUE(t.bots[0].m->visited_by_anyone(3));
+    if (visits == 2) {
+      EXPECT_NEAR(v.entries[1].x, 10.0 + moved_m, 1.6) << "marked at the new goal";
+      EXPECT_EQ(t.bots[0].m->status().visited_team, 1U);
+    }
+  }
+}
+
 TEST(Manager, ABadlyLocalizedRobotNearTheGoalDoesNotMarkItVisited) {
   Team t;
   t.add(1, 1, 0, 0, quick());

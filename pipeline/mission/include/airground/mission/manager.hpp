@@ -33,6 +33,10 @@ struct ManagerParams {
   // [m] a visit is marked only within visit_radius_m - visit_margin_m (at least half the radius) of the
   // goal: the pose's own error must not carry a mark made at the circle's edge outside it.
   double visit_margin_m{1.5};
+  // [m] A region's goal moves as the map grows it (a long row of parked cars is found one part at a time):
+  // a mark made farther than this from the goal it has now no longer counts, and the region is visited
+  // again. 0 = a mark counts for ever.
+  double revisit_moved_m{10.0};
   double max_sigma_m{1.5};             // [m] a pose less certain than this marks nothing visited
   int max_no_route{5};                 // failed plans in a row for the current goal: failure
   double no_progress_timeout_s{90.0};  // no progress_min_m closer in this long: failure
@@ -112,9 +116,10 @@ class MissionManager {
   [[nodiscard]] ClaimState state() const noexcept { return state_; }
   [[nodiscard]] std::uint32_t current_region() const noexcept { return region_; }
   [[nodiscard]] const VisitedRecord& own_visited() const noexcept { return visited_; }
+  // Someone's visit mark counts for region `id` (within revisit_moved_m of its goal, when it is known).
+  [[nodiscard]] bool visited_by_anyone(std::uint32_t id) const noexcept;
   [[nodiscard]] const ManagerCounters& counters() const noexcept { return c_; }
   [[nodiscard]] const ManagerParams& params() const noexcept { return p_; }
-  [[nodiscard]] bool visited_by_anyone(std::uint32_t region) const noexcept;
   [[nodiscard]] std::size_t regions_known() const noexcept { return n_regions_; }
   [[nodiscard]] std::size_t waypoints_reached() const noexcept { return wp_reached_; }
   [[nodiscard]] std::size_t waypoints_skipped() const noexcept { return wp_skipped_; }
@@ -124,9 +129,10 @@ class MissionManager {
   [[nodiscard]] double mark_radius() const noexcept { return std::max(p_.visit_radius_m - p_.visit_margin_m, 0.5 * p_.visit_radius_m); }
   struct KnownRegion {
     std::uint32_t id{0};
-    double x{0}, y{0};
+    double x{0}, y{0};  // [m] its goal
     bool valid{false};
   };
+  [[nodiscard]] bool visited_by_anyone(const KnownRegion& r) const noexcept;
   struct Peer {
     comms::RobotId id{comms::kNoRobot};
     TimeNs last_heard{0};

@@ -88,6 +88,7 @@ inline constexpr ParamField<ManagerParams> kManagerFields[] = {
     field::real("visit_radius_m", &ManagerParams::visit_radius_m, 0.5, 20.0, "m", "a region is visited when the robot is this close to its goal ..."),
     field::real("max_sigma_m", &ManagerParams::max_sigma_m, 0.1, 50.0, "m", "... while tracking with a pose sigma (largest xy axis) below this"),
     field::real("visit_margin_m", &ManagerParams::visit_margin_m, 0.0, 20.0, "m", "... and is marked only this much inside visit_radius_m (at least half of it): a pose error must not carry the mark outside"),
+    field::real("revisit_moved_m", &ManagerParams::revisit_moved_m, 0.0, 1000.0, "m", "a visit mark this far from the region's goal as it is now no longer counts: visited again (0 = never)"),
     field::integer("max_no_route", &ManagerParams::max_no_route, 1, 1000, "plans", "failed plans in a row for the current goal: the goal failed"),
     field::real("no_progress_timeout_s", &ManagerParams::no_progress_timeout_s, 5.0, 3600.0, "s", "no progress_min_m closer for this long: the goal failed"),
     field::real("progress_min_m", &ManagerParams::progress_min_m, 0.1, 50.0, "m", "what counts as progress"),
