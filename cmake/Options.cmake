@@ -9,6 +9,16 @@ if(AG_SANITIZE)
   target_link_options(airground_options INTERFACE -fsanitize=${AG_SANITIZE})
 endif()
 target_link_libraries(airground_options INTERFACE airground_warnings)
+# Native builds link with LLD when it is installed (tools/deps/debian-packages.txt): GNU ld spent about a
+# sixth of a fresh build's CPU time linking, and LLD links airground-sim 4.5x faster (9.9 -> 2.1 s,
+# the same machine, in turn). The cross build keeps its toolchain's linker.
+option(AG_USE_LLD "link native builds with LLD when it is installed" ON)
+if(AG_USE_LLD AND NOT CMAKE_CROSSCOMPILING)
+  find_program(AG_LLD ld.lld)
+  if(AG_LLD)
+    target_link_options(airground_options INTERFACE -fuse-ld=lld)
+  endif()
+endif()
 
 # A role binary: one static executable per robot role, with a build id (the -dbgsym package files its
 # symbols under /usr/lib/debug/.build-id/, where gdb looks them up).
