@@ -165,19 +165,24 @@ int main() {
   double update_ms_by_bin[2] = {0, 0}, update_min_by_bin[2] = {0, 0}, ref_ratio[2] = {0, 0};
   std::size_t bins_by_bin[2] = {0, 0};
   const double bin_sizes[2] = {4.0, 1.0};
+  // `runs` forced updates of `filter`, each from a fresh Gaussian of `sigma_m` around (2, -1) m off the truth.
+  auto time_updates = [&](ParticleFilter& filter, double sigma_m, int runs) {
+    std::vector<double> times;
+    for (int i = 0; i < runs; ++i) {
+      filter.initialise_gaussian(Pose2{truth.x + 2.0, truth.y - 1.0, truth.yaw + 0.05}, sigma_m, 0.1);
+      const auto start = Clock::now();
+      filter.update(render, fields, true);
+      times.push_back(ms_since(start));
+    }
+    return times;
+  };
   for (int k = 0; k < 2; ++k) {
     ParticleFilterParams fp;
     fp.min_particles = fp.max_particles = 2000;
     ParticleFilter filter(fp, rp, 7);
     render.render(scan, bin_sizes[k]);
     bins_by_bin[k] = render.bins().size();
-    std::vector<double> times;
-    for (int i = 0; i < 30; ++i) {
-      filter.initialise_gaussian(Pose2{truth.x + 2.0, truth.y - 1.0, truth.yaw + 0.05}, 4.0, 0.1);
-      t0 = Clock::now();
-      filter.update(render, fields, true);
-      times.push_back(ms_since(t0));
-    }
+    const std::vector<double> times = time_updates(filter, 4.0, 30);
     update_ms_by_bin[k] = median(times);
     update_min_by_bin[k] = minimum(times);
     // reference on 100 particles, scaled to 2,000
@@ -202,14 +207,7 @@ int main() {
     fp.min_particles = fp.max_particles = 2000;
     if (on == 0) fp.obstacle_penalty_per_m = 0.0;
     ParticleFilter filter(fp, rp, 7);
-    std::vector<double> times;
-    for (int i = 0; i < 20; ++i) {
-      filter.initialise_gaussian(Pose2{truth.x + 2.0, truth.y - 1.0, truth.yaw + 0.05}, 25.0, 0.1);
-      t0 = Clock::now();
-      filter.update(render, fields, true);
-      times.push_back(ms_since(t0));
-    }
-    prior_ms[on] = median(times);
+    prior_ms[on] = median(time_updates(filter, 25.0, 20));
     if (on == 1) penalised = filter.estimate().inside_obstacle / 20;
   }
   std::printf("  filter update, 2000 particles spread 25 m: median %.2f ms with the obstacle prior (%llu particles penalised), "
