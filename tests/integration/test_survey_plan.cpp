@@ -1,6 +1,7 @@
 // airground-sim survey-plan: the exported QGroundControl .plan read back (JSON), its waypoints taken back
 // to the map frame and checked against the route the simulator flies; run's own survey.plan; bad options.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <GeographicLib/LocalCartesian.hpp>
 #include <nlohmann/json.hpp>
@@ -38,10 +39,11 @@ nlohmann::json read_json(const std::string& path) {
   return j;
 }
 
-// The small world every test here uses (generated once per process).
+// The small world every test here uses (generated once per process, into a folder of its own: ctest runs
+// each test as a process, two at once with -j2, and a shared folder raced: "height.png: cannot write").
 const std::string& world_dir() {
   static const std::string w = [] {
-    const std::string dir = tmp("world");
+    const std::string dir = tmp("world-" + std::to_string(::getpid()));
     fs::remove_all(dir);
     const auto gen = run({sim_bin(), "world", "generate", "--seed", "7", "--size", "200", "--targets", "2", "--datum",
                           std::to_string(kLat) + "," + std::to_string(kLon) + "," + std::to_string(kHeight), "--out", dir},
