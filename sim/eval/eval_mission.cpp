@@ -197,6 +197,7 @@ void record_sample(MissionLog& log, const UgvSample& s) {
   if (s.localization_received) x.loc = kLoc[static_cast<int>(s.localization->status) & 3];
   if (s.localization_received) {
     x.have_est = true;
+    x.est = s.localization->pose;
     x.tracking = s.localization->status == LocalizationStatus::kTracking;
     x.err = std::hypot(s.localization->pose.x - s.truth_at_localization.x, s.localization->pose.y - s.truth_at_localization.y);
   }
@@ -239,9 +240,9 @@ void print_status(const MissionLog& log, double t, RoleInstance* uav, std::size_
   for (std::size_t i = 0; i < ugvs; ++i) {
     const Sample& x = log.last_sample[i];
     const mission::MissionStatusMsg& st = log.status[i];
-    std::fprintf(stderr, "  ugv%zu %-10s region %-10d goal (%.0f, %.0f) at (%.0f, %.0f) loc %s err %.1f m sigma %.1f m visited %u failed %u regions %u%s\n", i + 1,
+    std::fprintf(stderr, "  ugv%zu %-10s region %-10d goal (%.0f, %.0f) at (%.0f, %.0f) est (%.0f, %.0f) loc %s err %.1f m sigma %.1f m visited %u failed %u regions %u%s\n", i + 1,
                  mission::to_string(st.state), st.region_id == mission::kNoRegion ? -1 : static_cast<int>(st.region_id), st.goal_x,
-                 st.goal_y, x.truth.x, x.truth.y, x.loc, x.err, st.pose_sigma_m, st.visited_own,
+                 st.goal_y, x.truth.x, x.truth.y, x.est.x, x.est.y, x.loc, x.err, st.pose_sigma_m, st.visited_own,
                  st.failed_own, st.regions_known, log.killed[i] ? " (off)" : "");
   }
 }

@@ -21,6 +21,7 @@ namespace ag::sim::mission_eval {
 struct Sample {
   double t{0};
   Pose2 truth, odom;
+  Pose2 est;             // the robot's published pose (have_est)
   bool have_est{false};  // the robot had published a pose
   bool tracking{false};
   double err{-1};        // [m] its estimate against the truth at the estimate's stamp, tracking or not

@@ -54,4 +54,12 @@ LocalizationChannels LocalizationChannels::two_class(double ground_weight, doubl
   return c;
 }
 
+int LocalizationChannels::add_off_route(Traversability level, const ClassTable& table) {
+  const int k = add_channel("off route", 0.0);
+  for (const ClassInfo& info : table.all())
+    if (info.id != ClassId::kUnknown && static_cast<int>(info.traversability) > static_cast<int>(level)) add_map_source(raw(info.id), k);
+  obstacle_ = static_cast<std::uint8_t>(1U << static_cast<unsigned>(k));
+  return k;
+}
+
 }  // namespace ag::loc

@@ -20,7 +20,9 @@ double ParticleFilter::room_distance_m(const ClassDistanceFields& f, std::uint8_
   const auto c0 = static_cast<std::int64_t>(std::floor((x - f.origin_x()) / res));
   const auto r0 = static_cast<std::int64_t>(std::floor((y - f.origin_y()) / res));
   const auto stride = static_cast<std::size_t>(f.stride());
-  const int clear_q = static_cast<int>(std::ceil(p_.obstacle_clearance_m / f.quantum_m() - 1e-9));
+  // The planner's clearance runs from a cell's centre to the nearest blocked cell's edge, the fields'
+  // from centre to centre: half a cell more here (Roadmap's free_min_edt_).
+  const int clear_q = static_cast<int>(std::ceil((p_.obstacle_clearance_m + 0.5 * res) / f.quantum_m() - 1e-9));
   const double reach = p_.obstacle_max_depth_m / res;
   const double reach2 = std::min(reach * reach, static_cast<double>(kRoomTableCells * kRoomTableCells));
   for (const RoomOffset& o : room_) {
@@ -36,6 +38,12 @@ double ParticleFilter::room_distance_m(const ClassDistanceFields& f, std::uint8_
     if (clearance >= clear_q) return d;
   }
   return p_.obstacle_max_depth_m;
+}
+
+bool ParticleFilter::pose_blocked(const ClassDistanceFields& fields) const noexcept {
+  if (p_.obstacle_penalty_per_m <= 0.0 || est_.status == FilterStatus::kUninitialised) return false;
+  const std::uint8_t mask = fields.channels().obstacle_space_channels();
+  return mask != 0U && room_distance_m(fields, mask, est_.pose.x, est_.pose.y) > p_.obstacle_margin_m;
 }
 
 }  // namespace ag::loc

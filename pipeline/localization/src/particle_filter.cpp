@@ -402,8 +402,11 @@ UpdateReport ParticleFilter::update_impl(const ScanRenderPolar& render, const Cl
   }
   compute_estimate();
   est_.best_cost_m = best;
+  est_.room_m = obstacle_mask != 0U ? room_distance_m(fields, obstacle_mask, est_.pose.x, est_.pose.y) : 0.0;
+  const bool blocked = obstacle_mask != 0U && est_.room_m > p_.obstacle_margin_m;
+  if (blocked) ++est_.blocked_updates;
   const std::uint32_t before = est_.recoveries;
-  update_status(best, cost_valid, roughen);
+  update_status(best, cost_valid, roughen, blocked);
   rep.recovered = est_.recoveries != before;
   set_range_bin();
   return rep;
@@ -511,9 +514,9 @@ void ParticleFilter::set_range_bin() noexcept {
   est_.range_bin_m = range_bin_m_;
 }
 
-void ParticleFilter::update_status(double best_cost, bool cost_valid, bool standing) noexcept {
+void ParticleFilter::update_status(double best_cost, bool cost_valid, bool standing, bool blocked) noexcept {
   if (est_.status == FilterStatus::kTracking) {
-    const bool bad = est_.spread_m > p_.lost_spread_m ||
+    const bool bad = blocked || est_.spread_m > p_.lost_spread_m ||
                      (cost_valid && cost_level_valid_ &&
                       best_cost > std::max(p_.lost_cost_min_m, p_.lost_cost_ratio * est_.cost_level_m));
     if (!bad) {
@@ -532,7 +535,7 @@ void ParticleFilter::update_status(double best_cost, bool cost_valid, bool stand
     est_.status = FilterStatus::kLost;
     attempt_ = 0;
   } else {
-    converged_count_ = est_.spread_m < p_.converged_spread_m && cost_valid ? converged_count_ + 1 : 0;
+    converged_count_ = est_.spread_m < p_.converged_spread_m && cost_valid && !blocked ? converged_count_ + 1 : 0;
     if (converged_count_ >= (standing ? p_.lost_standing_converged_updates : p_.converged_updates)) {
       est_.status = FilterStatus::kTracking;
       est_.cost_level_m = best_cost;

@@ -48,7 +48,7 @@ void SemanticLocalizer::fill(LocalizationMsg& m) const noexcept {
 
 UpdateReport SemanticLocalizer::on_scan(std::span<const ScanPoint> labelled, const ClassDistanceFields& fields, TimeNs stamp) noexcept {
   const bool moved = filter_.wants_update();
-  if (!moved && !standing_update_due()) return {};
+  if (!moved && !standing_update_due(fields)) return {};
   render_.render(labelled, filter_.range_bin_m());
   const UpdateReport rep = moved ? filter_.update(render_, fields) : filter_.update_standing(render_, fields);
   if (rep.updated) {

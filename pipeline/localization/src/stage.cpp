@@ -34,8 +34,10 @@ Status LocalizationStage::init(StageContext& ctx) {
   LocalizationStageSettings own = load_params(v, kLocalizationStageOwnParams);
   load_params(v, std::span<const ParamField<LocalizationStageSettings>>(kLocalizationLabelsParam), own);
   geometric_ = own.labels == ScanLabels::kGeometric;
-  const LocalizationChannels channels =
+  LocalizationChannels channels =
       geometric_ ? LocalizationChannels::two_class(1.0, 1.5, p.fields.obstacle_faces) : LocalizationChannels::per_class();
+  if (p.filter.obstacle_penalty_per_m > 0.0 && p.filter.obstacle_traversable != Traversability::kBlocked)
+    channels.add_off_route(p.filter.obstacle_traversable);  // the obstacle prior's room is the planner's free space
   if (geometric_) labeller_ = std::make_unique<GeometricLabeller>(p.label, 128, 2048);
   else labeller_ = std::make_unique<GroundTruthLabeller>();
   const TileExtent extent = tiles_covering(area, kMapResolutionM, kTileCells);
@@ -146,7 +148,7 @@ void LocalizationStage::take_scan(LidarScanMsg& scan) noexcept {
     ++c_.scans_before_map;
     return;
   }
-  if (!loc_->wants_scan()) {
+  if (!loc_->wants_scan(*fields_)) {
     ++c_.scans_skipped_standing;
     return;
   }

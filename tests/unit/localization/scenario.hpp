@@ -41,7 +41,7 @@ inline ScenarioResult run_scenario(SemanticLocalizer& loc, const SyntheticWorld&
   for (std::size_t k = 0; k < truth.size(); ++k) {
     if (k > 0) dist += std::hypot(truth[k].pose.x - truth[k - 1].pose.x, truth[k].pose.y - truth[k - 1].pose.y);
     loc.on_odometry(odom[k], truth[k].stamp);
-    if (loc.wants_scan()) {
+    if (loc.wants_scan(fields)) {
       ray_cast(w, truth[k].pose, lidar, seed * 100003ULL + k, scan);
       labeller.label(scan, lidar.rings, lidar.columns);
       loc.on_scan(scan, fields, truth[k].stamp);

@@ -59,7 +59,7 @@ TEST(NoAllocation, LabellingRenderingFilteringFusingAndFieldUpdates) {
     geometric.label(geo, test::LidarModel{}.rings, test::LidarModel{}.columns);
     for (std::size_t k = 1; k < truth.size(); ++k) {
       loc.on_odometry(odom[k], truth[k].stamp);
-      if (loc.wants_scan()) {
+      if (loc.wants_scan(fields)) {
         std::vector<ScanPoint>& scan = scans[k / 3];
         gt.label(scan, test::LidarModel{}.rings, test::LidarModel{}.columns);
         updates += loc.on_scan(scan, fields, truth[k].stamp).updated ? 1U : 0U;

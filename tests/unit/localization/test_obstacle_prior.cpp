@@ -16,26 +16,28 @@ namespace {
 using test::LidarModel;
 using test::SyntheticWorld;
 
-bool is_obstacle(std::uint8_t k) {
-  return k == raw(ClassId::kTree) || k == raw(ClassId::kBuilding) || k == raw(ClassId::kVehicle);
+bool routable(std::uint8_t k, Traversability level) {
+  return static_cast<int>(ClassTable::builtin().info(static_cast<ClassId>(k)).traversability) <= static_cast<int>(level);
 }
 
 // The room a robot has on each cell, by brute force over the class raster: true on an unknown cell, and on
-// a known cell at least `clearance` (cell centre to cell centre) from every obstacle and unknown cell (the
-// two-class obstacle channel, whose sources include the unknown).
-std::vector<char> room_grid(const SyntheticWorld& w, double clearance) {
+// a cell of a class up to `level` (the planner's traversable) at least `clearance` from every cell of a
+// class above it and every unknown cell (the off-route channel, whose sources include the unknown), from
+// the cell's centre to the other's edge, as the planner measures it: centre to centre, half a cell more.
+std::vector<char> room_grid(const SyntheticWorld& w, double clearance, Traversability level) {
   std::vector<char> room(w.cls.size(), 0);
-  const int reach = static_cast<int>(std::ceil(clearance / w.resolution));
+  const double centres = clearance + 0.5 * w.resolution;
+  const int reach = static_cast<int>(std::ceil(centres / w.resolution));
   for (int r = 0; r < w.height; ++r)
     for (int c = 0; c < w.width; ++c) {
       const std::uint8_t k = w.cls[w.index(c, r)];
-      bool ok = k == raw(ClassId::kUnknown) || !is_obstacle(k);
+      bool ok = k == raw(ClassId::kUnknown) || routable(k, level);
       if (k != raw(ClassId::kUnknown))
         for (int dr = -reach; ok && dr <= reach; ++dr)
           for (int dc = -reach; ok && dc <= reach; ++dc) {
-            if (std::hypot(dc, dr) * w.resolution >= clearance - 1e-9) continue;
+            if (std::hypot(dc, dr) * w.resolution >= centres - 1e-9) continue;
             const std::uint8_t n = w.inside(c + dc, r + dr) ? w.cls[w.index(c + dc, r + dr)] : raw(ClassId::kUnknown);
-            if (n == raw(ClassId::kUnknown) || is_obstacle(n)) ok = false;
+            if (n == raw(ClassId::kUnknown) || !routable(n, level)) ok = false;
           }
       room[w.index(c, r)] = ok ? 1 : 0;
     }
@@ -64,6 +66,15 @@ TEST(ObstaclePrior, ObstacleChannelsAreTheRegionsOfTheClassesARobotCannotEnter) 
     const bool blocked = per.name(k) == "tree" || per.name(k) == "building" || per.name(k) == "vehicle" || per.name(k) == "water";
     EXPECT_EQ(obstacle, blocked) << per.name(k);
   }
+  // The planner's free space instead: one channel, off the route classes, replaces them.
+  LocalizationChannels routed = LocalizationChannels::two_class();
+  const int off = routed.add_off_route(Traversability::kRough);
+  EXPECT_EQ(routed.obstacle_space_channels(), 1U << off);
+  EXPECT_EQ(routed.weight(off), 0.0F) << "it is not matched against the scan";
+  for (const ClassId id : {ClassId::kGrass, ClassId::kWater, ClassId::kTree, ClassId::kBuilding, ClassId::kVehicle})
+    EXPECT_TRUE((routed.map_sources(raw(id)) >> off) & 1U) << "class " << static_cast<int>(raw(id));
+  for (const ClassId id : {ClassId::kRoad, ClassId::kDirt}) EXPECT_FALSE((routed.map_sources(raw(id)) >> off) & 1U);
+  for (std::uint8_t label = 0; label < 255; ++label) EXPECT_NE(routed.scan_channel(label), off);
 }
 
 // Beside the robot's road: a 30 m building block, a 28 m tree block that the map speckles with one-cell
@@ -80,7 +91,8 @@ TEST(ObstaclePrior, AParticleFarFromRoomLosesThePenaltyPerMetreBeyondTheMarginAn
     for (double x = truth.x - 35.0; x < truth.x - 9.0; x += 1.5) w.fill_rect(x, y, x + 0.5, y + 0.5, ClassId::kGrass, 0.0F);
   SyntheticWorld aerial = w;
   aerial.fill_rect(truth.x - 20.0, truth.y - 7.0, truth.x - 6.0, truth.y + 7.0, ClassId::kUnknown, 0.0F);
-  const LocalizationChannels ch = LocalizationChannels::two_class();
+  LocalizationChannels ch = LocalizationChannels::two_class();
+  ch.add_off_route(ParticleFilterParams{}.obstacle_traversable);  // as the stage does
   ClassDistanceFields fields(DistanceFieldParams{}, ch, aerial.extent());
   test::load_world(aerial, fields);
   std::vector<ScanPoint> scan;
@@ -111,7 +123,7 @@ TEST(ObstaclePrior, AParticleFarFromRoomLosesThePenaltyPerMetreBeyondTheMarginAn
   }
   ASSERT_EQ(logw[0].size(), logw[1].size());
   // The normalisation moves every log weight by the same amount: measure it on the particles with no prior.
-  const std::vector<char> room = room_grid(aerial, p.obstacle_clearance_m);
+  const std::vector<char> room = room_grid(aerial, p.obstacle_clearance_m, p.obstacle_traversable);
   std::vector<double> depth(where.size());
   double shift = 0.0;
   int free = 0, deep = 0, on_unknown = 0, in_wood = 0;

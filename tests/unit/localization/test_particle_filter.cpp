@@ -50,7 +50,7 @@ ScenarioResult run(const World& world, const LocalizationChannels& ch, ScanLabel
 void drive_step(SemanticLocalizer& loc, const World& world, const ClassDistanceFields& fields, ScanLabeller& labeller, std::size_t k,
                 std::vector<ScanPoint>& scan) {
   loc.on_odometry(world.odom[k], world.truth[k].stamp);
-  if (!loc.wants_scan()) return;
+  if (!loc.wants_scan(fields)) return;
   test::ray_cast(world.w, world.truth[k].pose, LidarModel{}, k, scan);
   labeller.label(scan, LidarModel{}.rings, LidarModel{}.columns);
   loc.on_scan(scan, fields, world.truth[k].stamp);
@@ -65,7 +65,7 @@ double stand_until_tracking(SemanticLocalizer& loc, const World& world, const Cl
   for (int i = 1; i <= static_cast<int>(seconds * 10.0); ++i) {
     const TimeNs t = at.stamp + from_seconds(i / 10.0);
     loc.on_odometry(world.odom[k - 1], t);
-    if (loc.wants_scan()) {
+    if (loc.wants_scan(fields)) {
       test::ray_cast(world.w, at.pose, LidarModel{}, k + static_cast<std::size_t>(i), scan);
       labeller.label(scan, LidarModel{}.rings, LidarModel{}.columns);
       loc.on_scan(scan, fields, t);
@@ -231,7 +231,7 @@ TEST(ParticleFilter, StandingStillPublishesAFixedYaw) {
     double yaw_at_stop = 0.0, max_turn = 0.0;
     for (std::size_t k = 0; k < truth.size(); ++k) {
       loc.on_odometry(odom[k], truth[k].stamp);
-      if (loc.wants_scan()) {
+      if (loc.wants_scan(fields)) {
         test::ray_cast(w, truth[k].pose, LidarModel{}, k, scan);
         gt.label(scan, LidarModel{}.rings, LidarModel{}.columns);
         loc.on_scan(scan, fields, truth[k].stamp);
@@ -439,7 +439,7 @@ TEST(ParticleFilter, ParticleCountAdaptsBetweenMinAndMax) {
   std::size_t smallest = loc.filter().size();
   for (std::size_t k = 0; k < world.truth.size(); ++k) {
     loc.on_odometry(world.odom[k], world.truth[k].stamp);
-    if (!loc.wants_scan()) continue;
+    if (!loc.wants_scan(fields)) continue;
     test::ray_cast(world.w, world.truth[k].pose, LidarModel{}, k, scan);
     gt.label(scan, LidarModel{}.rings, LidarModel{}.columns);
     loc.on_scan(scan, fields, world.truth[k].stamp);
@@ -465,14 +465,14 @@ TEST(ParticleFilter, NoUpdateAndNoNoiseWhileStandingStill) {
   SemanticLocalizer loc(LocalizerParams{}, ch, 3);
   loc.on_odometry(Pose2{}, 0);
   loc.initialise_gaussian(truth, 2.0, 0.05, 0);
-  EXPECT_TRUE(loc.wants_scan()) << "one update at the start";
+  EXPECT_TRUE(loc.wants_scan(fields)) << "one update at the start";
   EXPECT_TRUE(loc.on_scan(scan, fields, 0).updated);
   std::vector<Pose2> before;
   for (std::size_t i = 0; i < loc.filter().size(); ++i) before.push_back(loc.filter().particle(i));
   // 60 s of standing, with a drifting yaw
   for (int k = 1; k <= 600; ++k) {
     loc.on_odometry(Pose2{0.0, 0.0, 0.001 * k / 10.0}, from_seconds(k / 10.0));
-    EXPECT_FALSE(loc.wants_scan());
+    EXPECT_FALSE(loc.wants_scan(fields));
     EXPECT_FALSE(loc.on_scan(scan, fields, from_seconds(k / 10.0)).updated);
   }
   ASSERT_EQ(before.size(), loc.filter().size());
@@ -482,7 +482,7 @@ TEST(ParticleFilter, NoUpdateAndNoNoiseWhileStandingStill) {
   }
   // a real turn in place is motion
   for (int k = 1; k <= 10; ++k) loc.on_odometry(Pose2{0.0, 0.0, 0.06 + 0.03 * k}, from_seconds(60.0 + k / 10.0));
-  EXPECT_TRUE(loc.wants_scan());
+  EXPECT_TRUE(loc.wants_scan(fields));
   // the channel's message
   LocalizationMsg m;
   loc.fill(m);
@@ -506,7 +506,7 @@ TEST(ParticleFilter, DeterministicForASeed) {
     std::vector<ScanPoint> scan;
     for (std::size_t k = 0; k < 400; ++k) {
       loc.on_odometry(world.odom[k], world.truth[k].stamp);
-      if (!loc.wants_scan()) continue;
+      if (!loc.wants_scan(fields)) continue;
       test::ray_cast(world.w, world.truth[k].pose, LidarModel{}, k, scan);
       gt.label(scan, LidarModel{}.rings, LidarModel{}.columns);
       loc.on_scan(scan, fields, world.truth[k].stamp);

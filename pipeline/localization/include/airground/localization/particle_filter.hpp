@@ -33,6 +33,7 @@
 
 #include "airground/platform/rng.hpp"
 #include "airground/messages/geometry.hpp"
+#include "airground/messages/classes.hpp"
 #include "airground/localization/class_distance_fields.hpp"
 #include "airground/localization/polar_render.hpp"
 #include "airground/platform/config.hpp"
@@ -116,6 +117,12 @@ struct ParticleFilterParams {
   double obstacle_margin_m{2.0};      // [m] the planner's snap radius
   double obstacle_penalty_per_m{1.0}; // [1/m] 0 = no prior
   double obstacle_max_depth_m{6.0};   // [m] the search for room stops here (and so does the penalty)
+  // ... where room is measured from the classes the planner does not route over (its `traversable`;
+  // the stage adds LocalizationChannels::add_off_route for it), or with kBlocked ("any") from the
+  // obstacle classes alone. The imported world's wood, whose clearings ErfNet's map labels grass, has
+  // clearance enough between the crowns but no road: a pose there converged "tracking" where the planner
+  // found no free cell near the start.
+  Traversability obstacle_traversable{Traversability::kRough};
 };
 
 inline constexpr ParamField<ParticleFilterParams> kParticleFilterFields[] = {
@@ -172,6 +179,10 @@ inline constexpr ParamField<ParticleFilterParams> kParticleFilterFields[] = {
                 "... beyond it, log weight lost per metre at each update (0 = no prior)"),
     field::real("pf_obstacle_max_depth_m", &ParticleFilterParams::obstacle_max_depth_m, 0.5, 15.0, "m",
                 "... up to this distance from room (the search stops there)"),
+    field::choice<&ParticleFilterParams::obstacle_traversable>(
+        "pf_obstacle_traversable", "free|rough|costly|any",
+        {Traversability::kFree, Traversability::kRough, Traversability::kCostly, Traversability::kBlocked},
+        "... room is clearance from the classes above this level (the planner's traversable; any = from obstacles only)"),
 };
 inline constexpr auto kParticleFilterParamSpecs = param_specs(kParticleFilterFields);
 ParticleFilterParams load_particle_filter_params(const SectionView& s);
@@ -197,6 +208,12 @@ struct FilterEstimate {
   std::uint32_t recoveries{0};         // re-spreads after divergence (total)
   std::uint64_t outside_area{0};       // particles found outside the mission area at an update (total; no weight)
   std::uint64_t inside_obstacle{0};    // particles found beyond the obstacle margin from room at an update (total; penalised)
+  // The pose check (obstacle prior on): [m] from the mean pose to the nearest cell with room, at the last
+  // update (0 with the prior off). Beyond obstacle_margin_m the pose is one the robot cannot hold (the
+  // planner cannot start from it either): it does not converge there, and tracking there is lost after
+  // lost_updates such updates.
+  double room_m{0};
+  std::uint64_t blocked_updates{0};    // updates whose mean pose had no room (total)
 };
 
 struct UpdateReport {
@@ -247,6 +264,10 @@ class ParticleFilter {
 
   // The known-cell cost of one pose (no yaw shifts) [m], and the share of the render on known cells:
   // for tests and diagnostics.
+  // The mean pose lies farther than obstacle_margin_m from any cell with room in `fields` (as the map is
+  // now; false with the obstacle prior off): SemanticLocalizer re-checks a standing, tracking robot so.
+  [[nodiscard]] bool pose_blocked(const ClassDistanceFields& fields) const noexcept;
+
   [[nodiscard]] double pose_cost(const Pose2& pose, const ScanRenderPolar& render, const ClassDistanceFields& fields,
                                  double* known_fraction = nullptr) noexcept;
 
@@ -268,7 +289,7 @@ class ParticleFilter {
   // when there is none that near. Exact on the fields' cells (the offset table, nearest first).
   [[nodiscard]] double room_distance_m(const ClassDistanceFields& f, std::uint8_t obstacle_mask, double x, double y) const noexcept;
   static constexpr int kRoomTableCells = 32;  // 16 m on 0.5 m cells, 8 m on 0.25 m
-  void update_status(double best_cost, bool cost_valid, bool standing) noexcept;
+  void update_status(double best_cost, bool cost_valid, bool standing, bool blocked) noexcept;
   void respread(const Pose2& centre, double sigma_xy, double sigma_yaw) noexcept;
   void set_range_bin() noexcept;
 
@@ -292,7 +313,7 @@ class ParticleFilter {
     std::int16_t dc, dr;  // [cells]
     std::int32_t d2;      // [cells^2]
   };
-  std::vector<RoomOffset> room_;  // obstacle prior: the cell offsets within kRoomTableCells, nearest first  // per shift: score, known share, known cost
+  std::vector<RoomOffset> room_;  // obstacle prior: the cell offsets within kRoomTableCells, nearest first
   Pose2 pending_{};           // accumulated motion since the last update (body frame then)
   double pending_dist_{0};    // [m] path length
   double pending_turn_{0};    // [rad] total |dyaw|

@@ -89,6 +89,12 @@ class LocalizationChannels {
     obstacle_ = static_cast<std::uint8_t>(obstacle_ | (1U << static_cast<unsigned>(channel)));
   }
   [[nodiscard]] std::uint8_t obstacle_space_channels() const noexcept { return obstacle_; }
+  // Adds the "off route" channel (weight 0, no scan label counts into it): its sources are the classes of
+  // `table` above `level` (the planner's traversable), and it becomes the only obstacle channel. Its
+  // distance at a cell is then the planner's own clearance (to the nearest cell it does not route over),
+  // so the obstacle prior's room is the planner's free space: on the imported world's wood, whose
+  // clearings ErfNet's map labels grass, the obstacle channels alone left room between the crowns.
+  int add_off_route(Traversability level, const ClassTable& table = ClassTable::builtin());
 
  private:
   int count_{0};

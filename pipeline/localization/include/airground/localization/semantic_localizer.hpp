@@ -48,9 +48,12 @@ class SemanticLocalizer {
   // scan's time before on_scan().
   void on_odometry(const Pose2& odom, TimeNs stamp) noexcept;
   // The robot moved enough since the last update for a scan to be worth labelling and matching, or it is
-  // lost (or still converging after converging_standing_after_m of driving) and lost_standing_update_s
-  // passed since the last update (at the last odometry stamp).
-  [[nodiscard]] bool wants_scan() const noexcept { return filter_.wants_update() || standing_update_due(); }
+  // lost (or still converging after converging_standing_after_m of driving, or tracking at a pose that
+  // `fields` now say it cannot hold: ParticleFilter::pose_blocked) and lost_standing_update_s passed since
+  // the last update (at the last odometry stamp).
+  [[nodiscard]] bool wants_scan(const ClassDistanceFields& fields) const noexcept {
+    return filter_.wants_update() || standing_update_due(fields);
+  }
   // A labelled scan (sensor frame). Renders it and updates the filter when wants_scan(); never allocates.
   UpdateReport on_scan(std::span<const ScanPoint> labelled, const ClassDistanceFields& fields, TimeNs stamp) noexcept;
 
@@ -79,10 +82,16 @@ class SemanticLocalizer {
   TimeNs last_stamp_{0};
   TimeNs last_update_stamp_{0};
 
-  [[nodiscard]] bool standing_update_due() const noexcept {
-    const bool stuck = filter_.status() == FilterStatus::kLost ||
-                       (filter_.status() == FilterStatus::kInitialising && filter_.driven_m() >= p_.filter.converging_standing_after_m);
-    return stuck && p_.filter.lost_standing_update_s > 0.0 && last_stamp_ - last_update_stamp_ >= from_seconds(p_.filter.lost_standing_update_s);
+  [[nodiscard]] bool standing_update_due(const ClassDistanceFields& fields) const noexcept {
+    if (p_.filter.lost_standing_update_s <= 0.0 || last_stamp_ - last_update_stamp_ < from_seconds(p_.filter.lost_standing_update_s))
+      return false;
+    switch (filter_.status()) {
+      case FilterStatus::kLost: return true;
+      case FilterStatus::kInitialising: return filter_.driven_m() >= p_.filter.converging_standing_after_m;
+      case FilterStatus::kTracking: return filter_.pose_blocked(fields);  // the map filled in under it
+      case FilterStatus::kUninitialised: return false;
+    }
+    return false;
   }
 };
 
