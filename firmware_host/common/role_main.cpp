@@ -16,6 +16,7 @@
 #include "airground/platform/service.hpp"
 #include "airground_version.hpp"
 #include "sensor_labels_check.hpp"
+#include "stage_agreement_check.hpp"
 
 namespace ag {
 
@@ -129,6 +130,8 @@ int run_role(const RoleDescription& role, int argc, char** argv) {
     return 2;
   }
   for (const std::string& w : sensor_label_warnings(cfg))  // before the logger starts: straight to stderr
+    std::fprintf(stderr, "airground-%s: warning: %s\n", rname.c_str(), w.c_str());
+  for (const std::string& w : stage_agreement_warnings(cfg))
     std::fprintf(stderr, "airground-%s: warning: %s\n", rname.c_str(), w.c_str());
   if (check_config) {
     std::printf("%s: valid\n", config_path.empty() ? "built-in defaults" : config_path.c_str());

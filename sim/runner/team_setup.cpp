@@ -17,6 +17,7 @@
 #include "airground/sim/survey_plan.hpp"
 #include "roles.hpp"
 #include "sensor_labels_check.hpp"
+#include "stage_agreement_check.hpp"
 #include "sim_probes.hpp"
 
 namespace ag::sim::lockstep {
@@ -479,6 +480,11 @@ Result<const Config*> RoleFactory::configure(const RoleDescription& role, const 
   for (const auto& kv : extra)
     if (auto st = c.set(kv, what); !st) return st.error();
   if (auto st = check_sensor_labels(c, origin + " with the simulator's settings and the " + what); !st) return st.error();
+  for (std::string& w : stage_agreement_warnings(c))
+    if (std::find(warned_.begin(), warned_.end(), w) == warned_.end()) {
+      std::fprintf(stderr, "airground-sim: warning: %.*s: %s\n", static_cast<int>(role.name.size()), role.name.data(), w.c_str());
+      warned_.push_back(std::move(w));
+    }
   // The simulated camera gives what a V4L2 one gives, RGB: classes only in the ablation the user names.
   if (!opt_.oracle("labels") && c.has("segmentation.labels") && c.get_text("segmentation.labels") == "gt" && c.get_text("camera.source") == "sim")
     return Error::make(ErrorCode::kConfig, "config error: " + origin + " with the simulator's settings and the " + what +

@@ -78,6 +78,7 @@ class RoleFactory {
   const RunOptions& opt_;
   SimClock& clock_;
   std::vector<Config>& configs_;
+  std::vector<std::string> warned_;  // stage-agreement warnings already printed (once per run, not per robot)
 };
 
 // The quadrotor: its vehicle on the survey route, its sensors, and its role. Returns the route's

@@ -114,6 +114,22 @@ TEST(RoleBinaryErrors, LabelsTheSensorsCannotGiveExit2NamingTheKeys) {
   EXPECT_EQ(shipped.err.find("warning"), std::string::npos) << "the shipped configuration warns of nothing: " << shipped.err;
 }
 
+// The localizer's obstacle prior models the planner's free space: a narrower level is said at start-up.
+TEST(RoleBinaryErrors, ALocalizerRoomNarrowerThanThePlannersRoutesIsSaidAtStart) {
+  const std::string cfg = source_dir() + "/firmware_host/ugv/ugv.yaml";
+  const auto narrower = run({role_bin("ugv"), "--config", cfg, "--set", "planner.traversable=costly", "--check-config"});
+  EXPECT_EQ(narrower.exit_code, 0) << narrower.err;
+  EXPECT_NE(narrower.err.find("warning: localization.pf_obstacle_traversable: rough is narrower than planner.traversable: costly"),
+            std::string::npos)
+      << narrower.err;
+  const auto equal = run({role_bin("ugv"), "--config", cfg, "--set", "planner.traversable=costly", "--set",
+                          "localization.pf_obstacle_traversable=costly", "--check-config"});
+  EXPECT_EQ(equal.err.find("warning"), std::string::npos) << equal.err;
+  const auto no_prior = run({role_bin("ugv"), "--config", cfg, "--set", "planner.traversable=costly", "--set",
+                             "localization.pf_obstacle_penalty_per_m=0", "--check-config"});
+  EXPECT_EQ(no_prior.err.find("warning"), std::string::npos) << no_prior.err;
+}
+
 TEST(RoleBinaryErrors, MissingConfigFileAndBadOptionsExit2) {
   const auto missing = run({role_bin("uav"), "--config", "/nonexistent/uav.yaml"});
   EXPECT_EQ(missing.exit_code, 2);
