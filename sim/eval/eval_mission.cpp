@@ -18,6 +18,7 @@
 #include "airground/platform/role_instance.hpp"
 #include "airground/sim/eval_scoring.hpp"
 #include "airground/sim/generator.hpp"
+#include "airground/sim/survey_plan.hpp"
 #include "airground/sim/uav_replay.hpp"
 #include "mission_log.hpp"
 
@@ -448,13 +449,22 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
   auto world = resolve_world(o.world);
   if (!world) return world.error();
   const World& w = *world.value();
-  const std::vector<TargetCluster> targets = mission_targets(o.world);
   std::error_code ec;
   fs::create_directories(fs::path(o.out_dir) / "maps", ec);
   if (ec) return Error::make(ErrorCode::kIo, "cannot create " + o.out_dir + ": " + ec.message());
 
   const int n = o.ugvs;
   RunOptions r = team_run_options(o, w, mf.value());
+  std::vector<int> outside;
+  const MapRect surveyed = survey_area(w, UavSurveyOptions{r.uav_altitude_m, r.survey_overlap, r.uav_speed_mps, r.survey_margin_m, r.survey_x0,
+                                                            r.survey_y0, r.survey_x1, r.survey_y1});
+  const std::vector<TargetCluster> targets = targets_in_area(mission_targets(o.world), surveyed, outside);
+  if (!outside.empty()) {
+    std::string ids;
+    for (const int id : outside) ids += (ids.empty() ? "" : ", ") + std::to_string(id);
+    std::fprintf(stderr, "airground-sim mission: the world's target%s %s %s no car in the surveyed area (x %.0f..%.0f, y %.0f..%.0f m): not scored\n",
+                 outside.size() > 1 ? "s" : "", ids.c_str(), outside.size() > 1 ? "have" : "has", surveyed.x0, surveyed.x1, surveyed.y0, surveyed.y1);
+  }
   MissionLog log(static_cast<std::size_t>(n), o.status_period_s);
   watch_mission(r, log, o);
   const auto wall0 = std::chrono::steady_clock::now();
@@ -471,6 +481,8 @@ Result<MissionMetrics> run_mission(const MissionOptions& options, const Progress
   const RunSummary& sum = run.value();
 
   MissionMetrics m = score_run(sum, targets, log, n);
+  m.targets_outside_survey = static_cast<std::uint32_t>(outside.size());
+  m.outside_survey_ids = outside;
   const VisitJudgement judged = judge_visits(targets, log, m);
   score_robots(sum, log, judged, n, m);
   if (!log.raster.cls.empty()) m.map_class_accuracy = class_accuracy(w, log.raster);

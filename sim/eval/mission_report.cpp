@@ -159,6 +159,7 @@ bool write_mission_metrics(const fs::path& out, const MissionOptions& o, const M
   RunOptions oracle_list;
   oracle_list.oracles = o.oracles;
   j << "{\n  \"oracles\": " << oracle_list.oracles_json() << ",\n  \"targets_total\": " << m.targets_total << ",\n  \"targets_visited\": " << m.targets_visited
+    << ",\n  \"targets_outside_survey\": " << m.targets_outside_survey
     << ",\n  \"regions_found\": " << m.regions_found << ",\n  \"regions_visited\": " << m.regions_visited
     << ",\n  \"mission_time_s\": " << m.mission_time_s << ",\n  \"completed\": " << (m.completed ? "true" : "false")
     << ",\n  \"time_cap_s\": " << m.time_cap_s << ",\n  \"survey_estimate_s\": " << m.survey_estimate_s
@@ -215,6 +216,12 @@ bool write_mission_report(const fs::path& out, const MissionOptions& o, const Mi
      << (m.completed ? "Every robot finished and returned to its start." : "The mission hit the time cap before every robot finished.")
      << " The survey was estimated at " << static_cast<int>(std::lround(m.survey_estimate_s)) << " s with its return; the cap was "
      << static_cast<int>(std::lround(m.time_cap_s)) << " s.\n\n";
+  if (!m.outside_survey_ids.empty()) {
+    md << "Not scored: the world's target" << (m.outside_survey_ids.size() > 1 ? "s " : " ");
+    for (std::size_t i = 0; i < m.outside_survey_ids.size(); ++i) md << (i > 0 ? ", " : "") << m.outside_survey_ids[i];
+    md << (m.outside_survey_ids.size() > 1 ? " have" : " has") << " no car in the area the quadrotor surveys, so "
+       << (m.outside_survey_ids.size() > 1 ? "they are" : "it is") << " not part of the mission.\n\n";
+  }
   if (m.uav_replay.mode == "replayed")
     md << "The quadrotor's mapping was replayed from `" << m.uav_replay.file << "` (recorded live with the same key"
        << (m.uav_replay.build.empty() ? std::string() : " by the build `" + m.uav_replay.build + "`") << "; its comms stage and flight ran live"

@@ -65,4 +65,15 @@ VisitVerdict judge_visit(double true_x, double true_y, double goal_x, double goa
   return region_near_target ? VisitVerdict::kTrue : VisitVerdict::kNonTarget;
 }
 
+std::vector<TargetCluster> targets_in_area(std::span<const TargetCluster> all, const MapRect& area, std::vector<int>& outside) {
+  std::vector<TargetCluster> in;
+  for (const TargetCluster& t : all) {
+    bool inside = area.contains(t.x, t.y);
+    for (const Pose2& c : t.car_poses) inside = inside || area.contains(c.x, c.y);
+    if (inside) in.push_back(t);
+    else outside.push_back(t.id);
+  }
+  return in;
+}
+
 }  // namespace ag::sim

@@ -26,6 +26,22 @@ TEST(VisitScoring, ATrueVisitToARegionWithNoTargetIsCountedApart) {
   EXPECT_STREQ(verdict_name(VisitVerdict::kNonTarget), "non_target");
 }
 
+// A target counts when any of its cars lies in the surveyed area, even with its centre outside; one with
+// every car outside is not part of the mission.
+TEST(TargetScoring, OnlyTargetsWithACarInTheSurveyedAreaAreScored) {
+  const MapRect survey{-80.0, -80.0, 80.0, 80.0};
+  std::vector<TargetCluster> world(3);
+  world[0] = {1, 10.0, 10.0, 1, {Pose2{10.0, 10.0, 0.0}}};
+  world[1] = {2, -81.0, 0.0, 2, {Pose2{-84.0, 0.0, 0.0}, Pose2{-78.0, 0.0, 0.0}}};  // straddles the edge
+  world[2] = {6, -56.6, 84.1, 2, {Pose2{-56.6, 81.5, 0.0}, Pose2{-56.6, 86.7, 0.0}}};  // the imported world's
+  std::vector<int> outside;
+  const std::vector<TargetCluster> in = targets_in_area(world, survey, outside);
+  ASSERT_EQ(in.size(), 2U);
+  EXPECT_EQ(in[0].id, 1);
+  EXPECT_EQ(in[1].id, 2);
+  EXPECT_EQ(outside, std::vector<int>{6});
+}
+
 TEST(LocErrorScoring, SamplesBeforeTheFirstGoodOneAreNotScored) {
   LocErrorScore s(3.0);
   const std::vector<LocErrorSample> v{{false, false, -1}, lost(15.0), tracking(8.0), tracking(1.0), tracking(2.0)};

@@ -69,6 +69,10 @@ struct MissionRobot {
 
 struct MissionMetrics {
   std::uint32_t targets_total{0}, targets_visited{0};
+  // The world's targets with no car in the area the quadrotor surveys (an imported map's cluster in the
+  // survey's border): not part of the mission, so not in targets_total; their ids are in the report.
+  std::uint32_t targets_outside_survey{0};
+  std::vector<int> outside_survey_ids;
   std::uint32_t regions_found{0}, regions_visited{0};
   double mission_time_s{0};        // [s] until every robot still running was back (or the cap)
   bool completed{false};           // every running robot finished its mission before the cap

@@ -6,6 +6,9 @@
 #include <span>
 #include <vector>
 
+#include "airground/messages/geometry.hpp"
+#include "airground/sim/generator.hpp"
+
 namespace ag::sim {
 
 // One sample of a robot's own pose estimate against the truth.
@@ -50,5 +53,9 @@ enum class VisitVerdict {
 // true_x/true_y: the robot's true position at the moment it marked the visit.
 [[nodiscard]] VisitVerdict judge_visit(double true_x, double true_y, double goal_x, double goal_y, double visit_radius_m,
                                        bool region_near_target) noexcept;
+
+// The world's targets a mission is about: those with a car (or their centre) in `area`, the quadrotor's
+// survey; the ids of the others (an imported map's cluster in the survey's border) go to `outside`.
+[[nodiscard]] std::vector<TargetCluster> targets_in_area(std::span<const TargetCluster> all, const MapRect& area, std::vector<int>& outside);
 
 }  // namespace ag::sim
