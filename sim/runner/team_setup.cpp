@@ -157,15 +157,18 @@ std::vector<std::string> ugv_settings(const Team& t, const std::vector<std::stri
   }
   // The runner is then the robots' map link and writes their map_tiles itself.
   if (!opt.gossip || opt.ugv_map != UgvMapSource::kNone) ugv_extra.emplace_back("comms.deliver_map_tiles=false");
-  // The mission area is the world's: the planner's roadmap and the localizer's distance fields cover it
-  // (the shipped +-500 m would drop an imported 1.9 km map's tiles outside it and never localize there).
-  // The localizer's is the area the quadrotor surveys, where its map is (the fields keep the whole tiles
-  // that cover it): over the unsurveyed border a particle's score is neutral and beats a fair match on
-  // the map, and a robot whose guess reached it settled there, 40 m off (docs/localization.md).
-  for (const std::string& kv : world_area_keys(t.world->grid(), "planner")) ugv_extra.push_back(kv);
+  // The mission area is the world's when the runner hands the robots the true map (the shipped +-500 m
+  // would drop an imported 1.9 km map's tiles outside it and never localize there), and else the area
+  // the quadrotor surveys, where its map is (the fields keep the whole tiles that cover it), for the
+  // localizer and the planner's geofence alike. The localizer's: over the unsurveyed border a particle's
+  // score is neutral and beats a fair match on the map, and a robot whose guess reached it settled
+  // there, 40 m off. The planner's: the robot must not drive where it cannot localize (its particles
+  // have no weight outside the area): on the imported world a route along the road 9 m beyond the
+  // survey's south edge, which the camera had mapped in part, lost a robot (docs/localization.md).
   const bool quad_map = opt.uav && opt.ugv_map != UgvMapSource::kGroundTruth;
-  const MapRect loc_area = quad_map ? survey_area(*t.world, survey_options(opt)) : world_rect(t.world->grid());
-  for (const std::string& kv : area_keys(loc_area, "localization")) ugv_extra.push_back(kv);
+  const MapRect ugv_area = quad_map ? survey_area(*t.world, survey_options(opt)) : world_rect(t.world->grid());
+  for (const char* section : {"localization", "planner"})
+    for (const std::string& kv : area_keys(ugv_area, section)) ugv_extra.push_back(kv);
   if (opt.ugv_survey_end && opt.uav) {
     char buf[96];
     std::snprintf(buf, sizeof buf, "mission.survey_end_s=%.1f", survey_time_s);

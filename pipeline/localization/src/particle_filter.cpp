@@ -119,6 +119,12 @@ void ParticleFilter::respread(const Pose2& centre, double sigma_xy, double sigma
 void ParticleFilter::initialise_gaussian(const Pose2& guess, double sigma_xy_m, double sigma_yaw_rad) noexcept {
   respread(guess, sigma_xy_m, sigma_yaw_rad);
   est_.status = FilterStatus::kInitialising;
+  start_blocked_ = false;
+  prior_ = guess;
+  prior_sigma_xy_ = sigma_xy_m;
+  prior_sigma_yaw_ = sigma_yaw_rad;
+  dist_since_prior_ = tracked_m_ = 0.0;
+  distrust_good_ = false;
   est_.updates = 0;
   pending_ = {};
   pending_dist_ = pending_turn_ = 0.0;
@@ -131,6 +137,8 @@ void ParticleFilter::initialise_gaussian(const Pose2& guess, double sigma_xy_m, 
 
 void ParticleFilter::initialise_disc(const Pose2& guess, double radius_m, double yaw_halfwidth_rad) noexcept {
   initialise_gaussian(guess, 0.0, 0.0);
+  prior_sigma_xy_ = 0.5 * radius_m;                             // a uniform disc's standard deviation per axis
+  prior_sigma_yaw_ = yaw_halfwidth_rad / 1.7320508075688772;  // ... and a uniform interval's
   for (std::size_t i = 0; i < n_; ++i) {
     const double r = radius_m * std::sqrt(rng_.uniform()), a = 2.0 * kPi * rng_.uniform();
     x_[i] = guess.x + r * std::cos(a);
@@ -158,6 +166,11 @@ void ParticleFilter::add_motion(const Pose2& d) noexcept {
     last_good_.yaw = wrap_angle(last_good_.yaw + d.yaw);
     dist_since_good_ += step;
   }
+  const double cp = std::cos(prior_.yaw), sp = std::sin(prior_.yaw);
+  prior_.x += cp * d.x - sp * d.y;
+  prior_.y += sp * d.x + cp * d.y;
+  prior_.yaw = wrap_angle(prior_.yaw + d.yaw);
+  dist_since_prior_ += step;
 }
 
 bool ParticleFilter::wants_update() const noexcept {
@@ -333,6 +346,7 @@ UpdateReport ParticleFilter::update_impl(const ScanRenderPolar& render, const Cl
   rep.updated = true;
   rep.moved_m = pending_dist_;
   driven_m_ += pending_dist_;
+  if (est_.status == FilterStatus::kTracking) tracked_m_ += pending_dist_;
   apply_motion(roughen);
   first_update_done_ = true;
   ++est_.updates;
@@ -403,7 +417,7 @@ UpdateReport ParticleFilter::update_impl(const ScanRenderPolar& render, const Cl
   compute_estimate();
   est_.best_cost_m = best;
   est_.room_m = obstacle_mask != 0U ? room_distance_m(fields, obstacle_mask, est_.pose.x, est_.pose.y) : 0.0;
-  const bool blocked = obstacle_mask != 0U && est_.room_m > p_.obstacle_margin_m;
+  const bool blocked = (obstacle_mask != 0U && est_.room_m > p_.obstacle_margin_m) || start_blocked_;
   if (blocked) ++est_.blocked_updates;
   const std::uint32_t before = est_.recoveries;
   update_status(best, cost_valid, roughen, blocked);
@@ -533,11 +547,15 @@ void ParticleFilter::update_status(double best_cost, bool cost_valid, bool stand
     }
     if (++bad_count_ < p_.lost_updates) return;
     est_.status = FilterStatus::kLost;
+    start_blocked_ = false;
+    distrust_good_ = tracked_m_ < p_.confirm_distance_m;
     attempt_ = 0;
   } else {
     converged_count_ = est_.spread_m < p_.converged_spread_m && cost_valid && !blocked ? converged_count_ + 1 : 0;
     if (converged_count_ >= (standing ? p_.lost_standing_converged_updates : p_.converged_updates)) {
       est_.status = FilterStatus::kTracking;
+      tracked_m_ = 0.0;
+      distrust_good_ = false;
       est_.cost_level_m = best_cost;
       cost_level_valid_ = true;
       bad_count_ = 0;
@@ -556,6 +574,10 @@ void ParticleFilter::update_status(double best_cost, bool cost_valid, bool stand
   const double syaw = std::min(kPi, p_.recovery_sigma_yaw_rad * growth);
   const Pose2 centre = has_last_good_ ? last_good_ : est_.pose;
   ++est_.recoveries;
+  if (distrust_good_) {  // an unconfirmed fix, lost: search from the initial guess again
+    respread(prior_, std::max(sxy, dead_reckoned_sigma_m()), std::min(kPi, std::max(syaw, prior_sigma_yaw_)));
+    return;
+  }
   respread(centre, sxy, syaw);
 }
 

@@ -59,6 +59,10 @@ Status LocalizationStage::init(StageContext& ctx) {
   if (!init) return init.error();
   init_ = init.value();
   ctx.channels.allow_unwritten(chan::kInitialPose);  // optional: an operator's tool or the simulator; else the config's guess
+  auto path = ctx.channels.latest_reader(chan::kPlannedPath);
+  if (!path) return path.error();
+  path_ = path.value();
+  ctx.channels.allow_unwritten(chan::kPlannedPath);  // optional: a role without a planner (eval localization)
   auto out = ctx.channels.latest_writer(chan::kLocalization);
   if (!out) return out.error();
   out_ = out.value();
@@ -163,9 +167,24 @@ void LocalizationStage::take_scan(LidarScanMsg& scan) noexcept {
   }
 }
 
+// A route the planner could not start from a pose stamped after the status last changed: the pose the
+// localizer tracks is one the robot cannot hold (ParticleFilter::set_start_blocked); any other route
+// clears it.
+void LocalizationStage::take_route() noexcept {
+  if (!path_.fresh()) return;
+  const PlannedPathMsg& m = path_.read();
+  if (m.seq == path_seq_) return;
+  path_seq_ = m.seq;
+  const bool blocked = m.status == RouteStatus::kBadEnds && m.plan_status == kPlanStatusStartBlocked && m.stamp > status_since_ &&
+                       msg_.status == LocalizationStatus::kTracking;
+  if (blocked) ++c_.planner_start_blocked;
+  loc_->set_start_blocked(blocked);
+}
+
 void LocalizationStage::step(TimeNs now) noexcept {
   take_tiles();
   take_initial_pose();
+  take_route();
   // Odometry up to each scan's time first, so the filter moves by exactly the motion before the scan.
   for (LidarScanMsg* s = scans_.front(); s != nullptr; s = scans_.front()) {
     feed_odometry_until(s->stamp);
@@ -181,6 +200,10 @@ void LocalizationStage::step(TimeNs now) noexcept {
     if (!have_map_) msg_.status = LocalizationStatus::kNoMap;
   }
   msg_.published = now;
+  if (msg_.status != last_status_) {
+    last_status_ = msg_.status;
+    status_since_ = msg_.stamp;
+  }
   out_.publish(msg_);
 }
 

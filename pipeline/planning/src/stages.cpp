@@ -42,6 +42,8 @@ Status PlannerStage::init(StageContext& ctx) {
   return ok_status();
 }
 
+static_assert(static_cast<std::uint8_t>(PlanStatus::kStartBlocked) == kPlanStatusStartBlocked, "the localizer reads this value");
+
 void PlannerStage::plan_now(TimeNs now) noexcept {
   ++c_.plans;
   last_plan_ = now;

@@ -71,11 +71,14 @@ TEST(PoseCheck, AFilterDoesNotConvergeWhereThePlannerCouldNotStart) {
   EXPECT_LE(e.room_m, p.obstacle_margin_m);
 }
 
-// A robot tracks on a road and stops. The quadrotor's next tile says the ground around it is grass (no
-// route: the planner could not start from there), and nothing else changes (grass and road are both
-// "ground" to the scan). A standing, tracking robot is matched again once per lost_standing_update_s, and
-// loses track after lost_updates such updates; with the old map it is never matched.
-TEST(PoseCheck, TrackingIsLostWhenTheMapFillsInUnderAStandingRobot) {
+namespace {
+
+// A robot tracks on a road and stops; 10 s later either nothing happens, or the quadrotor's next tile says
+// the ground around it is grass (no route: the planner could not start from there; nothing else changes,
+// as grass and road are both "ground" to the scan), or its planner says it found no free cell near the
+// pose. Returns the seconds from then until tracking is lost (-1: never), with the standing updates made.
+enum class Word { kNone, kMapFills, kPlannerSays };
+double seconds_until_lost(Word word, int* standing_before, int* standing_after, std::uint64_t* blocked) {
   SyntheticWorld w = test::make_world(8, 8, 5);
   const std::vector<std::pair<int, int>> route{{1, 1}, {1, 3}};
   std::vector<test::TruthSample> truth = test::drive_route(w, route);
@@ -92,38 +95,120 @@ TEST(PoseCheck, TrackingIsLostWhenTheMapFillsInUnderAStandingRobot) {
   loc.on_odometry(odom[0], truth[0].stamp);
   loc.initialise_gaussian(truth[0].pose, 1.0, 0.05, truth[0].stamp);
   std::vector<ScanPoint> scan;
-  int matched_standing = 0, matched_after_fill = 0;
+  *standing_before = *standing_after = 0;
   std::size_t lost_at = 0;
-  const std::size_t fill_at = stop + 100;  // 10 s after stopping
+  const std::size_t word_at = stop + 100;  // 10 s after stopping
   for (std::size_t k = 1; k < truth.size(); ++k) {
-    if (k == fill_at) {
-      ASSERT_EQ(loc.filter().status(), FilterStatus::kTracking) << "it tracked on the road";
-      const Pose2& at = truth[k].pose;
-      const int tx = static_cast<int>(std::floor(at.x / w.resolution)) / w.tile_cells;
-      const int ty = static_cast<int>(std::floor(at.y / w.resolution)) / w.tile_cells;
-      const std::vector<std::uint8_t> grass(static_cast<std::size_t>(w.tile_cells * w.tile_cells), raw(ClassId::kGrass));
-      ASSERT_TRUE(fields.set_tile(tx, ty, 2, grass));
-      fields.update();
-      EXPECT_TRUE(loc.filter().pose_blocked(fields));
+    if (k == word_at) {
+      EXPECT_EQ(loc.filter().status(), FilterStatus::kTracking) << "it tracked on the road";
+      if (word == Word::kMapFills) {
+        const Pose2& at = truth[k].pose;
+        const int tx = static_cast<int>(std::floor(at.x / w.resolution)) / w.tile_cells;
+        const int ty = static_cast<int>(std::floor(at.y / w.resolution)) / w.tile_cells;
+        const std::vector<std::uint8_t> grass(static_cast<std::size_t>(w.tile_cells * w.tile_cells), raw(ClassId::kGrass));
+        EXPECT_TRUE(fields.set_tile(tx, ty, 2, grass));
+        fields.update();
+        EXPECT_TRUE(loc.filter().pose_blocked(fields));
+      }
+      if (word == Word::kPlannerSays) loc.set_start_blocked(true);
     }
     loc.on_odometry(odom[k], truth[k].stamp);
     if (!loc.wants_scan(fields)) continue;
-    if (k > stop + 5 && k < fill_at) ++matched_standing;
-    if (k >= fill_at) ++matched_after_fill;
+    if (k > stop + 5 && k < word_at) ++*standing_before;
+    if (k >= word_at) ++*standing_after;
     test::ray_cast(w, truth[k].pose, LidarModel{}, k, scan);
     labeller.label(scan, LidarModel{}.rings, LidarModel{}.columns);
     loc.on_scan(scan, fields, truth[k].stamp);
-    if (lost_at == 0 && k >= fill_at && loc.filter().status() == FilterStatus::kLost) lost_at = k;
+    if (lost_at == 0 && k >= word_at && loc.filter().status() == FilterStatus::kLost) {
+      lost_at = k;
+      EXPECT_FALSE(loc.filter().start_blocked()) << "the word was about the pose it lost";
+    }
   }
-  EXPECT_EQ(matched_standing, 0) << "tracking and standing on room: no update";
-  ASSERT_GT(lost_at, 0U) << "tracking was never lost";
-  const double seconds = static_cast<double>(lost_at - fill_at) / 10.0;
-  std::printf("lost %.1f s after the map filled in; %d standing updates in the %.0f s after it, %llu blocked in all\n", seconds,
-              matched_after_fill, static_cast<double>(truth.size() - fill_at) / 10.0,
-              static_cast<unsigned long long>(loc.filter().estimate().blocked_updates));
-  EXPECT_LE(seconds, (params.filter.lost_updates + 1) * params.filter.lost_standing_update_s + 0.2);
-  EXPECT_GE(seconds, (params.filter.lost_updates - 1) * params.filter.lost_standing_update_s);
-  EXPECT_GE(loc.filter().estimate().blocked_updates, static_cast<std::uint64_t>(params.filter.lost_updates));
+  *blocked = loc.filter().estimate().blocked_updates;
+  return lost_at == 0 ? -1.0 : static_cast<double>(lost_at - word_at) / 10.0;
+}
+
+}  // namespace
+
+TEST(PoseCheck, AStandingTrackingRobotIsMatchedAgainOnlyWhenTheMapOrThePlannerSaysItCannotBeThere) {
+  const ParticleFilterParams p;
+  for (const Word word : {Word::kNone, Word::kMapFills, Word::kPlannerSays}) {
+    int before = 0, after = 0;
+    std::uint64_t blocked = 0;
+    const double lost = seconds_until_lost(word, &before, &after, &blocked);
+    const char* what = word == Word::kNone ? "nothing said" : word == Word::kMapFills ? "the map fills in" : "the planner says";
+    std::printf("%s: lost after %.1f s; %d standing updates before, %d in the 30 s after; %llu blocked\n", what, lost, before, after,
+                static_cast<unsigned long long>(blocked));
+    EXPECT_EQ(before, 0) << what << ": tracking and standing on room: no update";
+    if (word == Word::kNone) {
+      EXPECT_EQ(lost, -1.0);
+      EXPECT_EQ(after, 0);
+      EXPECT_EQ(blocked, 0U);
+      continue;
+    }
+    ASSERT_GE(lost, 0.0) << what << ": tracking was never lost";
+    EXPECT_LE(lost, (p.lost_updates + 1) * p.lost_standing_update_s + 0.2) << what;
+    EXPECT_GE(lost, (p.lost_updates - 1) * p.lost_standing_update_s) << what;
+    EXPECT_GE(blocked, static_cast<std::uint64_t>(p.lost_updates)) << what;
+  }
+}
+
+// A fix the pose check refuses before it is confirmed by driving (confirm_distance_m) is dropped: the
+// re-spread searches from the initial guess moved by the odometry, with the guess's sigma, instead of
+// around the refused fix (which, when it was a wrong convergence, the filter found again and again).
+// Here the fix is right and the guess 9 m off, so the two centres are told apart.
+TEST(PoseCheck, AnUnconfirmedFixThePlannerRefusesIsSearchedForFromTheInitialGuess) {
+  SyntheticWorld w = test::make_world(8, 8, 5);
+  const std::vector<std::pair<int, int>> route{{1, 1}, {1, 3}};
+  std::vector<test::TruthSample> truth = test::drive_route(w, route);
+  truth.resize(150);  // 30 m at 2 m/s
+  const std::size_t stop = truth.size() - 1;
+  test::stand(truth, 20.0);
+  const std::vector<Pose2> odom = test::odometry(truth, test::OdometryNoise{}, 9);
+  LocalizationChannels ch = LocalizationChannels::two_class();
+  ch.add_off_route(ParticleFilterParams{}.obstacle_traversable);
+  ClassDistanceFields fields(DistanceFieldParams{}, ch, w.extent());
+  test::load_world(w, fields);
+  const Pose2 guess{truth[0].pose.x + 9.0 * std::cos(truth[0].pose.yaw + 1.2), truth[0].pose.y + 9.0 * std::sin(truth[0].pose.yaw + 1.2),
+                    truth[0].pose.yaw};
+  for (const double confirm : {ParticleFilterParams{}.confirm_distance_m, 0.0}) {
+    LocalizerParams params;
+    params.filter.confirm_distance_m = confirm;
+    GeometricLabeller labeller(params.label, 64, 1024);
+    SemanticLocalizer loc(params, ch, 21);
+    loc.on_odometry(odom[0], truth[0].stamp);
+    loc.initialise_gaussian(guess, 10.0, 0.05, truth[0].stamp);
+    std::vector<ScanPoint> scan;
+    bool lost = false;
+    for (std::size_t k = 1; k < truth.size() && !lost; ++k) {
+      if (k == stop + 20) {
+        ASSERT_EQ(loc.filter().status(), FilterStatus::kTracking) << "it tracked on the road";
+        ASSERT_LT(std::hypot(loc.pose().pose.x - truth[k].pose.x, loc.pose().pose.y - truth[k].pose.y), 1.5);
+        loc.set_start_blocked(true);
+      }
+      loc.on_odometry(odom[k], truth[k].stamp);
+      if (!loc.wants_scan(fields)) continue;
+      test::ray_cast(w, truth[k].pose, LidarModel{}, k, scan);
+      labeller.label(scan, LidarModel{}.rings, LidarModel{}.columns);
+      loc.on_scan(scan, fields, truth[k].stamp);
+      lost = loc.filter().status() == FilterStatus::kLost;
+    }
+    ASSERT_TRUE(lost) << "confirm " << confirm;
+    const FilterEstimate& e = loc.filter().estimate();  // the re-spread set
+    const Pose2 reckoned = loc.filter().dead_reckoned_guess();
+    const double from_guess = std::hypot(e.pose.x - reckoned.x, e.pose.y - reckoned.y);
+    const double from_truth = std::hypot(e.pose.x - truth[stop].pose.x, e.pose.y - truth[stop].pose.y);
+    std::printf("confirm %.0f m: re-spread %.1f m from the dead-reckoned guess, %.1f m from the truth, spread %.1f m (guess sigma %.1f m)\n",
+                confirm, from_guess, from_truth, e.spread_m, loc.filter().dead_reckoned_sigma_m());
+    EXPECT_GT(std::hypot(reckoned.x - truth[stop].pose.x, reckoned.y - truth[stop].pose.y), 7.0) << "the guess, moved, is still 9 m off";
+    if (confirm > 0.0) {
+      EXPECT_LT(from_guess, 2.5);
+      EXPECT_GT(e.spread_m, 8.0) << "the guess's sigma";
+    } else {
+      EXPECT_LT(from_truth, 2.5) << "around the last good pose";
+      EXPECT_LT(e.spread_m, 8.0) << "recovery_sigma_xy_m";
+    }
+  }
 }
 
 }  // namespace ag::loc

@@ -193,12 +193,13 @@ TEST_F(ShippedConfig, EveryRobotRunsTheShippedFileExceptTheKeysTheSimulatorMustS
     }
     EXPECT_EQ(got[1].get_int("robot.id"), 1);
     EXPECT_EQ(got[2].get_text("robot.name"), "ugv2");
-    // The mission area is the world's for the planner and the regions (not the shipped +-500 m, which
-    // would drop a bigger map's tiles); the localizer's is the area the quadrotor surveys, where its map
-    // is (the world less the 20 m survey margin), and the world's when the runner hands it the true map.
+    // The mission area is the world's for the regions (not the shipped +-500 m, which would drop a bigger
+    // map's tiles); the localizer's and the planner's geofence are the area the quadrotor surveys, where
+    // its map is (the world less the 20 m survey margin), and the world's when the runner hands the
+    // robots the true map.
     const GridGeometry& g = saved_->world()->grid();
     const double in = gossip ? RunOptions{}.survey_margin_m : 0.0;
-    for (const auto& [cfg, section, m] : {std::tuple{&got[1], "localization", in}, std::tuple{&got[1], "planner", 0.0}, std::tuple{&got[0], "regions", 0.0}}) {
+    for (const auto& [cfg, section, m] : {std::tuple{&got[1], "localization", in}, std::tuple{&got[1], "planner", in}, std::tuple{&got[0], "regions", 0.0}}) {
       EXPECT_NEAR(cfg->get_real(std::string(section) + ".area_x0_m"), g.origin_x + m, 1e-3) << section;
       EXPECT_NEAR(cfg->get_real(std::string(section) + ".area_x1_m"), g.origin_x + g.size_x() - m, 1e-3) << section;
       EXPECT_NEAR(cfg->get_real(std::string(section) + ".area_y0_m"), g.origin_y - g.size_y() + m, 1e-3) << section;

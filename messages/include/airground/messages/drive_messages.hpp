@@ -26,6 +26,9 @@ struct GoalMsg {
 };
 
 enum class RouteStatus : std::uint8_t { kNone = 0, kOk = 1, kNoRoute = 2, kBadEnds = 3, kNoMap = 4, kCancelled = 5 };
+// PlannedPathMsg::plan_status when the planner found no free cell near the start (plan::PlanStatus::
+// kStartBlocked): the localizer takes it as the planner's word that the robot cannot be where its pose says.
+inline constexpr std::uint8_t kPlanStatusStartBlocked = 3;
 
 // Channel "planned_path" (latest value): the global planner's route from the robot to the goal.
 struct PlannedPathMsg {

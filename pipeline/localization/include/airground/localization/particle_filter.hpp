@@ -88,6 +88,13 @@ struct ParticleFilterParams {
   double recovery_growth{1.5};       // sigma x this at each further attempt
   double recovery_sigma_xy_max_m{25.0};
   double lost_drift_per_m{0.05};     // [m/m] the last good pose's uncertainty grows with the distance since
+  // A fix is confirmed once the filter has tracked this far [m of driving] since it converged. A fix
+  // lost before that (its cost, its spread, or the pose check: a pose without room, or the planner's word)
+  // is dropped: the re-spreads start from the initial guess moved by the odometry since, with the guess's
+  // sigma plus lost_drift_per_m per metre, not from the last good pose. On the imported world a first
+  // convergence 35-70 m up the road from the pad was found again at each re-spread around it, and the
+  // pose check then refused it for ever. 0 = always the last good pose.
+  double confirm_distance_m{50.0};
   // Lost and standing: a scan is still matched this often (the caller's clock; SemanticLocalizer), so that
   // the re-spreads go on: a robot that stops when it loses track would otherwise never be matched again
   // (AMCL's no-motion update). Each such update first roughens the particles (no motion to spread them,
@@ -162,6 +169,8 @@ inline constexpr ParamField<ParticleFilterParams> kParticleFilterFields[] = {
     field::real("pf_recovery_growth", &ParticleFilterParams::recovery_growth, 1.0, 10.0, "", "sigma x this at each further attempt"),
     field::real("pf_recovery_sigma_xy_max_m", &ParticleFilterParams::recovery_sigma_xy_max_m, 0.1, 500.0, "m", "largest re-spread sigma"),
     field::real("pf_lost_drift_per_m", &ParticleFilterParams::lost_drift_per_m, 0.0, 1.0, "m/m", "last good pose uncertainty per metre since"),
+    field::real("pf_confirm_distance_m", &ParticleFilterParams::confirm_distance_m, 0.0, 100000.0, "m",
+                "a fix lost before tracking this far re-spreads from the initial guess, not from it (0 = never)"),
     field::real("pf_lost_standing_update_s", &ParticleFilterParams::lost_standing_update_s, 0.0, 60.0, "s",
                 "lost and standing: match a scan this often anyway, so the re-spreads go on (0 = never)"),
     field::real("pf_lost_standing_sigma_xy_m", &ParticleFilterParams::lost_standing_sigma_xy_m, 0.0, 5.0, "m",
@@ -258,6 +267,9 @@ class ParticleFilter {
   [[nodiscard]] double weight(std::size_t i) const noexcept { return w_[i]; }
   [[nodiscard]] const ParticleFilterParams& params() const noexcept { return p_; }
   [[nodiscard]] std::size_t memory_bytes() const noexcept;  // everything this object holds
+  // The initial guess moved by the odometry since, and its sigma grown by lost_drift_per_m [m, rad].
+  [[nodiscard]] Pose2 dead_reckoned_guess() const noexcept { return prior_; }
+  [[nodiscard]] double dead_reckoned_sigma_m() const noexcept { return prior_sigma_xy_ + p_.lost_drift_per_m * dist_since_prior_; }
   // The last pose judged good (tracking, cost in line), moved by the odometry since [m, rad].
   [[nodiscard]] Pose2 last_good_pose() const noexcept { return last_good_; }
   [[nodiscard]] bool has_last_good_pose() const noexcept { return has_last_good_; }
@@ -267,6 +279,11 @@ class ParticleFilter {
   // The mean pose lies farther than obstacle_margin_m from any cell with room in `fields` (as the map is
   // now; false with the obstacle prior off): SemanticLocalizer re-checks a standing, tracking robot so.
   [[nodiscard]] bool pose_blocked(const ClassDistanceFields& fields) const noexcept;
+  // The planner found no free cell near the pose this filter tracks (SemanticLocalizer::set_start_blocked):
+  // each update counts as one at a blocked pose until it is cleared, or until the filter is lost or
+  // initialised again (the word was about the old pose).
+  void set_start_blocked(bool blocked) noexcept { start_blocked_ = blocked; }
+  [[nodiscard]] bool start_blocked() const noexcept { return start_blocked_; }
 
   [[nodiscard]] double pose_cost(const Pose2& pose, const ScanRenderPolar& render, const ClassDistanceFields& fields,
                                  double* known_fraction = nullptr) noexcept;
@@ -329,6 +346,12 @@ class ParticleFilter {
   double dist_since_good_{0};
   std::uint32_t attempt_{0};  // recovery attempts since the last tracking
   int updates_since_respread_{0};
+  bool start_blocked_{false};
+  Pose2 prior_{};                // the initial guess, moved by the odometry since
+  double prior_sigma_xy_{0}, prior_sigma_yaw_{0};
+  double dist_since_prior_{0};   // [m]
+  double tracked_m_{0};          // [m] driven while tracking since the last convergence
+  bool distrust_good_{false};    // the last good pose was an unconfirmed fix, lost
 };
 
 }  // namespace ag::loc

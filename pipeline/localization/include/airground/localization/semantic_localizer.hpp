@@ -57,6 +57,10 @@ class SemanticLocalizer {
   // A labelled scan (sensor frame). Renders it and updates the filter when wants_scan(); never allocates.
   UpdateReport on_scan(std::span<const ScanPoint> labelled, const ClassDistanceFields& fields, TimeNs stamp) noexcept;
 
+  // The planner found no free cell near the tracked pose (or, false, it found one): see
+  // ParticleFilter::set_start_blocked; a standing robot is matched again while it holds.
+  void set_start_blocked(bool blocked) noexcept { filter_.set_start_blocked(blocked); }
+
   // The smooth pose at the last odometry stamp, or extrapolated in time at `stamp` (same odometry).
   [[nodiscard]] FusedPoseSample pose() const noexcept { return fused_.sample(); }
   [[nodiscard]] FusedPoseSample pose_at(TimeNs stamp) const noexcept { return fused_.sample_at(stamp); }
@@ -88,7 +92,7 @@ class SemanticLocalizer {
     switch (filter_.status()) {
       case FilterStatus::kLost: return true;
       case FilterStatus::kInitialising: return filter_.driven_m() >= p_.filter.converging_standing_after_m;
-      case FilterStatus::kTracking: return filter_.pose_blocked(fields);  // the map filled in under it
+      case FilterStatus::kTracking: return filter_.start_blocked() || filter_.pose_blocked(fields);  // the planner's word, or the map filled in under it
       case FilterStatus::kUninitialised: return false;
     }
     return false;

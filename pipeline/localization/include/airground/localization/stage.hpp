@@ -10,6 +10,7 @@
 #include <memory>
 #include <span>
 
+#include "airground/messages/drive_messages.hpp"
 #include "airground/messages/messages.hpp"
 #include "airground/messages/mission_area.hpp"
 #include "airground/localization/semantic_localizer.hpp"
@@ -33,6 +34,7 @@ struct LocalizationStageCounters {
   std::uint64_t initial_poses{0};
   std::uint64_t initial_pose_invalid{0};      // non-finite pose or sigma: ignored
   std::uint64_t recoveries{0};
+  std::uint64_t planner_start_blocked{0};     // routes the planner could not start from the tracked pose
 };
 
 // The stage's own parameters (the localizer's follow them in the same section).
@@ -93,6 +95,7 @@ class LocalizationStage final : public Stage {
   void take_initial_pose() noexcept;
   void feed_odometry_until(TimeNs t) noexcept;  // every queued sample stamped at or before t
   void take_scan(LidarScanMsg& scan) noexcept;
+  void take_route() noexcept;
 
   std::unique_ptr<ClassDistanceFields> fields_;
   std::unique_ptr<SemanticLocalizer> loc_;
@@ -102,6 +105,10 @@ class LocalizationStage final : public Stage {
   RingReader<WheelOdometryMsg, kWheelOdometryRing> odom_;
   RingReader<MapTileMsg, kMapTileRing> tiles_;
   LatestReader<InitialPoseMsg> init_;
+  LatestReader<PlannedPathMsg> path_;  // optional: the planner's word on the tracked pose
+  std::uint32_t path_seq_{0};
+  LocalizationStatus last_status_{LocalizationStatus::kNoMap};
+  TimeNs status_since_{0};  // [ns] odometry stamp of the published status's last change
   LatestWriter<LocalizationMsg> out_;
   LocalizationMsg msg_{};
   std::size_t tiles_per_step_{4};
