@@ -2,6 +2,7 @@
 #include "stage_agreement_check.hpp"
 
 #include <array>
+#include <cstdio>
 #include <string_view>
 
 namespace ag {
@@ -27,6 +28,21 @@ std::vector<std::string> stage_agreement_warnings(const Config& c) {
                    " is narrower than planner.traversable: " + c.get_text("planner.traversable") +
                    ": the localizer's obstacle prior would doubt poses on routes the planner takes; set it to the planner's level "
                    "(docs/localization.md, \"Obstacle prior\")");
+  constexpr std::array<std::string_view, 4> kEdges{"area_x0_m", "area_y0_m", "area_x1_m", "area_y1_m"};
+  std::string beyond;
+  for (std::size_t i = 0; i < kEdges.size(); ++i) {
+    const std::string loc = "localization." + std::string(kEdges[i]), plan = "planner." + std::string(kEdges[i]);
+    if (!c.has(loc) || !c.has(plan)) continue;
+    const double l = c.get_real(loc), p = c.get_real(plan);
+    if (i < 2 ? p >= l : p <= l) continue;  // the west and south edges may not lie lower, the east and north not higher
+    char edge[160];
+    std::snprintf(edge, sizeof edge, "%s%s %.1f beyond %s %.1f", beyond.empty() ? "" : ", ", plan.c_str(), p, loc.c_str(), l);
+    beyond += edge;
+  }
+  if (!beyond.empty())
+    w.emplace_back("the planner's area reaches beyond the localizer's (" + beyond +
+                   "): it could route the robot where the localizer gives its particles no weight; set planner.area_* within "
+                   "localization.area_* (docs/localization.md)");
   return w;
 }
 

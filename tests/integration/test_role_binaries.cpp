@@ -128,6 +128,14 @@ TEST(RoleBinaryErrors, ALocalizerRoomNarrowerThanThePlannersRoutesIsSaidAtStart)
   const auto no_prior = run({role_bin("ugv"), "--config", cfg, "--set", "planner.traversable=costly", "--set",
                              "localization.pf_obstacle_penalty_per_m=0", "--check-config"});
   EXPECT_EQ(no_prior.err.find("warning"), std::string::npos) << no_prior.err;
+  // The planner's geofence beyond the localizer's area: the robot could be sent where it cannot localize.
+  const auto wider = run({role_bin("ugv"), "--config", cfg, "--set", "localization.area_y0_m=-80", "--check-config"});
+  EXPECT_EQ(wider.exit_code, 0) << wider.err;
+  EXPECT_NE(wider.err.find("warning: the planner's area reaches beyond the localizer's (planner.area_y0_m -500.0 beyond localization.area_y0_m -80.0)"),
+            std::string::npos)
+      << wider.err;
+  const auto within = run({role_bin("ugv"), "--config", cfg, "--set", "planner.area_y0_m=-80", "--check-config"});
+  EXPECT_EQ(within.err.find("warning"), std::string::npos) << within.err;
 }
 
 TEST(RoleBinaryErrors, MissingConfigFileAndBadOptionsExit2) {
