@@ -160,6 +160,52 @@ TEST(LocalizationStage, ANewInitialPoseReinitialises) {
   EXPECT_NE(rig->latest().status, LocalizationStatus::kTracking);
 }
 
+// The planner's word on "planned_path": a route it could not start from the tracked pose (planned after the
+// robot began to track) makes the standing robot's localizer match again and give the pose up; one planned
+// from before tracking began, or a route that succeeded, changes nothing.
+TEST(LocalizationStage, ARouteThePlannerCouldNotStartFromTheTrackedPoseUnsettlesIt) {
+  for (const int word : {0, 1, 2}) {  // 0: a route; 1: start blocked, planned before tracking began; 2: start blocked
+    Drive d;
+    auto rig = test::StageRig::make(d.w);
+    ASSERT_NE(rig, nullptr);
+    LatestWriter<PlannedPathMsg> path_w = rig->role->channels().latest_writer(chan::kPlannedPath).value();
+    std::vector<ScanPoint> scan;
+    rig->push_world(d.w, 0);
+    rig->push_odometry(d.odom[0], d.truth[0].stamp);
+    rig->step(d.truth[0].stamp);
+    const Pose2& t0 = d.truth[0].pose;
+    rig->initial_pose(Pose2{t0.x + 1.0, t0.y, t0.yaw}, 2.0, 0.1, 1);
+    const std::size_t half = d.truth.size() / 2;
+    drive(*rig, d, 1, half, scan);
+    ASSERT_EQ(rig->latest().status, LocalizationStatus::kTracking);
+    auto msg = std::make_unique<PlannedPathMsg>();
+    msg->seq = 1;
+    msg->status = word == 0 ? RouteStatus::kOk : RouteStatus::kBadEnds;
+    msg->plan_status = word == 0 ? std::uint8_t{0} : kPlanStatusStartBlocked;
+    msg->stamp = word == 1 ? d.truth[1].stamp : rig->latest().stamp;
+    path_w.publish(*msg);
+    // 20 s standing where the drive stopped, scans at 3 Hz
+    const test::LidarModel lidar;
+    for (int i = 1; i <= 200; ++i) {
+      const TimeNs t = d.truth[half - 1].stamp + from_seconds(i / 10.0);
+      rig->push_odometry(d.odom[half - 1], t);
+      if (i % 3 == 0) {
+        test::ray_cast(d.w, d.truth[half - 1].pose, lidar, static_cast<std::uint64_t>(i), scan);
+        rig->push_scan(scan, t, lidar.rings, lidar.columns);
+      }
+      rig->step(t);
+    }
+    const LocalizationStageCounters& c = rig->stage->counters();
+    EXPECT_EQ(c.planner_start_blocked, word == 2 ? 1U : 0U) << "word " << word;
+    if (word == 2) {
+      EXPECT_GE(c.recoveries, 1U) << "it gave the pose up";
+    } else {
+      EXPECT_EQ(c.recoveries, 0U) << "word " << word;
+      EXPECT_EQ(rig->latest().status, LocalizationStatus::kTracking) << "word " << word;
+    }
+  }
+}
+
 TEST(LocalizationStage, AnInvertedAreaIsAConfigError) {
   test::SyntheticWorld w = test::make_world(2, 2, 1);
   static const std::vector<ParamSection> schema = role_schema(test::kRigRole);
