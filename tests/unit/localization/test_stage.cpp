@@ -36,6 +36,15 @@ void drive(test::StageRig& rig, const Drive& d, std::size_t from, std::size_t to
   }
 }
 
+// The map, the first odometry sample and a guess 1 m off: the start of a drive that tracks at once.
+void start_near_truth(test::StageRig& rig, const Drive& d) {
+  rig.push_world(d.w, 0);
+  rig.push_odometry(d.odom[0], d.truth[0].stamp);
+  rig.step(d.truth[0].stamp);
+  const Pose2& t0 = d.truth[0].pose;
+  rig.initial_pose(Pose2{t0.x + 1.0, t0.y, t0.yaw}, 2.0, 0.1, 1);
+}
+
 TEST(LocalizationStage, ConvergesThroughItsChannelsFromAGuess10mOff) {
   Drive d;
   auto rig = test::StageRig::make(d.w);
@@ -146,11 +155,8 @@ TEST(LocalizationStage, ANewInitialPoseReinitialises) {
   auto rig = test::StageRig::make(d.w);
   ASSERT_NE(rig, nullptr);
   std::vector<ScanPoint> scan;
-  rig->push_world(d.w, 0);
-  rig->push_odometry(d.odom[0], d.truth[0].stamp);
-  rig->step(d.truth[0].stamp);
+  start_near_truth(*rig, d);
   const Pose2& t0 = d.truth[0].pose;
-  rig->initial_pose(Pose2{t0.x + 1.0, t0.y, t0.yaw}, 2.0, 0.1, 1);
   drive(*rig, d, 1, d.truth.size() / 2, scan);
   ASSERT_EQ(rig->latest().status, LocalizationStatus::kTracking);
   // an operator says the robot is somewhere else: the stage starts over from there
@@ -170,11 +176,7 @@ TEST(LocalizationStage, ARouteThePlannerCouldNotStartFromTheTrackedPoseUnsettles
     ASSERT_NE(rig, nullptr);
     LatestWriter<PlannedPathMsg> path_w = rig->role->channels().latest_writer(chan::kPlannedPath).value();
     std::vector<ScanPoint> scan;
-    rig->push_world(d.w, 0);
-    rig->push_odometry(d.odom[0], d.truth[0].stamp);
-    rig->step(d.truth[0].stamp);
-    const Pose2& t0 = d.truth[0].pose;
-    rig->initial_pose(Pose2{t0.x + 1.0, t0.y, t0.yaw}, 2.0, 0.1, 1);
+    start_near_truth(*rig, d);
     const std::size_t half = d.truth.size() / 2;
     drive(*rig, d, 1, half, scan);
     ASSERT_EQ(rig->latest().status, LocalizationStatus::kTracking);
