@@ -150,6 +150,16 @@ void ParticleFilter::initialise_disc(const Pose2& guess, double radius_m, double
 
 // ------------------------------------------------------------------------------------------- motion
 
+namespace {
+// `p` moved by `d` (body frame at p: dx forward, dy left, dyaw).
+void move_by(Pose2& p, const Pose2& d) noexcept {
+  const double c = std::cos(p.yaw), s = std::sin(p.yaw);
+  p.x += c * d.x - s * d.y;
+  p.y += s * d.x + c * d.y;
+  p.yaw = wrap_angle(p.yaw + d.yaw);
+}
+}  // namespace
+
 void ParticleFilter::add_motion(const Pose2& d) noexcept {
   if (!std::isfinite(d.x) || !std::isfinite(d.y) || !std::isfinite(d.yaw)) return;  // a broken odometry sample
   const double c = std::cos(pending_.yaw), s = std::sin(pending_.yaw);
@@ -160,16 +170,10 @@ void ParticleFilter::add_motion(const Pose2& d) noexcept {
   pending_dist_ += step;
   pending_turn_ += std::fabs(d.yaw);
   if (has_last_good_) {
-    const double cg = std::cos(last_good_.yaw), sg = std::sin(last_good_.yaw);
-    last_good_.x += cg * d.x - sg * d.y;
-    last_good_.y += sg * d.x + cg * d.y;
-    last_good_.yaw = wrap_angle(last_good_.yaw + d.yaw);
+    move_by(last_good_, d);
     dist_since_good_ += step;
   }
-  const double cp = std::cos(prior_.yaw), sp = std::sin(prior_.yaw);
-  prior_.x += cp * d.x - sp * d.y;
-  prior_.y += sp * d.x + cp * d.y;
-  prior_.yaw = wrap_angle(prior_.yaw + d.yaw);
+  move_by(prior_, d);
   dist_since_prior_ += step;
 }
 
