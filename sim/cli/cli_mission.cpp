@@ -30,6 +30,8 @@ const char kMissionHelp[] =
     "Options:\n"
     "  --init-error M          initial guesses up to M metres off, uniform per robot (16)\n"
     "  --init-yaw-error D      ... and D degrees (10)\n"
+    "  --init-sigma S          the sigma the robots' localizers are given with their guesses (half of --init-error:\n"
+    "                          a guess up to M off lies within 2 sigma)\n"
     "  --altitude A            quadrotor survey altitude (40 m)\n"
     "  --max-duration T        stop after T simulated seconds at the latest (4x the survey's flying time, >= 1800)\n"
     "  --kill-ugv I@T          power ground robot I (1-based) off at T seconds (repeatable)\n"
@@ -83,6 +85,7 @@ int mission_cmd(const Args& a) {
   o.comm_range_m = number(a, "comm-range", o.comm_range_m);
   o.init_error_m = number(a, "init-error", o.init_error_m);
   o.init_yaw_error_deg = number(a, "init-yaw-error", o.init_yaw_error_deg);
+  o.init_sigma_m = number(a, "init-sigma", 0);
   o.uav_altitude_m = number(a, "altitude", o.uav_altitude_m);
   o.max_duration_s = a.has("max-duration") ? number(a, "max-duration", 0) : 0;
   if (a.has("max-duration") && !(o.max_duration_s > 0)) usage_error("--max-duration must be > 0");
@@ -98,6 +101,7 @@ int mission_cmd(const Args& a) {
   o.status_period_s = a.has("verbose") ? number(a, "verbose", 30) : 0;
   if (o.ugvs < 1 || o.ugvs > 32) usage_error("--ugvs must be 1..32");
   if (o.comm_range_m < 0 || o.init_error_m < 0) usage_error("--comm-range, --init-error must be >= 0");
+  if (a.has("init-sigma") && !(o.init_sigma_m > 0)) usage_error("--init-sigma must be > 0");
   if (o.web_port < 0 || o.web_port > 65535) usage_error("--web-port must be 1..65535");
   if (a.has("kill-ugv"))
     for (const auto& k : a.opt.at("kill-ugv")) {

@@ -152,6 +152,7 @@ RunOptions team_run_options(const MissionOptions& o, const World& w, const std::
   r.comm_range_m = o.comm_range_m;
   r.init_error_m = o.init_error_m;
   r.init_error_uniform = true;
+  r.init_sigma_m = o.init_sigma_m;
   r.init_yaw_error_deg = o.init_yaw_error_deg;
   r.kills = o.kills;
   r.sample_hz = 5;

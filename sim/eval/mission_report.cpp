@@ -211,7 +211,8 @@ bool write_mission_report(const fs::path& out, const MissionOptions& o, const Mi
   std::ofstream md(out / "report.md");
   char line[1536];
   md << "# airground mission report\n\n" << oracle_list.oracles_line() << "\n\nWorld `" << o.world << "`, seed " << o.seed << ": 1 quadrotor at " << o.uav_altitude_m << " m, " << o.ugvs
-     << " ground robots (initial guesses up to " << o.init_error_m << " m off), radio range "
+     << " ground robots (initial guesses up to " << o.init_error_m << " m off, given with sigma "
+     << (o.init_sigma_m > 0 ? o.init_sigma_m : 0.5 * o.init_error_m) << " m), radio range "
      << (o.comm_range_m > 0 ? std::to_string(static_cast<int>(o.comm_range_m)) + " m" : std::string("default")) << ". "
      << (m.completed ? "Every robot finished and returned to its start." : "The mission hit the time cap before every robot finished.")
      << " The survey was estimated at " << static_cast<int>(std::lround(m.survey_estimate_s)) << " s with its return; the cap was "

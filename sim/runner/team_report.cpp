@@ -126,7 +126,8 @@ Status write_reports(const Team& t, const RunSummary& s) {
   }
   m << "\nLocalization: each robot's own pose on its `localization` channel (no GPS: LiDAR against the aerial map, "
     << (t.opt.ugv_map == UgvMapSource::kOnline ? "the map the quadrotor builds online" : t.opt.ugv_map == UgvMapSource::kGroundTruth ? "the world's class map" : "no map given")
-    << ", initial guess " << t.opt.init_error_m << " m / " << t.opt.init_yaw_error_deg << " deg off), sampled at " << t.opt.sample_hz
+    << ", initial guess " << (t.opt.init_error_uniform ? "up to " : "") << t.opt.init_error_m << " m / " << t.opt.init_yaw_error_deg
+    << " deg off, given with sigma " << initial_sigma_m(t.opt) << " m), sampled at " << t.opt.sample_hz
     << " Hz while driving; errors over the tracking samples. White dots in the picture: the estimates.\n";
   m << "\nQuadrotor: " << s.uav_distance_m << " m flown, " << s.uav_waypoints_reached << " survey waypoints, "
     << s.camera_frames << " camera frames, " << s.gps_fixes << " GPS fixes, " << s.vo_samples << " VO samples in "

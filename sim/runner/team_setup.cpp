@@ -279,7 +279,7 @@ Status set_up_ugv(Team& t, const Models& m, RoleFactory& roles, int i, const Rol
     const double dist = opt.init_error_uniform ? rng.uniform(0.0, opt.init_error_m) : opt.init_error_m;
     const double yaw_err = sign * opt.init_yaw_error_deg * kPi / 180.0;
     u->init_pose.pose = Pose2{start.x + dist * std::cos(dir), start.y + dist * std::sin(dir), wrap_angle(start.yaw + yaw_err)};
-    u->init_pose.sigma_xy_m = std::max(opt.init_error_m, 0.5);
+    u->init_pose.sigma_xy_m = std::max(initial_sigma_m(opt), 0.5);
     u->init_pose.sigma_yaw_rad = std::max(opt.init_yaw_error_deg, 2.0) * kPi / 180.0;
     if (given != nullptr && given->has_guess) {
       u->init_pose.pose = given->guess;
@@ -319,6 +319,7 @@ Status check_options(const RunOptions& opt) {
     return Error::make(ErrorCode::kInvalidArgument, "LiDAR columns must be 512, 1024 or 2048");
   if (!(opt.init_error_m >= 0) || !(opt.init_yaw_error_deg >= 0) || opt.init_yaw_error_deg > 180)
     return Error::make(ErrorCode::kInvalidArgument, "the initial pose error must be >= 0 m and 0..180 deg");
+  if (!(opt.init_sigma_m >= 0)) return Error::make(ErrorCode::kInvalidArgument, "the initial guess's sigma must be >= 0 m");
   if (opt.map_tiles_per_tick < 1) return Error::make(ErrorCode::kInvalidArgument, "map_tiles_per_tick must be >= 1");
   if (opt.sample && !(opt.sample_hz > 0 && opt.sample_hz <= opt.physics_hz))
     return Error::make(ErrorCode::kInvalidArgument, "the sampling rate must be in (0, physics rate]");

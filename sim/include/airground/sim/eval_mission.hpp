@@ -29,6 +29,7 @@ struct MissionOptions {
   double comm_range_m{0};          // [m] 0 = the radio model's default
   double uav_altitude_m{40};
   double init_error_m{16};         // [m] each robot's initial guess is up to this far off (uniform)
+  double init_sigma_m{0};          // [m] the sigma its localizer is given with it; 0 = half of init_error_m
   double init_yaw_error_deg{10};
   // [s] simulated cap; the mission normally ends earlier (every robot back). 0 = four times the survey's
   // estimated flying time, at least kMinMissionCapS.

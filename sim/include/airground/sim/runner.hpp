@@ -162,6 +162,9 @@ struct RunOptions {
                                   // never more than its ring takes: the rest follow on the next steps)
   double init_error_m{0};         // [m] the initial pose published at start is the truth moved this far (random direction by seed)
   double init_yaw_error_deg{0};   // [deg] ... and turned by this much (random sign); sigmas given = these (at least 0.5 m / 2 deg)
+  // [m] the sigma given to the localizer with the guess; 0 = init_error_m, or with init_error_uniform half
+  // of it: a guess "up to R off" is one within 2 sigma (the error's own per-axis spread is R / sqrt(6)).
+  double init_sigma_m{0};
   std::vector<std::string> ugv_config{};  // "section.key=value" set on every ground robot's role config
   std::vector<std::string> uav_config{};  // "section.key=value" set on the quadrotor's role config
   // Ground truth handed to the robots, by name, for an ablation the user asks for; none by default.
@@ -263,6 +266,12 @@ struct RunOptions {
   std::function<void(const UgvSample&)> sample{};  // per ground robot at sample_hz (from t = 0)
   UgvChannelTap ugv_tap{};
 };
+
+// The sigma [m] a robot's localizer is given with its initial guess (RunOptions::init_sigma_m).
+inline double initial_sigma_m(const RunOptions& o) noexcept {
+  if (o.init_sigma_m > 0) return o.init_sigma_m;
+  return o.init_error_uniform ? 0.5 * o.init_error_m : o.init_error_m;
+}
 
 struct RobotSummary {
   std::string name;
