@@ -45,7 +45,7 @@ struct LocalizationStageSettings {
   std::int64_t seed{0};
   bool set_initial_pose{false};
   double initial_x_m{0.0}, initial_y_m{0.0}, initial_yaw_rad{0.0};
-  double initial_sigma_m{16.0}, initial_sigma_yaw_rad{0.5};
+  double initial_sigma_m{8.0}, initial_sigma_yaw_rad{0.5};
 };
 inline constexpr ParamField<LocalizationStageSettings> kLocalizationLabelsParam[] = {
     field::choice<&LocalizationStageSettings::labels>(
@@ -65,7 +65,7 @@ inline constexpr ParamField<LocalizationStageSettings> kLocalizationStageOwnPara
     field::real("initial_x_m", &LocalizationStageSettings::initial_x_m, -1e6, 1e6, "m", "initial guess (map frame): east"),
     field::real("initial_y_m", &LocalizationStageSettings::initial_y_m, -1e6, 1e6, "m", "initial guess: north"),
     field::real("initial_yaw_rad", &LocalizationStageSettings::initial_yaw_rad, -6.3, 6.3, "rad", "initial guess: heading (0 = east, counter-clockwise)"),
-    field::real("initial_sigma_m", &LocalizationStageSettings::initial_sigma_m, 0.5, 1000.0, "m", "how far off the initial guess may be"),
+    field::real("initial_sigma_m", &LocalizationStageSettings::initial_sigma_m, 0.5, 1000.0, "m", "the initial guess's standard deviation per axis (a guess within R m: R/2)"),
     field::real("initial_sigma_yaw_rad", &LocalizationStageSettings::initial_sigma_yaw_rad, 0.02, 3.2, "rad", "how far off its heading may be"),
 };
 // The stage's section: its own keys, then every localizer parameter.

@@ -26,7 +26,7 @@ struct TeamMember {
   int priority{1};
   double start_x{0}, start_y{0}, start_yaw{0};  // [m, m, rad] true start (the simulator places it here)
   double guess_x{0}, guess_y{0}, guess_yaw{0};  // initial pose guess given to the localizer
-  double guess_sigma_m{16.0};
+  double guess_sigma_m{8.0};                    // [m] its standard deviation per axis (a guess within R m: R/2)
   std::vector<XY> waypoints;                    // waypoints missions: this robot's route
 };
 struct Survey {
