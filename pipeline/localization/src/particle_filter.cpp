@@ -120,6 +120,7 @@ void ParticleFilter::initialise_gaussian(const Pose2& guess, double sigma_xy_m, 
   respread(guess, sigma_xy_m, sigma_yaw_rad);
   est_.status = FilterStatus::kInitialising;
   start_blocked_ = false;
+  est_.refused_fixes = 0;
   prior_ = guess;
   prior_sigma_xy_ = sigma_xy_m;
   prior_sigma_yaw_ = sigma_yaw_rad;
@@ -532,6 +533,13 @@ void ParticleFilter::set_range_bin() noexcept {
   est_.range_bin_m = range_bin_m_;
 }
 
+bool ParticleFilter::near_refused(const Pose2& p) const noexcept {
+  const std::size_t n = std::min<std::size_t>(est_.refused_fixes, kMaxRefused);
+  for (std::size_t i = 0; i < n; ++i)
+    if (std::hypot(p.x - refused_[i].x, p.y - refused_[i].y) < p_.refused_radius_m) return true;
+  return false;
+}
+
 void ParticleFilter::update_status(double best_cost, bool cost_valid, bool standing, bool blocked) noexcept {
   if (est_.status == FilterStatus::kTracking) {
     const bool bad = blocked || est_.spread_m > p_.lost_spread_m ||
@@ -551,11 +559,13 @@ void ParticleFilter::update_status(double best_cost, bool cost_valid, bool stand
     }
     if (++bad_count_ < p_.lost_updates) return;
     est_.status = FilterStatus::kLost;
+    if (start_blocked_) refused_[est_.refused_fixes++ % kMaxRefused] = est_.pose;
     start_blocked_ = false;
     distrust_good_ = tracked_m_ < p_.confirm_distance_m;
     attempt_ = 0;
   } else {
-    converged_count_ = est_.spread_m < p_.converged_spread_m && cost_valid && !blocked ? converged_count_ + 1 : 0;
+    const bool refused = near_refused(est_.pose);
+    converged_count_ = est_.spread_m < p_.converged_spread_m && cost_valid && !blocked && !refused ? converged_count_ + 1 : 0;
     if (converged_count_ >= (standing ? p_.lost_standing_converged_updates : p_.converged_updates)) {
       est_.status = FilterStatus::kTracking;
       tracked_m_ = 0.0;

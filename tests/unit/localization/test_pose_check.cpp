@@ -76,16 +76,19 @@ namespace {
 // A robot tracks on a road and stops; 10 s later either nothing happens, or the quadrotor's next tile says
 // the ground around it is grass (no route: the planner could not start from there; nothing else changes,
 // as grass and road are both "ground" to the scan), or its planner says it found no free cell near the
-// pose. Returns the seconds from then until tracking is lost (-1: never), with the standing updates made.
+// pose. Returns the seconds from then until tracking is lost (-1: never), with the standing updates made
+// and whether the filter tracked again after it lost track (`retracked`, optional).
 enum class Word { kNone, kMapFills, kPlannerSays };
-double seconds_until_lost(Word word, int* standing_before, int* standing_after, std::uint64_t* blocked) {
+double seconds_until_lost(Word word, int* standing_before, int* standing_after, std::uint64_t* blocked, bool* retracked = nullptr,
+                          double refused_radius_m = ParticleFilterParams{}.refused_radius_m) {
   SyntheticWorld w = test::make_world(8, 8, 5);
   const std::vector<std::pair<int, int>> route{{1, 1}, {1, 3}};
   std::vector<test::TruthSample> truth = test::drive_route(w, route);
   const std::size_t stop = truth.size() - 1;
   test::stand(truth, 40.0);
   const std::vector<Pose2> odom = test::odometry(truth, test::OdometryNoise{}, 9);
-  const LocalizerParams params;
+  LocalizerParams params;
+  params.filter.refused_radius_m = refused_radius_m;
   LocalizationChannels ch = LocalizationChannels::two_class();
   ch.add_off_route(params.filter.obstacle_traversable);
   ClassDistanceFields fields(DistanceFieldParams{}, ch, w.extent());
@@ -123,6 +126,7 @@ double seconds_until_lost(Word word, int* standing_before, int* standing_after, 
       lost_at = k;
       EXPECT_FALSE(loc.filter().start_blocked()) << "the word was about the pose it lost";
     }
+    if (retracked != nullptr && lost_at != 0 && k > lost_at && loc.filter().status() == FilterStatus::kTracking) *retracked = true;
   }
   *blocked = loc.filter().estimate().blocked_updates;
   return lost_at == 0 ? -1.0 : static_cast<double>(lost_at - word_at) / 10.0;
@@ -208,6 +212,22 @@ TEST(PoseCheck, AnUnconfirmedFixThePlannerRefusesIsSearchedForFromTheInitialGues
       EXPECT_LT(from_truth, 2.5) << "around the last good pose";
       EXPECT_LT(e.spread_m, 8.0) << "recovery_sigma_xy_m";
     }
+  }
+}
+
+// A fix the planner's word lost is not taken again (refused_radius_m): the robot stands where its
+// planner refused the pose, and in the 24 s of standing updates after the loss the filter, whose scans
+// still fit there, does not converge there again; with the memory off (0) it does, and would be lost and
+// found there for ever (the imported world's robot 10: 5000 s).
+TEST(PoseCheck, AFixThePlannersWordLostIsNotTakenAgain) {
+  for (const double radius : {ParticleFilterParams{}.refused_radius_m, 0.0}) {
+    int before = 0, after = 0;
+    std::uint64_t blocked = 0;
+    bool retracked = false;
+    const double lost = seconds_until_lost(Word::kPlannerSays, &before, &after, &blocked, &retracked, radius);
+    std::printf("refused radius %.1f m: lost after %.1f s, tracked again: %s (%d standing updates)\n", radius, lost, retracked ? "yes" : "no", after);
+    ASSERT_GE(lost, 0.0);
+    EXPECT_EQ(retracked, radius == 0.0) << "radius " << radius;
   }
 }
 

@@ -95,6 +95,11 @@ struct ParticleFilterParams {
   // convergence 35-70 m up the road from the pad was found again at each re-spread around it, and the
   // pose check then refused it for ever. 0 = always the last good pose.
   double confirm_distance_m{50.0};
+  // A fix the planner's word lost (set_start_blocked) is remembered: the filter does not converge within
+  // this of it again until a new initial pose (0 = off). On the imported world a standing robot's wrong fix
+  // in a wood, which the map check let pass and the planner refused, was found again by every re-spread
+  // and lost again, for 5000 s. A tracking filter that passes by is not affected.
+  double refused_radius_m{3.0};
   // Lost and standing: a scan is still matched this often (the caller's clock; SemanticLocalizer), so that
   // the re-spreads go on: a robot that stops when it loses track would otherwise never be matched again
   // (AMCL's no-motion update). Each such update first roughens the particles (no motion to spread them,
@@ -171,6 +176,8 @@ inline constexpr ParamField<ParticleFilterParams> kParticleFilterFields[] = {
     field::real("pf_lost_drift_per_m", &ParticleFilterParams::lost_drift_per_m, 0.0, 1.0, "m/m", "last good pose uncertainty per metre since"),
     field::real("pf_confirm_distance_m", &ParticleFilterParams::confirm_distance_m, 0.0, 100000.0, "m",
                 "a fix lost before tracking this far re-spreads from the initial guess, not from it (0 = never)"),
+    field::real("pf_refused_radius_m", &ParticleFilterParams::refused_radius_m, 0.0, 25.0, "m",
+                "no convergence this close to a fix the planner's word lost, until a new initial pose (0 = off)"),
     field::real("pf_lost_standing_update_s", &ParticleFilterParams::lost_standing_update_s, 0.0, 60.0, "s",
                 "lost and standing: match a scan this often anyway, so the re-spreads go on (0 = never)"),
     field::real("pf_lost_standing_sigma_xy_m", &ParticleFilterParams::lost_standing_sigma_xy_m, 0.0, 5.0, "m",
@@ -223,6 +230,7 @@ struct FilterEstimate {
   // lost_updates such updates.
   double room_m{0};
   std::uint64_t blocked_updates{0};    // updates whose mean pose had no room (total)
+  std::uint32_t refused_fixes{0};      // fixes the planner's word lost since the initial pose (remembered: refused_radius_m)
 };
 
 struct UpdateReport {
@@ -347,6 +355,9 @@ class ParticleFilter {
   std::uint32_t attempt_{0};  // recovery attempts since the last tracking
   int updates_since_respread_{0};
   bool start_blocked_{false};
+  static constexpr std::size_t kMaxRefused = 8;
+  std::array<Pose2, kMaxRefused> refused_{};  // the fixes the planner's word lost (a ring, newest kept)
+  [[nodiscard]] bool near_refused(const Pose2& p) const noexcept;
   Pose2 prior_{};                // the initial guess, moved by the odometry since
   double prior_sigma_xy_{0}, prior_sigma_yaw_{0};
   double dist_since_prior_{0};   // [m]
