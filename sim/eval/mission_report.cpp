@@ -156,8 +156,11 @@ void write_mission_tables(const fs::path& out, const std::vector<TargetCluster>&
 // metrics.json; false when it could not be written.
 bool write_mission_metrics(const fs::path& out, const MissionOptions& o, const MissionMetrics& m) {
   std::ofstream j(out / "metrics.json");
-  RunOptions oracle_list;
+  RunOptions oracle_list;  // the run's options this report names (its oracles, the guesses' sigma)
   oracle_list.oracles = o.oracles;
+  oracle_list.init_error_m = o.init_error_m;
+  oracle_list.init_error_uniform = true;
+  oracle_list.init_sigma_m = o.init_sigma_m;
   j << "{\n  \"oracles\": " << oracle_list.oracles_json() << ",\n  \"targets_total\": " << m.targets_total << ",\n  \"targets_visited\": " << m.targets_visited
     << ",\n  \"targets_outside_survey\": " << m.targets_outside_survey
     << ",\n  \"regions_found\": " << m.regions_found << ",\n  \"regions_visited\": " << m.regions_visited
@@ -206,13 +209,16 @@ bool write_mission_metrics(const fs::path& out, const MissionOptions& o, const M
 
 // report.md (replacing the runner's); false when it could not be written.
 bool write_mission_report(const fs::path& out, const MissionOptions& o, const MissionMetrics& m) {
-  RunOptions oracle_list;
+  RunOptions oracle_list;  // the run's options this report names (its oracles, the guesses' sigma)
   oracle_list.oracles = o.oracles;
+  oracle_list.init_error_m = o.init_error_m;
+  oracle_list.init_error_uniform = true;
+  oracle_list.init_sigma_m = o.init_sigma_m;
   std::ofstream md(out / "report.md");
   char line[1536];
   md << "# airground mission report\n\n" << oracle_list.oracles_line() << "\n\nWorld `" << o.world << "`, seed " << o.seed << ": 1 quadrotor at " << o.uav_altitude_m << " m, " << o.ugvs
      << " ground robots (initial guesses up to " << o.init_error_m << " m off, given with sigma "
-     << (o.init_sigma_m > 0 ? o.init_sigma_m : 0.5 * o.init_error_m) << " m), radio range "
+     << initial_sigma_m(oracle_list) << " m), radio range "
      << (o.comm_range_m > 0 ? std::to_string(static_cast<int>(o.comm_range_m)) + " m" : std::string("default")) << ". "
      << (m.completed ? "Every robot finished and returned to its start." : "The mission hit the time cap before every robot finished.")
      << " The survey was estimated at " << static_cast<int>(std::lround(m.survey_estimate_s)) << " s with its return; the cap was "

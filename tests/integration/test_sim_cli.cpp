@@ -54,6 +54,10 @@ TEST(SimCli, AnOptionTheCommandDoesNotHaveIsAnErrorNamingIt) {
   EXPECT_EQ(run({sim_bin(), "run", "--compute-time", "fast", "--out", tmp("typo")}).exit_code, 2);
   EXPECT_EQ(run({sim_bin(), "study", "--target-cpu", "pi4", "--out", tmp("typo")}).exit_code, 2);
   EXPECT_NE(run({sim_bin(), "mission", "--help"}).out.find("--target-cpu"), std::string::npos);
+  // The guesses' sigma must be a positive number.
+  const auto sigma = run({sim_bin(), "mission", "--init-sigma", "-3", "--out", tmp("typo")});
+  EXPECT_EQ(sigma.exit_code, 2);
+  EXPECT_NE(sigma.err.find("--init-sigma must be > 0"), std::string::npos) << sigma.err;
 }
 
 TEST(SimCli, GenerateShowRenderScanOnASmallWorld) {
