@@ -103,8 +103,12 @@ void ParticleFilter::respread(const Pose2& centre, double sigma_xy, double sigma
   n_ = static_cast<std::size_t>(p_.max_particles);
   const double w = 1.0 / static_cast<double>(n_);
   for (std::size_t i = 0; i < n_; ++i) {
-    x_[i] = centre.x + sigma_xy * rng_.gaussian();
-    y_[i] = centre.y + sigma_xy * rng_.gaussian();
+    // Not inside a refused fix's disc (a few tries: the discs are small beside any re-spread's sigma).
+    for (int attempt = 0; attempt < kRespreadTries; ++attempt) {
+      x_[i] = centre.x + sigma_xy * rng_.gaussian();
+      y_[i] = centre.y + sigma_xy * rng_.gaussian();
+      if (!near_refused(Pose2{x_[i], y_[i], 0.0})) break;
+    }
     yaw_[i] = wrap_angle(centre.yaw + sigma_yaw * rng_.gaussian());
     w_[i] = w;
     score_[i] = 0.0;
@@ -374,11 +378,17 @@ UpdateReport ParticleFilter::update_impl(const ScanRenderPolar& render, const Cl
   }
   std::sort(order_.begin(), order_.begin() + static_cast<std::ptrdiff_t>(n_));
   const std::uint8_t obstacle_mask = p_.obstacle_penalty_per_m > 0.0 ? fields.channels().obstacle_space_channels() : std::uint8_t{0};
+  const bool searching = est_.status != FilterStatus::kTracking && est_.refused_fixes > 0;
   for (std::size_t k = 0; k < n_; ++k) {
     const std::size_t i = order_[k] & 0xFFFFFFFFULL;
     if (!p_.area.contains(x_[i], y_[i])) {  // outside the mission area: not where the robot can be
       score_[i] = -std::numeric_limits<double>::infinity();
       ++est_.outside_area;
+      continue;
+    }
+    if (searching && near_refused(Pose2{x_[i], y_[i], 0.0})) {  // a fix the planner's word lost: not again
+      score_[i] = -std::numeric_limits<double>::infinity();
+      ++est_.in_refused;
       continue;
     }
     double score = 0.0, kf = 0.0, ck = 0.0;
