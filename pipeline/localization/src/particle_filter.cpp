@@ -379,11 +379,18 @@ UpdateReport ParticleFilter::update_impl(const ScanRenderPolar& render, const Cl
   std::sort(order_.begin(), order_.begin() + static_cast<std::ptrdiff_t>(n_));
   const std::uint8_t obstacle_mask = p_.obstacle_penalty_per_m > 0.0 ? fields.channels().obstacle_space_channels() : std::uint8_t{0};
   const bool searching = est_.status != FilterStatus::kTracking && est_.refused_fixes > 0;
+  // Searching from the initial guess: nothing beyond its gate, the guess moved by the odometry.
+  const double gate = est_.status == FilterStatus::kLost && distrust_good_ ? p_.guess_gate_sigmas * dead_reckoned_sigma_m() : 0.0;
   for (std::size_t k = 0; k < n_; ++k) {
     const std::size_t i = order_[k] & 0xFFFFFFFFULL;
     if (!p_.area.contains(x_[i], y_[i])) {  // outside the mission area: not where the robot can be
       score_[i] = -std::numeric_limits<double>::infinity();
       ++est_.outside_area;
+      continue;
+    }
+    if (gate > 0.0 && std::hypot(x_[i] - prior_.x, y_[i] - prior_.y) > gate) {  // farther than the guess's bound
+      score_[i] = -std::numeric_limits<double>::infinity();
+      ++est_.outside_guess;
       continue;
     }
     if (searching && near_refused(Pose2{x_[i], y_[i], 0.0})) {  // a fix the planner's word lost: not again
@@ -599,7 +606,9 @@ void ParticleFilter::update_status(double best_cost, bool cost_valid, bool stand
   const Pose2 centre = has_last_good_ ? last_good_ : est_.pose;
   ++est_.recoveries;
   if (distrust_good_) {  // an unconfirmed fix, lost: search from the initial guess again
-    respread(prior_, std::max(sxy, dead_reckoned_sigma_m()), std::min(kPi, std::max(syaw, prior_sigma_yaw_)));
+    const double guess_sxy = p_.guess_gate_sigmas > 0.0 ? std::max(p_.recovery_sigma_xy_m, dead_reckoned_sigma_m())  // the guess's own
+                                                         : std::max(sxy, dead_reckoned_sigma_m());
+    respread(prior_, guess_sxy, std::min(kPi, std::max(syaw, prior_sigma_yaw_)));
     return;
   }
   respread(centre, sxy, syaw);

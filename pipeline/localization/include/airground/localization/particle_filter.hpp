@@ -103,6 +103,16 @@ struct ParticleFilterParams {
   // spot at every re-spread (still lost there, 24 m off, with a 0.8 m spread) searches elsewhere. A
   // tracking filter that passes by is not affected.
   double refused_radius_m{3.0};
+  // Searching from the initial guess (an unconfirmed fix, lost), a particle farther from the guess (moved by
+  // the odometry) than this many of the guess's sigmas (grown by lost_drift_per_m) gets no weight, and the
+  // re-spreads keep the guess's sigma instead of growing with each attempt (0 = neither). 2: the bound R of
+  // "a guess within R" (initial_sigma_m = R / 2). Standing, the same scan is matched every second, and with
+  // the guess only placing the particles the resampled, roughened particles wandered to whichever wood fitted
+  // that one scan best: on the imported world a robot 6 m from its dead-reckoned guess (sigma 9.6 m) was
+  // searched for out to 25 m, and its cloud settled 22-23 m off (2.3 sigma), again and again. A gate, not a
+  // Gaussian in the weights: the standing updates would multiply a Gaussian in as often as the scan, and
+  // narrow the cloud onto the guess itself where the scan tells places apart poorly.
+  double guess_gate_sigmas{2.0};
   // Lost and standing: a scan is still matched this often (the caller's clock; SemanticLocalizer), so that
   // the re-spreads go on: a robot that stops when it loses track would otherwise never be matched again
   // (AMCL's no-motion update). Each such update first roughens the particles (no motion to spread them,
@@ -181,6 +191,8 @@ inline constexpr ParamField<ParticleFilterParams> kParticleFilterFields[] = {
                 "a fix lost before tracking this far re-spreads from the initial guess, not from it (0 = never)"),
     field::real("pf_refused_radius_m", &ParticleFilterParams::refused_radius_m, 0.0, 25.0, "m",
                 "no convergence this close to a fix the planner's word lost, until a new initial pose (0 = off)"),
+    field::real("pf_guess_gate_sigmas", &ParticleFilterParams::guess_gate_sigmas, 0.0, 100.0, "sigma",
+                "searching from the initial guess: no weight farther than this many of its sigmas, no wider re-spreads (0 = off)"),
     field::real("pf_lost_standing_update_s", &ParticleFilterParams::lost_standing_update_s, 0.0, 60.0, "s",
                 "lost and standing: match a scan this often anyway, so the re-spreads go on (0 = never)"),
     field::real("pf_lost_standing_sigma_xy_m", &ParticleFilterParams::lost_standing_sigma_xy_m, 0.0, 5.0, "m",
@@ -234,6 +246,7 @@ struct FilterEstimate {
   double room_m{0};
   std::uint64_t blocked_updates{0};    // updates whose mean pose had no room (total)
   std::uint32_t refused_fixes{0};      // fixes the planner's word lost since the initial pose (remembered: refused_radius_m)
+  std::uint64_t outside_guess{0};      // particles given no weight beyond the guess's gate (guess_gate_sigmas; searching)
   std::uint64_t in_refused{0};         // particles given no weight for lying in a refused fix's disc (not tracking)
 };
 
