@@ -80,21 +80,36 @@ namespace {
 // and whether the filter tracked again after it lost track (`retracked`, optional), and the particles'
 // weight within 2 m of the standing robot at the end (`weight_at_stand`, optional: inside the 3 m disc
 // around the fix it tracked there, which was within 1 m of the truth).
+// The road scenarios' map side: the world, the two-class channels with the planner's room, the fields.
+struct RoadMap {
+  SyntheticWorld w = test::make_world(8, 8, 5);
+  LocalizationChannels ch;
+  ClassDistanceFields fields;
+  explicit RoadMap(const LocalizerParams& p)
+      : ch(with_room(p)), fields(DistanceFieldParams{}, ch, w.extent()) {
+    test::load_world(w, fields);
+  }
+  static LocalizationChannels with_room(const LocalizerParams& p) {
+    LocalizationChannels c = LocalizationChannels::two_class();
+    c.add_off_route(p.filter.obstacle_traversable);
+    return c;
+  }
+};
+
 enum class Word { kNone, kMapFills, kPlannerSays };
 double seconds_until_lost(Word word, int* standing_before, int* standing_after, std::uint64_t* blocked, bool* retracked = nullptr,
                           double refused_radius_m = ParticleFilterParams{}.refused_radius_m, double* weight_at_stand = nullptr) {
-  SyntheticWorld w = test::make_world(8, 8, 5);
+  LocalizerParams params;
+  params.filter.refused_radius_m = refused_radius_m;
+  RoadMap map(params);
+  SyntheticWorld& w = map.w;
+  const LocalizationChannels& ch = map.ch;
+  ClassDistanceFields& fields = map.fields;
   const std::vector<std::pair<int, int>> route{{1, 1}, {1, 3}};
   std::vector<test::TruthSample> truth = test::drive_route(w, route);
   const std::size_t stop = truth.size() - 1;
   test::stand(truth, 40.0);
   const std::vector<Pose2> odom = test::odometry(truth, test::OdometryNoise{}, 9);
-  LocalizerParams params;
-  params.filter.refused_radius_m = refused_radius_m;
-  LocalizationChannels ch = LocalizationChannels::two_class();
-  ch.add_off_route(params.filter.obstacle_traversable);
-  ClassDistanceFields fields(DistanceFieldParams{}, ch, w.extent());
-  test::load_world(w, fields);
   GeometricLabeller labeller(params.label, 64, 1024);
   SemanticLocalizer loc(params, ch, 21);
   loc.on_odometry(odom[0], truth[0].stamp);
@@ -258,7 +273,11 @@ namespace {
 // of look-alike roads it finds one. Returns how far from that guess it converged (-1: it did not), and the
 // guess's sigma then.
 double standing_search(double gate_sigmas, double seconds, double* guess_sigma) {
-  SyntheticWorld w = test::make_world(8, 8, 5);
+  LocalizerParams params;
+  params.filter.guess_gate_sigmas = gate_sigmas;
+  RoadMap map(params);
+  SyntheticWorld& w = map.w;
+  ClassDistanceFields& fields = map.fields;
   const std::vector<std::pair<int, int>> route{{1, 1}, {1, 3}};
   std::vector<test::TruthSample> truth = test::drive_route(w, route);
   truth.resize(200);  // 40 m at 2 m/s
@@ -267,12 +286,7 @@ double standing_search(double gate_sigmas, double seconds, double* guess_sigma) 
   const Pose2& t0 = truth[0].pose;
   const Pose2 guess{t0.x + 6.0 * std::cos(t0.yaw + 2.0), t0.y + 6.0 * std::sin(t0.yaw + 2.0), t0.yaw};
   const std::vector<Pose2> odom = test::odometry(truth, test::OdometryNoise{}, 9);
-  LocalizerParams params;
-  params.filter.guess_gate_sigmas = gate_sigmas;
-  LocalizationChannels ch = LocalizationChannels::two_class();
-  ch.add_off_route(params.filter.obstacle_traversable);
-  ClassDistanceFields fields(DistanceFieldParams{}, ch, w.extent());
-  test::load_world(w, fields);
+  const LocalizationChannels& ch = map.ch;
   GeometricLabeller labeller(params.label, 64, 1024);
   SemanticLocalizer loc(params, ch, 21);
   loc.on_odometry(odom[0], truth[0].stamp);
