@@ -381,21 +381,19 @@ UpdateReport ParticleFilter::update_impl(const ScanRenderPolar& render, const Cl
   const bool searching = est_.status != FilterStatus::kTracking && est_.refused_fixes > 0;
   // Searching from the initial guess: nothing beyond its gate, the guess moved by the odometry.
   const double gate = est_.status == FilterStatus::kLost && distrust_good_ ? p_.guess_gate_sigmas * dead_reckoned_sigma_m() : 0.0;
+  const double gate2 = gate * gate;
   for (std::size_t k = 0; k < n_; ++k) {
     const std::size_t i = order_[k] & 0xFFFFFFFFULL;
-    if (!p_.area.contains(x_[i], y_[i])) {  // outside the mission area: not where the robot can be
+    // No weight, counted: outside the mission area (not where the robot can be); searching from the guess,
+    // beyond its gate; not tracking, in a fix the planner's word lost.
+    const double gx = x_[i] - prior_.x, gy = y_[i] - prior_.y;
+    std::uint64_t* excluded = !p_.area.contains(x_[i], y_[i])                        ? &est_.outside_area
+                              : gate2 > 0.0 && gx * gx + gy * gy > gate2                ? &est_.outside_guess
+                              : searching && near_refused(Pose2{x_[i], y_[i], 0.0}) ? &est_.in_refused
+                                                                                      : nullptr;
+    if (excluded != nullptr) {
       score_[i] = -std::numeric_limits<double>::infinity();
-      ++est_.outside_area;
-      continue;
-    }
-    if (gate > 0.0 && std::hypot(x_[i] - prior_.x, y_[i] - prior_.y) > gate) {  // farther than the guess's bound
-      score_[i] = -std::numeric_limits<double>::infinity();
-      ++est_.outside_guess;
-      continue;
-    }
-    if (searching && near_refused(Pose2{x_[i], y_[i], 0.0})) {  // a fix the planner's word lost: not again
-      score_[i] = -std::numeric_limits<double>::infinity();
-      ++est_.in_refused;
+      ++*excluded;
       continue;
     }
     double score = 0.0, kf = 0.0, ck = 0.0;

@@ -99,9 +99,8 @@ struct ParticleFilterParams {
   // this of it again until a new initial pose (0 = off). On the imported world a standing robot's wrong fix
   // in a wood, which the map check let pass and the planner refused, was found again by every re-spread
   // and lost again, for 5000 s. While the filter is not tracking, its re-spreads draw no particle inside
-  // such a disc and a particle that moves into one gets no weight: a lost cloud that collapsed onto the
-  // spot at every re-spread (still lost there, 24 m off, with a 0.8 m spread) searches elsewhere. A
-  // tracking filter that passes by is not affected.
+  // such a disc and a particle that moves into one gets no weight, so a lost cloud does not gather there
+  // again. A tracking filter that passes by is not affected.
   double refused_radius_m{3.0};
   // Searching from the initial guess (an unconfirmed fix, lost), a particle farther from the guess (moved by
   // the odometry) than this many of the guess's sigmas (grown by lost_drift_per_m) gets no weight, and the
