@@ -69,6 +69,21 @@ bool MissionManager::visited_by_anyone(const KnownRegion& r) const noexcept {
   return false;
 }
 
+bool MissionManager::given_up(const KnownRegion& r) const noexcept {
+  if (p_.give_up_failures <= 0) return false;
+  const bool by_goal = r.valid && p_.revisit_moved_m > 0.0;
+  const double lim2 = p_.revisit_moved_m * p_.revisit_moved_m;
+  int n = 0;
+  for (std::size_t k = 0; k < n_failures_; ++k) {
+    const Failure& f = failures_[k];
+    if (f.region != r.id || f.reason == FailureReason::kNoRoute) continue;
+    const double dx = static_cast<double>(f.x) - r.x, dy = static_cast<double>(f.y) - r.y;
+    if (by_goal && dx * dx + dy * dy > lim2) continue;  // failed at a goal the region has since moved away from
+    n += f.origin == p_.self ? 1 : f.attempts;
+  }
+  return n >= p_.give_up_failures;
+}
+
 DecodeError MissionManager::on_record(comms::RobotId origin, comms::Topic topic, std::span<const std::uint8_t> payload, TimeNs now) noexcept {
   ++c_.records_in;
   const comms::TopicKind kind = comms::topic_kind(topic);
@@ -119,11 +134,15 @@ DecodeError MissionManager::on_record(comms::RobotId origin, comms::Topic topic,
       for (std::size_t i = 0; i < n_failures_; ++i)
         if (failures_[i].origin == origin && failures_[i].region == f.region_id) {
           failures_[i].at = now;
+          failures_[i].reason = f.reason;
+          failures_[i].attempts = std::max<std::uint16_t>(failures_[i].attempts, std::max<std::uint16_t>(f.attempts, 1));
+          failures_[i].x = f.x;
+          failures_[i].y = f.y;
           known = true;
         }
       if (!known) {
         if (n_failures_ == kMaxFailures) ++c_.failures_overflow;
-        failures_[next_failure_] = Failure{origin, f.region_id, now, f.reason};
+        failures_[next_failure_] = Failure{origin, f.region_id, now, f.reason, std::max<std::uint16_t>(f.attempts, 1), f.x, f.y};
         next_failure_ = (next_failure_ + 1) % kMaxFailures;
         n_failures_ = std::min(kMaxFailures, n_failures_ + 1);
       }
@@ -232,7 +251,7 @@ bool MissionManager::choose(TimeNs now) noexcept {
       const bool no_new_map = f.reason == FailureReason::kNoRoute && last_map_data_ <= f.at;
       failed_recently = now - f.at < from_seconds(p_.retry_after_s) || no_new_map;
     }
-    if (failed_recently) continue;
+    if (failed_recently || given_up(r)) continue;
     bool deferred = false;
     for (const Deferred& df : deferred_) deferred = deferred || (df.region == r.id && now < df.until);
     if (deferred) continue;
@@ -270,7 +289,7 @@ void MissionManager::fail(FailureReason why, TimeNs now) noexcept {
     o->size = static_cast<std::uint32_t>(encode(f, o->payload));
   }
   if (n_failures_ == kMaxFailures) ++c_.failures_overflow;
-  failures_[next_failure_] = Failure{p_.self, region_, now, why};
+  failures_[next_failure_] = Failure{p_.self, region_, now, why, 1, static_cast<float>(goal_x_), static_cast<float>(goal_y_)};
   next_failure_ = (next_failure_ + 1) % kMaxFailures;
   n_failures_ = std::min(kMaxFailures, n_failures_ + 1);
   cancel_goal();
@@ -462,12 +481,14 @@ void MissionManager::update_status(TimeNs now) noexcept {
   s.goal_x = goal_x_;
   s.goal_y = goal_y_;
   s.pose_sigma_m = sigma_;
-  std::uint32_t known = 0, vis = 0;
+  std::uint32_t known = 0, vis = 0, gave_up = 0;
   for (std::size_t i = 0; i < n_regions_; ++i)
     if (regions_[i].valid) {
       ++known;
       if (visited_by_anyone(regions_[i])) ++vis;
+      else if (given_up(regions_[i])) ++gave_up;
     }
+  c_.regions_given_up = gave_up;
   s.regions_known = known;
   s.visited_team = vis;
   s.visited_own = visited_.count;

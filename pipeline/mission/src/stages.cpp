@@ -214,6 +214,11 @@ void MissionStage::step(TimeNs now) noexcept {
     m.on_route(pp.goal_id, pp.seq, pp.status);
   }
   m.tick(now);
+  if (const std::uint64_t g = m.counters().regions_given_up; g > given_up_logged_) {
+    AG_LOG_WARN("mission", "%llu region(s) given up after %d failures to reach them (mission.give_up_failures)", static_cast<unsigned long long>(g),
+                m.params().give_up_failures);
+    given_up_logged_ = g;
+  }
   for (const OutRecord& o : m.outbox()) {
     if (o.size == 0) continue;
     comms::GossipPublishMsg& g = *pub_;

@@ -38,7 +38,7 @@ void Roadmap::recompute_closed(Rect out) noexcept {
         closed_[k] = 1;
         continue;
       }
-      std::uint8_t all = fillable_[cls_[k]];
+      std::uint8_t all = mark_[k] == 0 ? fillable_[cls_[k]] : 0;  // a blocked disc is never filled
       for (std::int32_t yy = y - close_r_; yy <= y + close_r_ && all != 0; ++yy)
         for (std::int32_t xx = x - close_r_; xx <= x + close_r_; ++xx)
           if (!inside(xx, yy) || dil_[idx(xx, yy)] == 0) {

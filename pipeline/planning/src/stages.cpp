@@ -24,6 +24,7 @@ Status PlannerStage::init(StageContext& ctx) {
   RoadmapParams p = load_roadmap_params(v, kMapResolutionM, kTileCells);
   p.fence = {area.x0 + margin, area.y0 + margin, area.x1 - margin, area.y1 - margin};
   map_ = std::make_unique<Roadmap>(p, ClassTable::builtin(), tiles_covering(area, kMapResolutionM, kTileCells));
+  stall_ = std::make_unique<StallMarks>(load_params(v, kStallFields));
   path_ = std::make_unique<PlannedPath>();
   msg_ = std::make_unique<PlannedPathMsg>();
   replan_period_ = from_seconds(cfg_.replan_period_s);
@@ -132,6 +133,10 @@ void PlannerStage::step(TimeNs now) noexcept {
       }
     }
   }
+  // Standing on the route: the ground ahead is marked blocked (folded in by update() like a changed tile).
+  const bool following = have_goal_ && have_pose_ && pose_.status == LocalizationStatus::kTracking && msg_->status == RouteStatus::kOk;
+  if (stall_->observe(pose_.pose, Point2{goal_.goal.x, goal_.goal.y}, following, now, *map_)) ++c_.stalls;
+  stall_->expire(now, *map_);
   if (have_goal_ && have_pose_ && (now - last_plan_ >= replan_period_ || (map_changed_ && now - last_plan_ >= replan_period_ / 4)))
     plan_now(now);
 }

@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <vector>
@@ -31,6 +32,7 @@ struct Team {
   std::vector<RegionRecord> regions;
   std::uint32_t regions_version{0};
   std::uint64_t delivered{0};
+  double wall_x{1e18};  // [m] no robot gets east of this (ground the map calls free and is not)
 
   Bot& add(comms::RobotId id, std::uint8_t priority, double x, double y, ManagerParams p = {}) {
     p.self = id;
@@ -97,7 +99,7 @@ struct Team {
       const double dx = g.x - b.x, dy = g.y - b.y, d = std::hypot(dx, dy);
       const double s = std::min(d, b.speed * dt);
       if (d > 1e-9) {
-        b.x += dx / d * s;
+        b.x = std::min(b.x + dx / d * s, wall_x);
         b.y += dy / d * s;
       }
     }

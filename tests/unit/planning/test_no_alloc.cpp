@@ -1,4 +1,4 @@
-// The planner's real-time calls (set_tile, update, rebuild, plan) never allocate once the roadmap is
+// The planner's real-time calls (set_tile, update, rebuild, plan, stall marks) never allocate once the roadmap is
 // constructed (operator new counted by tests/common/counting_new.hpp).
 #include <gtest/gtest.h>
 
@@ -97,8 +97,15 @@ TEST(PlanningNoAllocation, ThePlannerAndDriveStagesStep) {
       if (k == 100) rig.push_tile(1, 1, 2, changed);
       rig.tick(k);
     }
+    // held in place on its route (wheels blocked): the planner marks the ground ahead and re-plans
+    const Pose2 held = rig.pose;
+    for (int k = 400; k < 800; ++k) {
+      rig.tick(k);
+      rig.pose = held;
+    }
     EXPECT_EQ(window.allocations(), 0U) << "allocations in PlannerStage::step() / DriveStage::step()";
   }
+  EXPECT_GE(rig.planner->counters().stalls, 1U) << "20 s held on the route: at least one stall mark";
   EXPECT_GT(rig.planner->counters().plans, 2U);
   EXPECT_EQ(rig.planner->published().status, RouteStatus::kOk);
   EXPECT_GT(rig.planner->roadmap().stats().tile_updates, 16U);

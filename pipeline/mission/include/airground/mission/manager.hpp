@@ -46,6 +46,12 @@ struct ManagerParams {
   // nothing else left the robot goes idle and returns to its start, where the map comes from (the
   // quadrotor hovers over it after its survey; out of radio range the robot would otherwise retry forever).
   double retry_after_s{120.0};
+  // The team gives a region up after this many failures to reach it (no_progress or lost_localization,
+  // by any robot, at goals within revisit_moved_m of its goal now; no_route has the map-data rule above):
+  // no robot chooses it again unless its goal moves. nav2's bounded retries; without it a region the
+  // aerial map got wrong (gen6's pond read as parked vehicles, its goal on a shore no robot can reach)
+  // was retried every retry_after_s to the mission's time cap. 0 = never.
+  int give_up_failures{5};
   double claim_timeout_s{20.0};        // a robot not heard this long: its claim is void
   double idle_return_s{60.0};          // nothing left and no new region this long: return to start
   double mission_end_s{0.0};           // > 0: return to start this long after the first tick regardless
@@ -82,6 +88,7 @@ struct ManagerCounters {
   std::uint64_t records_in{0}, records_bad{0}, records_ignored{0};
   std::uint64_t regions_overflow{0}, failures_overflow{0}, visited_overflow{0};
   std::uint64_t deferred_no_route{0};  // no route while the map still grows: dropped for defer_s, not failed
+  std::uint64_t regions_given_up{0};   // known regions not visited that the team gave up (give_up_failures), now
 };
 
 class MissionManager {
@@ -133,6 +140,7 @@ class MissionManager {
     bool valid{false};
   };
   [[nodiscard]] bool visited_by_anyone(const KnownRegion& r) const noexcept;
+  [[nodiscard]] bool given_up(const KnownRegion& r) const noexcept;
   struct Peer {
     comms::RobotId id{comms::kNoRobot};
     TimeNs last_heard{0};
@@ -145,6 +153,8 @@ class MissionManager {
     std::uint32_t region{0};
     TimeNs at{0};
     FailureReason reason{FailureReason::kNoRoute};
+    std::uint16_t attempts{1};  // another robot's: its own count so far (its latest record); own: one per entry
+    float x{0}, y{0};           // [m] the goal it failed to reach
   };
   Peer* peer(comms::RobotId id, bool create) noexcept;
   [[nodiscard]] bool alive(const Peer& p, TimeNs now) const noexcept;

@@ -93,6 +93,8 @@ inline constexpr ParamField<ManagerParams> kManagerFields[] = {
     field::real("no_progress_timeout_s", &ManagerParams::no_progress_timeout_s, 5.0, 3600.0, "s", "no progress_min_m closer for this long: the goal failed"),
     field::real("progress_min_m", &ManagerParams::progress_min_m, 0.1, 50.0, "m", "what counts as progress"),
     field::real("retry_after_s", &ManagerParams::retry_after_s, 0.0, 36000.0, "s", "a region this robot failed is not chosen by it again for this long"),
+    field::integer("give_up_failures", &ManagerParams::give_up_failures, 0, 1000, "failures",
+                   "the team gives a region up after this many no_progress / lost_localization failures at its goal (any robot); 0 = never"),
     field::real("claim_timeout_s", &ManagerParams::claim_timeout_s, 1.0, 3600.0, "s", "a robot not heard this long: its claim is void, others take over"),
     field::real("idle_return_s", &ManagerParams::idle_return_s, 0.0, 36000.0, "s", "nothing left and no new region or map tile this long: return to the start"),
     field::real("mission_end_s", &ManagerParams::mission_end_s, 0.0, 360000.0, "s", "> 0: return to the start this long after start-up regardless"),
@@ -131,6 +133,7 @@ class MissionStage final : public Stage {
   LatestReader<comms::TeamPosesMsg> team_;
   LatestReader<comms::CommsStatsMsg> comms_stats_;  // tiles_in: map data still arriving
   std::uint64_t tiles_seen_{0};
+  std::uint64_t given_up_logged_{0};  // regions given up, as last logged
   LatestReader<LocalizationMsg> loc_;
   LatestReader<PlannedPathMsg> path_;
   LatestWriter<GoalMsg> goal_out_;

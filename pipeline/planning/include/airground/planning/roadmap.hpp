@@ -134,6 +134,13 @@ class Roadmap {
   // Everything from the classes (clears the changed set).
   void rebuild() noexcept;
   [[nodiscard]] std::size_t pending_tiles() const noexcept { return n_dirty_; }
+  // Blocks every cell whose centre lies within radius_m of `centre` [m, map frame] whatever its class
+  // (what the robot found it cannot pass: the aerial map was wrong there), until unblock_disc() with the
+  // same disc; blocks nest (a cell stays blocked while any disc covers it) and outlive set_tile(). The
+  // roadmap around them is stale until update(). Returns the cells newly blocked.
+  std::size_t block_disc(Point2 centre, double radius_m) noexcept;
+  std::size_t unblock_disc(Point2 centre, double radius_m) noexcept;
+  [[nodiscard]] bool blocked_cell(std::int32_t c, std::int32_t r) const noexcept { return inside(c, r) && mark_[idx(c, r)] != 0; }
   [[nodiscard]] std::uint64_t tile_version(std::int32_t tx, std::int32_t ty) const noexcept;
 
   // Start to goal [m, map frame]. A start or goal on a cell that is not free snaps to the nearest free
@@ -179,6 +186,8 @@ class Roadmap {
   };
   [[nodiscard]] Rect clamp(Rect r) const noexcept;
   void recompute_fields(Rect changed) noexcept;           // trav, closed, clearance, free around `changed`
+  void mark_tile_dirty(std::size_t t) noexcept;
+  std::size_t change_disc(Point2 centre, double radius_m, int delta) noexcept;
   void recompute_closed(Rect out) noexcept;
   void recompute_clearance(Rect out) noexcept;
   void remove_node(std::uint32_t n) noexcept;
@@ -207,6 +216,7 @@ class Roadmap {
   std::array<std::uint8_t, 256> level_{};  // class id -> 0 blocked, 1 traversable, 2 costly
   std::array<std::uint8_t, 256> fillable_{};
   std::vector<std::uint8_t> cls_, trav_, dil_, closed_, free_;
+  std::vector<std::uint8_t> mark_;  // discs blocking the cell (block_disc); at most 255 over one cell
   std::vector<float> edt_;        // [cells] distance to the nearest blocked cell centre, capped
   std::vector<std::uint16_t> cover_;
   std::vector<std::uint64_t> tile_version_;

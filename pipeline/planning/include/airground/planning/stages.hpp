@@ -20,6 +20,7 @@
 #include "airground/planning/local_tracker.hpp"
 #include "airground/messages/mission_area.hpp"
 #include "airground/planning/roadmap.hpp"
+#include "airground/planning/stall_marks.hpp"
 #include "airground/platform/param_binding.hpp"
 #include "airground/platform/stage.hpp"
 
@@ -45,11 +46,12 @@ inline constexpr ParamField<PlannerSettings> kPlannerFields[] = {
                    "plan from the localizer's best estimate while it is still converging (it converges by driving)"),
     field::real("initialising_snap_m", &PlannerSettings::initialising_snap_m, 0.0, 100.0, "m", "... and snap its start to a free cell within 2 sigma, at most this far"),
 };
-inline constexpr auto kPlannerParamArray = param_specs(kPlannerAreaFields, kPlannerFields, kRoadmapFields);
+inline constexpr auto kPlannerParamArray = param_specs(kPlannerAreaFields, kPlannerFields, kRoadmapFields, kStallFields);
 
 struct PlannerCounters {
   std::uint64_t tiles_in{0}, tiles_applied{0}, tiles_outside{0}, tiles_stale{0};
   std::uint64_t goals{0}, goals_non_finite{0}, plans{0}, plans_failed{0};
+  std::uint64_t stalls{0};  // stood on the route stall_s: the ground ahead marked blocked
 };
 
 class PlannerStage final : public Stage {
@@ -61,10 +63,12 @@ class PlannerStage final : public Stage {
   [[nodiscard]] const Roadmap& roadmap() const noexcept { return *map_; }
   [[nodiscard]] const PlannedPathMsg& published() const noexcept { return *msg_; }
   [[nodiscard]] const PlannerCounters& counters() const noexcept { return c_; }
+  [[nodiscard]] const StallMarks& stall_marks() const noexcept { return *stall_; }
 
  private:
   void plan_now(TimeNs now) noexcept;
   std::unique_ptr<Roadmap> map_;
+  std::unique_ptr<StallMarks> stall_;
   std::unique_ptr<PlannedPath> path_;
   std::unique_ptr<PlannedPathMsg> msg_;
   RingReader<MapTileMsg, kMapTileRing> tiles_;

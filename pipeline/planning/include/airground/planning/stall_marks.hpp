@@ -1,0 +1,72 @@
+// Where the robot could not go: a robot that follows a route but stands still marks the ground just
+// ahead of it blocked in its own roadmap, and re-plans around it. The aerial map can be wrong at an
+// edge the LiDAR cannot see either (ErfNet calls the metre of a pond's shore next to a track "road";
+// water gives no return): without this the planner sends the robot into the same shore for ever
+// (gen6 study, session 38: 63 collisions at one spot). nav2's costmaps learn from the robot's own
+// sensors in the same way; a mark is lifted after keep_s, so a team-mate that stood in the way is no
+// obstacle for ever.
+//
+// Pure logic over a Roadmap; fixed capacity, no allocation after construction.
+#pragma once
+
+#include <array>
+#include <cstdint>
+
+#include "airground/messages/geometry.hpp"
+#include "airground/platform/param_binding.hpp"
+#include "airground/platform/time.hpp"
+#include "airground/planning/roadmap.hpp"
+
+namespace ag::plan {
+
+struct StallParams {
+  double stall_s{10.0};        // following a route and within move_m of one spot this long: stalled; 0 = off
+  double move_m{0.3};          // [m]
+  double goal_clear_m{3.0};    // [m] not within this of the goal (a robot at its goal stands by design)
+  double ahead_m{1.0};         // [m] the mark's centre ahead of the robot's centre (its footprint's edge)
+  double radius_m{0.6};        // [m] the mark's radius
+  double keep_s{600.0};        // [s] a mark is lifted after this
+};
+inline constexpr ParamField<StallParams> kStallFields[] = {
+    field::real("stall_s", &StallParams::stall_s, 0.0, 600.0, "s",
+                "following a route but within stall_move_m of one spot this long: the ground ahead is marked blocked and the route re-planned; 0 = off"),
+    field::real("stall_move_m", &StallParams::move_m, 0.05, 5.0, "m", "... moving less than this counts as standing"),
+    field::real("stall_goal_clear_m", &StallParams::goal_clear_m, 0.0, 50.0, "m", "... not within this of the goal"),
+    field::real("stall_mark_ahead_m", &StallParams::ahead_m, 0.0, 5.0, "m", "the blocked mark's centre this far ahead of the robot's centre"),
+    field::real("stall_mark_radius_m", &StallParams::radius_m, 0.1, 5.0, "m", "the blocked mark's radius"),
+    field::real("stall_mark_keep_s", &StallParams::keep_s, 1.0, 36000.0, "s", "a blocked mark is lifted after this"),
+};
+
+struct StallMark {
+  Point2 centre;
+  TimeNs until{0};
+};
+
+class StallMarks {
+ public:
+  static constexpr std::size_t kMaxMarks = 32;  // a full table lifts its oldest mark for a new one
+  explicit StallMarks(const StallParams& p) : p_(p) {}
+
+  // One pose (map frame). `following`: a route to a goal is being driven on a tracking pose. Returns true
+  // when it marked the ground ahead blocked in `map` (the caller re-plans once map.update() has run).
+  bool observe(const Pose2& pose, Point2 goal, bool following, TimeNs now, Roadmap& map) noexcept;
+  // Lifts marks past their keep_s; true when any was lifted.
+  bool expire(TimeNs now, Roadmap& map) noexcept;
+
+  [[nodiscard]] std::size_t count() const noexcept { return n_; }
+  [[nodiscard]] const StallMark& mark(std::size_t i) const noexcept { return marks_[i]; }
+  [[nodiscard]] std::uint64_t stalls() const noexcept { return stalls_; }
+  [[nodiscard]] const StallParams& params() const noexcept { return p_; }
+
+ private:
+  void lift(std::size_t i, Roadmap& map) noexcept;
+  StallParams p_;
+  std::array<StallMark, kMaxMarks> marks_{};
+  std::size_t n_{0};
+  bool anchored_{false};
+  Point2 anchor_{};
+  TimeNs since_{0};
+  std::uint64_t stalls_{0};
+};
+
+}  // namespace ag::plan

@@ -1,0 +1,49 @@
+// Stall marks: a robot standing on its route marks the ground ahead blocked.
+#include "airground/planning/stall_marks.hpp"
+
+#include <cmath>
+
+#include "airground/platform/log.hpp"
+
+namespace ag::plan {
+
+bool StallMarks::observe(const Pose2& pose, Point2 goal, bool following, TimeNs now, Roadmap& map) noexcept {
+  const bool near_goal = std::hypot(goal.x - pose.x, goal.y - pose.y) <= p_.goal_clear_m;
+  if (!(p_.stall_s > 0) || !following || near_goal || !std::isfinite(pose.x) || !std::isfinite(pose.y)) {
+    anchored_ = false;
+    return false;
+  }
+  if (!anchored_ || std::hypot(pose.x - anchor_.x, pose.y - anchor_.y) > p_.move_m) {
+    anchored_ = true;
+    anchor_ = Point2{pose.x, pose.y};
+    since_ = now;
+    return false;
+  }
+  if (now - since_ < from_seconds(p_.stall_s)) return false;
+  since_ = now;  // the next mark only after standing as long again
+  if (n_ == kMaxMarks) lift(0, map);
+  const Point2 c{pose.x + p_.ahead_m * std::cos(pose.yaw), pose.y + p_.ahead_m * std::sin(pose.yaw)};
+  marks_[n_++] = StallMark{c, now + from_seconds(p_.keep_s)};
+  map.block_disc(c, p_.radius_m);
+  ++stalls_;
+  AG_LOG_INFO("planner", "standing on the route for %.0f s at (%.1f, %.1f): ground ahead at (%.1f, %.1f) marked blocked for %.0f s (%zu marks)",
+              p_.stall_s, pose.x, pose.y, c.x, c.y, p_.keep_s, n_);
+  return true;
+}
+
+bool StallMarks::expire(TimeNs now, Roadmap& map) noexcept {
+  bool any = false;
+  while (n_ > 0 && marks_[0].until <= now) {  // marks are in time order: the oldest first
+    lift(0, map);
+    any = true;
+  }
+  return any;
+}
+
+void StallMarks::lift(std::size_t i, Roadmap& map) noexcept {
+  map.unblock_disc(marks_[i].centre, p_.radius_m);
+  for (std::size_t k = i + 1; k < n_; ++k) marks_[k - 1] = marks_[k];
+  --n_;
+}
+
+}  // namespace ag::plan

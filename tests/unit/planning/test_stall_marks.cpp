@@ -1,0 +1,178 @@
+// Where the robot could not go: blocked discs in the roadmap (they survive a new version of their tile
+// and lift cleanly), the stall detector (standing on a route marks the ground ahead; driving, standing at
+// the goal or not following marks nothing; marks expire; a full table lifts its oldest), and the
+// planner stage re-routing through the other gap of a wall after the robot stood in the first.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+#include "airground/planning/stall_marks.hpp"
+#include "stage_rig.hpp"
+
+namespace ag::plan {
+namespace {
+
+constexpr std::uint8_t kRoad = raw(ClassId::kRoad), kBuilding = raw(ClassId::kBuilding);
+constexpr double kRes = 0.5;
+
+// Two road tiles (64 m x 32 m) cut by a building wall at x = 32 m with two 3 m gaps: A at y 4-7 m (on the
+// straight line of the test's route) and B at y 25-28 m (the long way round).
+std::vector<std::uint8_t> wall_tile(int tx) {
+  std::vector<std::uint8_t> t(64 * 64, kRoad);
+  if (tx != 1) return t;
+  for (int r = 0; r < 64; ++r) {
+    const bool gap = (r >= 8 && r < 14) || (r >= 50 && r < 56);
+    if (!gap)
+      for (int c = 0; c < 2; ++c) t[static_cast<std::size_t>(r * 64 + c)] = kBuilding;
+  }
+  return t;
+}
+
+// Where a route crosses x = 32 m (the wall), or NaN.
+double crossing_y(std::span<const Point2> pts) {
+  for (std::size_t i = 1; i < pts.size(); ++i)
+    if ((pts[i - 1].x - 32.0) * (pts[i].x - 32.0) <= 0 && pts[i].x != pts[i - 1].x)
+      return pts[i - 1].y + (pts[i].y - pts[i - 1].y) * (32.0 - pts[i - 1].x) / (pts[i].x - pts[i - 1].x);
+  return std::nan("");
+}
+
+std::unique_ptr<Roadmap> wall_map() {
+  auto rm = std::make_unique<Roadmap>(RoadmapParams{}, ClassTable::builtin(), TileExtent{0, 0, 2, 1});
+  for (int tx = 0; tx < 2; ++tx) EXPECT_TRUE(rm->set_tile(tx, 0, 1, wall_tile(tx)));
+  rm->rebuild();
+  return rm;
+}
+
+double route_crossing(Roadmap& rm) {
+  auto path = std::make_unique<PlannedPath>();
+  rm.plan(Point2{20.0, 5.5}, Point2{44.0, 5.5}, *path);
+  if (path->status != PlanStatus::kOk) return std::nan("");
+  return crossing_y(std::span<const Point2>(path->points.data(), path->count));
+}
+
+TEST(RoadmapBlocks, ABlockedDiscClosesAGapUntilLiftedAndOutlivesANewTile) {
+  auto rm = wall_map();
+  const double open = route_crossing(*rm);
+  ASSERT_GT(open, 4.0);
+  ASSERT_LT(open, 7.0) << "the short way is through gap A";
+
+  const std::size_t cells = rm->block_disc(Point2{32.0, 5.5}, 0.6);
+  EXPECT_NEAR(static_cast<double>(cells), M_PI * 0.36 / (kRes * kRes), 3.0) << "cells whose centre is within the radius";
+  EXPECT_TRUE(rm->blocked_cell(64, 11));
+  EXPECT_FALSE(rm->blocked_cell(64, 14)) << "1.0 m from the centre";
+  EXPECT_GT(rm->pending_tiles(), 0U) << "the roadmap around the disc is stale until update()";
+  rm->update();
+  const double blocked = route_crossing(*rm);
+  EXPECT_GT(blocked, 25.0) << "around through gap B";
+  EXPECT_LT(blocked, 28.0);
+
+  ASSERT_TRUE(rm->set_tile(1, 0, 2, wall_tile(1))) << "a new version of the tile from the quadrotor";
+  rm->update();
+  EXPECT_TRUE(rm->blocked_cell(64, 11)) << "the robot's own finding is not overwritten by the aerial map";
+  EXPECT_GT(route_crossing(*rm), 25.0);
+
+  rm->block_disc(Point2{32.0, 5.5}, 0.6);  // blocks nest
+  rm->unblock_disc(Point2{32.0, 5.5}, 0.6);
+  rm->update();
+  EXPECT_GT(route_crossing(*rm), 25.0) << "still blocked by the first disc";
+  rm->unblock_disc(Point2{32.0, 5.5}, 0.6);
+  rm->update();
+  EXPECT_FALSE(rm->blocked_cell(64, 11));
+  EXPECT_NEAR(route_crossing(*rm), open, 1e-9) << "lifted: the same route as before";
+}
+
+TEST(StallMarks, StandingOnTheRouteMarksTheGroundAheadAndNothingElseDoes) {
+  auto rm = wall_map();
+  StallParams p;
+  p.stall_s = 10.0;
+  p.keep_s = 100.0;
+  StallMarks s(p);
+  const Point2 goal{44.0, 5.5};
+  auto at = [](double t) { return static_cast<TimeNs>(t * 1e9); };
+  // driving at 1 m/s for 30 s: no mark
+  for (int k = 0; k <= 300; ++k) EXPECT_FALSE(s.observe(Pose2{1.0 + 0.1 * k, 5.5, 0.0}, goal, true, at(0.1 * k), *rm));
+  // then standing (from 30.1 s, 0.5 m on): for 9.9 s none; at 10 s one, 1 m ahead (east) of the robot
+  const Pose2 stand{31.5, 5.5, 0.0};
+  for (int k = 0; k < 100; ++k) EXPECT_FALSE(s.observe(stand, goal, true, at(30.1 + 0.1 * k), *rm)) << k;
+  EXPECT_TRUE(s.observe(Pose2{31.6, 5.6, 0.0}, goal, true, at(40.1), *rm)) << "jitter within move_m is standing";
+  ASSERT_EQ(s.count(), 1U);
+  EXPECT_NEAR(s.mark(0).centre.x, 32.6, 1e-9);
+  EXPECT_NEAR(s.mark(0).centre.y, 5.6, 1e-9);
+  EXPECT_TRUE(rm->blocked_cell(64, 10));
+  // standing on: the next mark only after another stall_s
+  EXPECT_FALSE(s.observe(stand, goal, true, at(45.0), *rm));
+  EXPECT_TRUE(s.observe(stand, goal, true, at(50.1), *rm));
+  EXPECT_EQ(s.count(), 2U);
+  EXPECT_EQ(s.stalls(), 2U);
+
+  // standing still but not following a route (no goal, not tracking) or at the goal: no mark
+  StallMarks q(p);
+  for (int k = 0; k <= 300; ++k) EXPECT_FALSE(q.observe(stand, goal, false, at(0.1 * k), *rm));
+  for (int k = 0; k <= 300; ++k) EXPECT_FALSE(q.observe(Pose2{42.0, 5.5, 0.0}, goal, true, at(100.0 + 0.1 * k), *rm)) << "2 m from the goal";
+  EXPECT_EQ(q.count(), 0U);
+
+  // marks lift after keep_s, oldest first
+  EXPECT_FALSE(s.expire(at(140.0), *rm));
+  EXPECT_TRUE(s.expire(at(140.1), *rm));
+  EXPECT_EQ(s.count(), 1U);
+  EXPECT_TRUE(s.expire(at(150.1), *rm));
+  EXPECT_EQ(s.count(), 0U);
+  EXPECT_FALSE(rm->blocked_cell(64, 10));
+  EXPECT_FALSE(rm->blocked_cell(64, 11));
+}
+
+TEST(StallMarks, AFullTableLiftsItsOldestMark) {
+  auto rm = wall_map();
+  StallParams p;
+  p.stall_s = 1.0;
+  StallMarks s(p);
+  TimeNs t = 0;
+  for (std::size_t i = 0; i <= StallMarks::kMaxMarks; ++i) {
+    const Pose2 stand{2.0 + 1.5 * static_cast<double>(i), 20.0, M_PI / 2};  // a new spot each time, facing north
+    for (int k = 0; k <= 11; ++k, t += 100'000'000) s.observe(stand, Point2{60.0, 5.0}, true, t, *rm);
+  }
+  EXPECT_EQ(s.stalls(), StallMarks::kMaxMarks + 1);
+  EXPECT_EQ(s.count(), StallMarks::kMaxMarks);
+  EXPECT_FALSE(rm->blocked_cell(4, 42)) << "the first mark (2, 21) was lifted";
+  EXPECT_TRUE(rm->blocked_cell(7, 42)) << "the second (3.5, 21) is still there";
+}
+
+// The stage: a robot standing in gap A on its tracking pose for stall_s gets a route through gap B.
+TEST(StallMarks, ThePlannerStageRoutesAroundWhereTheRobotStood) {
+  const auto w = loc::test::make_world(2, 1, 3);
+  test::Rig rig(w);
+  for (int tx = 0; tx < 2; ++tx) rig.push_tile(tx, 0, 1, wall_tile(tx));
+  do rig.step_planner();
+  while (rig.planner->roadmap().pending_tiles() > 0);
+  rig.pose = Pose2{20.0, 5.5, 0.0};
+  rig.goal(44.0, 5.5, 1);
+  rig.step_planner();
+  auto crossing = [&] {
+    const PlannedPathMsg& m = rig.planner->published();
+    std::vector<Point2> pts;
+    for (std::uint32_t i = 0; i < m.count; ++i) pts.push_back(Point2{m.points[i].x, m.points[i].y});
+    return crossing_y(pts);
+  };
+  ASSERT_EQ(rig.planner->published().status, RouteStatus::kOk);
+  ASSERT_LT(crossing(), 7.0);
+  // the robot reached the gap and stands there (in the field: the aerial map was wrong about it)
+  rig.pose = Pose2{31.0, 5.5, 0.0};
+  for (int k = 0; k < 110; ++k) {  // 11 s at 10 Hz
+    rig.clock.set(rig.clock.now() + 100 * kNsPerMs);
+    rig.step_planner();
+  }
+  EXPECT_EQ(rig.planner->counters().stalls, 1U);
+  ASSERT_EQ(rig.planner->published().status, RouteStatus::kOk);
+  EXPECT_GT(crossing(), 25.0) << "re-planned through gap B";
+  // the same standing robot, lost: no more marks
+  rig.status = LocalizationStatus::kLost;
+  for (int k = 0; k < 200; ++k) {
+    rig.clock.set(rig.clock.now() + 100 * kNsPerMs);
+    rig.step_planner();
+  }
+  EXPECT_EQ(rig.planner->counters().stalls, 1U);
+}
+
+}  // namespace
+}  // namespace ag::plan
