@@ -51,15 +51,11 @@ Roadmap::Roadmap(const RoadmapParams& params, const ClassTable& classes, const T
   };
   fence_ = {first(p_.fence.x0, ox_, w_), first(p_.fence.y0, oy_, h_), end(p_.fence.x1, ox_, w_), end(p_.fence.y1, oy_, h_)};
   for (int i = 0; i < 256; ++i) {
-    const auto id = static_cast<ClassId>(i);
     const bool known = classes.valid_id(static_cast<std::uint8_t>(i));
-    const Traversability t = known ? classes.info(id).traversability : Traversability::kBlocked;
-    std::uint8_t lv = 0;
-    if (t != Traversability::kBlocked && static_cast<int>(t) <= static_cast<int>(p_.max_level))
-      lv = t == Traversability::kCostly ? 2 : 1;
-    level_[static_cast<std::size_t>(i)] = lv;
+    class_trav_[static_cast<std::size_t>(i)] = known ? classes.info(static_cast<ClassId>(i)).traversability : Traversability::kBlocked;
     fillable_[static_cast<std::size_t>(i)] = (p_.hole_fill_any_class || i == raw(ClassId::kUnknown)) ? 1 : 0;
   }
+  set_levels();
   const std::size_t n = static_cast<std::size_t>(w_) * static_cast<std::size_t>(h_);
   cls_.assign(n, raw(ClassId::kUnknown));
   trav_.assign(n, 0);
@@ -100,6 +96,28 @@ Roadmap::Roadmap(const RoadmapParams& params, const ClassTable& classes, const T
   dense_x_.assign(8192, 0.0);
   dense_y_.assign(8192, 0.0);
   dense_c_.assign(8192, 0.0F);
+}
+
+void Roadmap::set_levels() noexcept {
+  for (std::size_t i = 0; i < 256; ++i) {
+    const Traversability t = class_trav_[i];
+    std::uint8_t lv = 0;
+    if (t != Traversability::kBlocked && static_cast<int>(t) <= static_cast<int>(p_.max_level)) lv = t == Traversability::kCostly ? 2 : 1;
+    level_[i] = lv;
+  }
+}
+
+bool Roadmap::set_max_level(Traversability level) noexcept {
+  if (level == p_.max_level) return false;
+  p_.max_level = level;
+  set_levels();
+  for (std::int32_t r = 0; r < h_; ++r)
+    for (std::int32_t c = 0; c < w_; ++c) {
+      const std::size_t k = idx(c, r);
+      trav_[k] = level_[cls_[k]] != 0 && in_fence(c, r) && mark_[k] == 0 ? 1 : 0;
+    }
+  for (std::size_t t = 0; t < tile_dirty_.size(); ++t) mark_tile_dirty(t);
+  return true;
 }
 
 std::size_t Roadmap::memory_bytes() const noexcept {

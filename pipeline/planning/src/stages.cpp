@@ -135,7 +135,10 @@ void PlannerStage::step(TimeNs now) noexcept {
   }
   // Standing on the route: the ground ahead is marked blocked (folded in by update() like a changed tile).
   const bool following = have_goal_ && have_pose_ && pose_.status == LocalizationStatus::kTracking && msg_->status == RouteStatus::kOk;
-  if (stall_->observe(pose_.pose, Point2{goal_.goal.x, goal_.goal.y}, following, now, *map_)) ++c_.stalls;
+  if (stall_->observe(pose_.pose, Point2{goal_.goal.x, goal_.goal.y}, following, now, *map_)) {
+    ++c_.stalls;
+    map_changed_ = true;  // re-plan soon (a widening rebuilt the roadmap at once: no tile is pending)
+  }
   stall_->expire(now, *map_);
   if (have_goal_ && have_pose_ && (now - last_plan_ >= replan_period_ || (map_changed_ && now - last_plan_ >= replan_period_ / 4)))
     plan_now(now);

@@ -26,6 +26,12 @@ bool StallMarks::observe(const Pose2& pose, Point2 goal, bool following, TimeNs 
   marks_[n_++] = StallMark{c, now + from_seconds(p_.keep_s)};
   map.block_disc(c, p_.radius_m);
   ++stalls_;
+  if (static_cast<int>(p_.traversable) > static_cast<int>(map.params().max_level) && map.set_max_level(p_.traversable)) {
+    map.rebuild();  // once: every tile changed
+    widened_ = true;
+    AG_LOG_WARN("planner", "the aerial map was wrong about where this robot can drive: planning through '%s' classes from now on (planner.stall_traversable)",
+                p_.traversable == Traversability::kCostly ? "costly" : p_.traversable == Traversability::kRough ? "rough" : "free");
+  }
   AG_LOG_INFO("planner", "standing on the route for %.0f s at (%.1f, %.1f): ground ahead at (%.1f, %.1f) marked blocked for %.0f s (%zu marks)",
               p_.stall_s, pose.x, pose.y, c.x, c.y, p_.keep_s, n_);
   return true;

@@ -29,11 +29,11 @@ std::vector<std::uint8_t> wall_tile(int tx) {
   return t;
 }
 
-// Where a route crosses x = 32 m (the wall), or NaN.
-double crossing_y(std::span<const Point2> pts) {
+// Where a route crosses x = at_x (the wall: 32 m), or NaN.
+double crossing_y(std::span<const Point2> pts, double at_x = 32.0) {
   for (std::size_t i = 1; i < pts.size(); ++i)
-    if ((pts[i - 1].x - 32.0) * (pts[i].x - 32.0) <= 0 && pts[i].x != pts[i - 1].x)
-      return pts[i - 1].y + (pts[i].y - pts[i - 1].y) * (32.0 - pts[i - 1].x) / (pts[i].x - pts[i - 1].x);
+    if ((pts[i - 1].x - at_x) * (pts[i].x - at_x) <= 0 && pts[i].x != pts[i - 1].x)
+      return pts[i - 1].y + (pts[i].y - pts[i - 1].y) * (at_x - pts[i - 1].x) / (pts[i].x - pts[i - 1].x);
   return std::nan("");
 }
 
@@ -136,6 +136,47 @@ TEST(StallMarks, AFullTableLiftsItsOldestMark) {
   EXPECT_EQ(s.count(), StallMarks::kMaxMarks);
   EXPECT_FALSE(rm->blocked_cell(4, 42)) << "the first mark (2, 21) was lifted";
   EXPECT_TRUE(rm->blocked_cell(7, 42)) << "the second (3.5, 21) is still there";
+}
+
+// A 3 m road between buildings (north) and a 3 m strip of grass (south, then buildings): gen6's pond
+// track, where the map's "road" was water and its "grass" the track.
+std::unique_ptr<Roadmap> track_map() {
+  constexpr std::uint8_t kGrass = raw(ClassId::kGrass);
+  std::vector<std::uint8_t> t(64 * 64, kBuilding);
+  for (int r = 10; r < 16; ++r)
+    for (int c = 0; c < 64; ++c) t[static_cast<std::size_t>(r * 64 + c)] = kGrass;
+  for (int r = 16; r < 22; ++r)
+    for (int c = 0; c < 64; ++c) t[static_cast<std::size_t>(r * 64 + c)] = kRoad;
+  auto rm = std::make_unique<Roadmap>(RoadmapParams{}, ClassTable::builtin(), TileExtent{0, 0, 1, 1});
+  EXPECT_TRUE(rm->set_tile(0, 0, 1, t));
+  rm->rebuild();
+  return rm;
+}
+
+TEST(StallMarks, AfterTheFirstMarkTheRobotAlsoPlansOverGrass) {
+  for (const Traversability widen : {Traversability::kCostly, Traversability::kRough}) {
+    auto rm = track_map();
+    auto path = std::make_unique<PlannedPath>();
+    rm->plan(Point2{3.0, 9.5}, Point2{29.0, 9.5}, *path);
+    ASSERT_EQ(path->status, PlanStatus::kOk) << "along the road";
+    StallParams p;
+    p.traversable = widen;
+    StallMarks s(p);
+    const Pose2 stand{15.0, 9.5, 0.0};
+    for (int k = 0; k <= 100; ++k) s.observe(stand, Point2{29.0, 9.5}, true, static_cast<TimeNs>(k) * 100'000'000, *rm);
+    ASSERT_EQ(s.count(), 1U);
+    rm->update();
+    rm->plan(Point2{3.0, 9.5}, Point2{29.0, 9.5}, *path);
+    if (widen == Traversability::kCostly) {
+      EXPECT_TRUE(s.widened());
+      EXPECT_EQ(rm->params().max_level, Traversability::kCostly);
+      ASSERT_EQ(path->status, PlanStatus::kOk) << "round the mark over the grass";
+      EXPECT_LT(crossing_y(std::span<const Point2>(path->points.data(), path->count), 16.0), 8.5) << "passes south of the mark (8.9-10.1 m), keeping its clearance over the grass";
+    } else {
+      EXPECT_FALSE(s.widened());
+      EXPECT_NE(path->status, PlanStatus::kOk) << "road only: the mark closes the track";
+    }
+  }
 }
 
 // The stage: a robot standing in gap A on its tracking pose for stall_s gets a route through gap B.

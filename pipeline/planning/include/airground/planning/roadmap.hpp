@@ -141,6 +141,9 @@ class Roadmap {
   std::size_t block_disc(Point2 centre, double radius_m) noexcept;
   std::size_t unblock_disc(Point2 centre, double radius_m) noexcept;
   [[nodiscard]] bool blocked_cell(std::int32_t c, std::int32_t r) const noexcept { return inside(c, r) && mark_[idx(c, r)] != 0; }
+  // Plans through classes up to `level` from now on (every tile is stale until update() or rebuild()).
+  // False when it already did.
+  bool set_max_level(Traversability level) noexcept;
   [[nodiscard]] std::uint64_t tile_version(std::int32_t tx, std::int32_t ty) const noexcept;
 
   // Start to goal [m, map frame]. A start or goal on a cell that is not free snaps to the nearest free
@@ -213,6 +216,8 @@ class Roadmap {
   double ox_{0}, oy_{0};
   std::int32_t close_r_{0}, cap_cells_{0}, vis_r_{0}, win_{0};
   float free_min_edt_{0};  // [cells] EDT needed for a free cell
+  void set_levels() noexcept;  // level_ from class_trav_ and p_.max_level
+  std::array<Traversability, 256> class_trav_{};
   std::array<std::uint8_t, 256> level_{};  // class id -> 0 blocked, 1 traversable, 2 costly
   std::array<std::uint8_t, 256> fillable_{};
   std::vector<std::uint8_t> cls_, trav_, dil_, closed_, free_;

@@ -4,7 +4,8 @@
 // water gives no return): without this the planner sends the robot into the same shore for ever
 // (gen6 study, session 38: 63 collisions at one spot). nav2's costmaps learn from the robot's own
 // sensors in the same way; a mark is lifted after keep_s, so a team-mate that stood in the way is no
-// obstacle for ever.
+// obstacle for ever. From the first mark on the robot also plans over grass (stall_traversable): where
+// the map is wrong about the track it is often wrong both ways (gen6: the shore "road", the track "grass").
 //
 // Pure logic over a Roadmap; fixed capacity, no allocation after construction.
 #pragma once
@@ -26,6 +27,9 @@ struct StallParams {
   double ahead_m{1.0};         // [m] the mark's centre ahead of the robot's centre (its footprint's edge)
   double radius_m{0.6};        // [m] the mark's radius
   double keep_s{600.0};        // [s] a mark is lifted after this
+  // From the first mark on, plan through classes up to this level (grass): the robot has learned that
+  // the aerial map is wrong about where it can drive, and the way round may be ground it calls grass.
+  Traversability traversable{Traversability::kCostly};
 };
 inline constexpr ParamField<StallParams> kStallFields[] = {
     field::real("stall_s", &StallParams::stall_s, 0.0, 600.0, "s",
@@ -35,6 +39,9 @@ inline constexpr ParamField<StallParams> kStallFields[] = {
     field::real("stall_mark_ahead_m", &StallParams::ahead_m, 0.0, 5.0, "m", "the blocked mark's centre this far ahead of the robot's centre"),
     field::real("stall_mark_radius_m", &StallParams::radius_m, 0.1, 5.0, "m", "the blocked mark's radius"),
     field::real("stall_mark_keep_s", &StallParams::keep_s, 1.0, 36000.0, "s", "a blocked mark is lifted after this"),
+    field::choice<&StallParams::traversable>(
+        "stall_traversable", "free|rough|costly", {Traversability::kFree, Traversability::kRough, Traversability::kCostly},
+        "from the first blocked mark on, plan through classes up to this level (the way round may be what the map calls grass); at most 'traversable' = never wider"),
 };
 
 struct StallMark {
@@ -56,6 +63,7 @@ class StallMarks {
   [[nodiscard]] std::size_t count() const noexcept { return n_; }
   [[nodiscard]] const StallMark& mark(std::size_t i) const noexcept { return marks_[i]; }
   [[nodiscard]] std::uint64_t stalls() const noexcept { return stalls_; }
+  [[nodiscard]] bool widened() const noexcept { return widened_; }
   [[nodiscard]] const StallParams& params() const noexcept { return p_; }
 
  private:
@@ -67,6 +75,7 @@ class StallMarks {
   Point2 anchor_{};
   TimeNs since_{0};
   std::uint64_t stalls_{0};
+  bool widened_{false};
 };
 
 }  // namespace ag::plan
