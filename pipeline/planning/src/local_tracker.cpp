@@ -34,6 +34,14 @@ LocalTracker::LocalTracker(const LocalTrackerParams& p) : p_(p) {
   clear_.assign(grid_.size(), 0.0F);
   inliers_.assign(4096, 0);
   end_stamp_.assign(grid_.size(), 0);
+  hit_stamp_.assign(grid_.size(), 0);
+  const int nr = static_cast<int>(std::floor(p.no_ground_radius_m / p.cell_m));
+  for (int dj = -nr; dj <= nr; ++dj)
+    for (int di = -nr; di <= nr; ++di)
+      if (di * di + dj * dj <= nr * nr) {
+        near_di_.push_back(static_cast<std::int16_t>(di));
+        near_dj_.push_back(static_cast<std::int16_t>(dj));
+      }
   far_keys_.assign(kFarSlots, 0);
   far_stamp_.assign(kFarSlots, 0);
 }
@@ -178,9 +186,11 @@ bool LocalTracker::update(std::span<const ScanReturn> pts, const Pose3& mount, c
   // Free space first: a ray from the robot to every ground return (once per end cell).
   if (++stamp_ == 0) {  // wrapped: forget every old mark
     std::fill(end_stamp_.begin(), end_stamp_.end(), 0U);
+    std::fill(hit_stamp_.begin(), hit_stamp_.end(), 0U);
     std::fill(far_stamp_.begin(), far_stamp_.end(), 0U);
     stamp_ = 1;
   }
+  double r_min = 1e9;  // [m] the nearest ground return, horizontally from the robot
   for (const ScanReturn& q : pts) {
     if (!(q.range > 0.0F)) continue;
     const double h = plane_.height(q.x, q.y, q.z);
@@ -188,7 +198,8 @@ bool LocalTracker::update(std::span<const ScanReturn> pts, const Pose3& mount, c
     double mx = 0, my = 0, bx = 0, by = 0;
     to_map(q, mx, my, bx, by);
     int ei = 0, ej = 0;
-    (void)cell_of(mx, my, ei, ej);
+    if (cell_of(mx, my, ei, ej)) hit_stamp_[idx(ei, ej)] = stamp_;
+    r_min = std::min(r_min, std::hypot(bx, by));
     if (p_.trace_each_end_cell_once && !first_free_ray(ei, ej)) continue;
     int x = ri, y = rj;
     const int dx = std::abs(ei - ri), dy = -std::abs(ej - rj), sx = ri < ei ? 1 : -1, syy = rj < ej ? 1 : -1;
@@ -208,6 +219,7 @@ bool LocalTracker::update(std::span<const ScanReturn> pts, const Pose3& mount, c
       }
     }
   }
+  if (p_.no_ground_range_m > 0) mark_no_ground(ri, rj, r_min);
   // Then obstacles, which win; and the reflex.
   for (const ScanReturn& q : pts) {
     if (!(q.range > 0.0F)) continue;
@@ -221,6 +233,28 @@ bool LocalTracker::update(std::span<const ScanReturn> pts, const Pose3& mount, c
   }
   compute_clearance();
   return true;
+}
+
+// Free cells (crossed by rays) with no ground return within no_ground_radius_m, in the ring where the
+// ground returns lie that close together: no ground there (water, a drop); an obstacle.
+void LocalTracker::mark_no_ground(int ri, int rj, double r_min_m) noexcept {
+  const double r0 = (r_min_m + p_.no_ground_radius_m) / p_.cell_m, r1 = p_.no_ground_range_m / p_.cell_m;
+  if (!(r1 > r0)) return;
+  const int rc = static_cast<int>(std::ceil(r1));
+  const std::size_t m = near_di_.size();
+  for (int dj = -rc; dj <= rc; ++dj)
+    for (int di = -rc; di <= rc; ++di) {
+      const int i = ri + di, j = rj + dj;
+      if (i < 0 || j < 0 || i >= n_ || j >= n_ || grid_[idx(i, j)] != kFree) continue;
+      const double d2 = static_cast<double>(di * di + dj * dj);
+      if (d2 < r0 * r0 || d2 > r1 * r1) continue;
+      bool ground = false;
+      for (std::size_t k = 0; k < m && !ground; ++k) {
+        const int x = i + near_di_[k], y = j + near_dj_[k];
+        ground = x >= 0 && y >= 0 && x < n_ && y < n_ && hit_stamp_[idx(x, y)] == stamp_;
+      }
+      if (!ground) grid_[idx(i, j)] = kObstacle;
+    }
 }
 
 // Chamfer (1, sqrt 2) distance to the nearest obstacle cell, capped; less half a cell: from the cell's

@@ -14,13 +14,15 @@ struct Box {
   double x0, x1, y0, y1, h;  // body frame [m], from the ground up
 };
 
-// A 32-beam scan (-22.5..22.5 deg, 1 deg azimuth) from a sensor `hs` above flat ground, tilted by
-// (roll, pitch) relative to the ground: points in the sensor frame.
-inline std::vector<ScanReturn> scan(const std::vector<Box>& boxes, double hs = 0.6, double roll = 0.0, double pitch = 0.0, int az_step_deg = 1) {
+// A `beams`-beam scan (-22.5..22.5 deg, 1 deg azimuth; 32 beams unless asked) from a sensor `hs` above
+// flat ground, tilted by (roll, pitch) relative to the ground: points in the sensor frame. Ground inside
+// a `water` box (x0..x1, y0..y1 of the level frame) gives no return, as a pond does not.
+inline std::vector<ScanReturn> scan(const std::vector<Box>& boxes, double hs = 0.6, double roll = 0.0, double pitch = 0.0, int az_step_deg = 1,
+                                    int beams = 32, const std::vector<Box>& water = {}) {
   const Eigen::Matrix3d r = rotation_matrix(roll, pitch, 0.0);  // sensor -> level
   std::vector<ScanReturn> out;
-  for (int b = 0; b < 32; ++b) {
-    const double el = (-22.5 + 45.0 * b / 31.0) * kPi / 180.0;
+  for (int b = 0; b < beams; ++b) {
+    const double el = (-22.5 + 45.0 * b / (beams - 1)) * kPi / 180.0;
     for (int a = 0; a < 360; a += az_step_deg) {
       const double az = a * kPi / 180.0;
       const Eigen::Vector3d ds(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el));
@@ -44,6 +46,10 @@ inline std::vector<ScanReturn> scan(const std::vector<Box>& boxes, double hs = 0
         if (hit && t0 < t) t = t0;
       }
       if (t > 30.0) continue;
+      const Eigen::Vector3d lv = d * t;  // level frame, from the sensor
+      bool wet = false;
+      for (const Box& wb : water) wet = wet || (lv.z() < -hs + 1e-6 && lv.x() >= wb.x0 && lv.x() <= wb.x1 && lv.y() >= wb.y0 && lv.y() <= wb.y1);
+      if (wet) continue;
       const Eigen::Vector3d p = ds * t;
       ScanReturn s;
       s.x = static_cast<float>(p.x());

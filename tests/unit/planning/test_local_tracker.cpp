@@ -39,8 +39,16 @@ TEST(LocalTracker, ObstaclesBlockFreeSpaceAndCastShadows) {
   EXPECT_NEAR(t.clearance_at(12.0, 20.0), 2.0, 0.25);
 }
 
+// The tests' 32-beam sensor has its rings 1.45 deg apart, twice the Ouster's: ground returns lie close
+// enough together for the no-ground check only within about 3 m.
+LocalTrackerParams sparse_sensor() {
+  LocalTrackerParams p;
+  p.no_ground_range_m = 3.0;
+  return p;
+}
+
 TEST(LocalTracker, TheLocalGoalStepsAroundAnObstacleTheAerialMapMissed) {
-  LocalTracker t{LocalTrackerParams{}};
+  LocalTracker t{sparse_sensor()};
   const Point2 path[] = {{0, 0}, {20, 0}};
   t.set_path(path);
   ASSERT_TRUE(t.update(scan({{4.5, 5.5, -0.6, 0.6, 1.0}}), kMount, Pose2{0, 0, 0}, 0.0));
@@ -132,8 +140,38 @@ std::vector<std::uint8_t> reference_grid(const LocalTracker& t, const std::vecto
   return g;
 }
 
+// A pond beside the route (no return from it) and trees across it: the rays to the far shore cross the
+// water, and the goal farthest from the trees would be on it; ground never hit near the robot is an obstacle.
+TEST(LocalTracker, WaterThatGivesNoReturnIsNoPlaceForTheLocalGoal) {
+  const std::vector<Box> trees = {{0.0, 12.0, -4.5, -1.1, 2.0}};  // 1.5 m of track between trees and water
+  const std::vector<Box> pond = {{1.5, 12.0, 0.4, 8.0, 0.0}};
+  const auto pts = scan(trees, 0.6, 0.0, 0.0, 1, 64, pond);  // 64 beams, 0.71 deg apart: the Ouster OS1-64's spacing
+  const Point2 path[] = {{0, 0}, {20, 0}};
+  for (const bool check : {true, false}) {
+    LocalTrackerParams p;
+    if (!check) p.no_ground_range_m = 0.0;
+    LocalTracker t{p};
+    t.set_path(path);
+    ASSERT_TRUE(t.update(pts, kMount, Pose2{0, 0, 0}, 0.0));
+    const LocalGoal g = t.local_goal(Pose2{0, 0, 0}, 0);
+    ASSERT_TRUE(g.valid);
+    if (check) {
+      EXPECT_EQ(t.cell_at(4.0, 2.0), 2) << "water is an obstacle";
+      EXPECT_EQ(t.cell_at(4.0, -0.3), 1) << "the track is free";
+      EXPECT_EQ(t.cell_at(-3.0, 3.0), 1) << "dry ground beside the pond, behind the robot";
+      EXPECT_LT(g.goal.y, 0.4 - p.min_clearance_m + 0.2) << "on the track, clear of the water's edge";
+      EXPECT_GT(g.goal.y, -1.1 + p.min_clearance_m - 0.2) << "... and of the trees";
+    } else {
+      EXPECT_EQ(t.cell_at(4.0, 2.0), 1) << "without the check the rays to the far shore make the pond free";
+      EXPECT_GT(g.goal.y, 0.4) << "and the goal farthest from the trees is on the water";
+    }
+  }
+}
+
 TEST(LocalTracker, FreeSpaceTracedOncePerEndCellEqualsTracingEveryReturn) {
-  LocalTracker t{LocalTrackerParams{}};
+  LocalTrackerParams no_check;  // the reference grid is the rays alone
+  no_check.no_ground_range_m = 0.0;
+  LocalTracker t{no_check};
   const std::vector<std::vector<Box>> scenes = {{{4, 5, -0.5, 0.5, 1.0}}, {{-3, -2, 1, 6, 2.5}, {6, 7, -8, -4, 1.2}}, {}};
   const Pose2 poses[] = {{0, 0, 0}, {10.05, -3.3, 0.7}, {-7.2, 4.4, -2.1}};
   int checked = 0;

@@ -4,7 +4,8 @@
 // robot-centred obstacle grid. The local goal is a point toward the next waypoint in known free space,
 // the cell around it farthest from obstacles. When that region is blocked the robot backs up to the
 // last waypoint; when that fails too the path is cancelled and reported. A reflex stops the robot for
-// any return above a height threshold in front of it, whatever the plan.
+// any return above a height threshold in front of it, whatever the plan. Ground the rays crossed near
+// the robot without a ground return near it (water, a drop) is an obstacle too.
 //
 // Everything is allocated in the constructor; update() and local_goal() never allocate.
 #pragma once
@@ -37,6 +38,13 @@ struct LocalTrackerParams {
   double reflex_time_s{0.5};
   double reflex_half_width_m{0.35};  // ... within this of the centre line stops the robot
   double backup_timeout_s{8.0};      // backing up that long without a free way forward fails
+  // Ground the LiDAR passed over but never hit: a cell a ray crossed (to ground beyond it) with no ground
+  // return within no_ground_radius_m, between the nearest ground return + that radius and
+  // no_ground_range_m of the robot (where the rings lie closer than twice the radius), is an obstacle.
+  // Water gives no return, so without this the rays to the far shore made a pond free space, and the
+  // local goal (the cell farthest from obstacles) went onto it (gen6's pond, session 39). 0 = off.
+  double no_ground_range_m{6.0};
+  double no_ground_radius_m{0.5};
   bool trace_each_end_cell_once{true};  // false: a line to every ground return (the reference, same grid)
 };
 
@@ -98,6 +106,9 @@ class LocalTracker {
   // In-grid ends are marked in end_stamp_ (this update's stamp_), ends outside the grid in a small
   // open-addressed set (far_keys_/far_stamp_); when that is full a ray is traced anyway (same grid).
   std::vector<std::uint32_t> end_stamp_;
+  std::vector<std::uint32_t> hit_stamp_;  // cells a ground return fell in (this update's stamp_)
+  std::vector<std::int16_t> near_di_, near_dj_;  // cell offsets within no_ground_radius_m
+  void mark_no_ground(int ri, int rj, double r_min_m) noexcept;
   std::vector<std::uint64_t> far_keys_;
   std::vector<std::uint32_t> far_stamp_;
   std::uint32_t stamp_{0};

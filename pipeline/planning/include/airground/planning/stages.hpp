@@ -151,6 +151,9 @@ inline constexpr ParamField<LocalTrackerParams> kTrackerFields[] = {
     field::real("reflex_distance_m", &LocalTrackerParams::reflex_distance_m, 0.1, 5.0, "m", "... within this ahead (plus speed x 0.5 s)"),
     field::real("reflex_half_width_m", &LocalTrackerParams::reflex_half_width_m, 0.1, 2.0, "m", "... and this of the centre line"),
     field::real("backup_timeout_s", &LocalTrackerParams::backup_timeout_s, 0.5, 60.0, "s", "backing up this long without a way forward cancels the route"),
+    field::real("no_ground_range_m", &LocalTrackerParams::no_ground_range_m, 0.0, 10.0, "m",
+                "within this of the robot, ground the rays crossed with no ground return near it (water, a drop) is an obstacle; 0 = off"),
+    field::real("no_ground_radius_m", &LocalTrackerParams::no_ground_radius_m, 0.2, 2.0, "m", "... no ground return within this of the cell"),
 };
 inline constexpr auto kTrackerParamArray = param_specs(kTrackerFields);
 

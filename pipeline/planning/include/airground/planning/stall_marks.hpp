@@ -4,8 +4,9 @@
 // water gives no return): without this the planner sends the robot into the same shore for ever
 // (gen6 study, session 38: 63 collisions at one spot). nav2's costmaps learn from the robot's own
 // sensors in the same way; a mark is lifted after keep_s, so a team-mate that stood in the way is no
-// obstacle for ever. From the first mark on the robot also plans over grass (stall_traversable): where
-// the map is wrong about the track it is often wrong both ways (gen6: the shore "road", the track "grass").
+// obstacle for ever. Optionally (stall_traversable: costly) it also plans over grass from its first mark
+// on: where the map is wrong about a track it is often wrong both ways (gen6: the shore "road", the
+// track "grass"); off by default, as grass fields cost the localizer its fix.
 //
 // Pure logic over a Roadmap; fixed capacity, no allocation after construction.
 #pragma once
@@ -27,9 +28,10 @@ struct StallParams {
   double ahead_m{1.0};         // [m] the mark's centre ahead of the robot's centre (its footprint's edge)
   double radius_m{0.6};        // [m] the mark's radius
   double keep_s{600.0};        // [s] a mark is lifted after this
-  // From the first mark on, plan through classes up to this level (grass): the robot has learned that
-  // the aerial map is wrong about where it can drive, and the way round may be ground it calls grass.
-  Traversability traversable{Traversability::kCostly};
+  // From the first mark on, plan through classes up to this level (costly: grass): the way round may be
+  // ground the map calls grass. Off by default (rough, the planner's own default): measured on gen6
+  // (session 39) a lone robot routed over grass fields lost track there for good (5 of 13 targets).
+  Traversability traversable{Traversability::kRough};
 };
 inline constexpr ParamField<StallParams> kStallFields[] = {
     field::real("stall_s", &StallParams::stall_s, 0.0, 600.0, "s",
@@ -41,7 +43,7 @@ inline constexpr ParamField<StallParams> kStallFields[] = {
     field::real("stall_mark_keep_s", &StallParams::keep_s, 1.0, 36000.0, "s", "a blocked mark is lifted after this"),
     field::choice<&StallParams::traversable>(
         "stall_traversable", "free|rough|costly", {Traversability::kFree, Traversability::kRough, Traversability::kCostly},
-        "from the first blocked mark on, plan through classes up to this level (the way round may be what the map calls grass); at most 'traversable' = never wider"),
+        "from the first blocked mark on, plan through classes up to this level (costly: also grass); the default rough = never wider (grass fields cost the localizer its fix)"),
 };
 
 struct StallMark {
