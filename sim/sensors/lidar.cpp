@@ -1,6 +1,8 @@
 // The simulated Ouster LiDAR: metadata loading, the SDK's beam geometry, ray-cast scans with seeded noise.
 #include "airground/sim/lidar.hpp"
 
+#include "airground/messages/classes.hpp"
+
 #include <Eigen/LU>
 #include <nlohmann/json.hpp>
 
@@ -30,6 +32,7 @@ constexpr ParamField<LidarNoise> kNoiseFields[] = {
     field::real("min_range_m", &LidarNoise::min_range_m, 0.0, 10.0, "m", "closer returns are dropped"),
     field::real("max_range_m", &LidarNoise::max_range_m, 1.0, 1000.0, "m", "nothing is seen beyond"),
     field::real("dropout_prob", &LidarNoise::dropout_prob, 0.0, 1.0, "", "chance a return is lost"),
+    field::boolean("water_returns", &LidarNoise::water_returns, "water returns like ground (false: no return, as at 865 nm: specular and absorbing)"),
 };
 constexpr auto kNoiseParams = param_specs(kNoiseFields);
 constexpr ParamSection kNoiseSchema[] = {{"lidar_noise", kNoiseParams, "simulated LiDAR range noise"}};
@@ -282,6 +285,8 @@ LidarSimulator::LidarSimulator(const World& world, const OusterBeamModel& beams,
 void LidarSimulator::emit(std::size_t k, double hit_range, std::int32_t cell_col, std::int32_t cell_row,
                           std::uint64_t key, std::vector<LidarPoint>& out) const {
   const auto rings = static_cast<std::size_t>(beams_.rings());
+  const std::uint8_t cls = world_.class_id.at<std::uint8_t>(cell_row, cell_col);
+  if (cls == raw(ClassId::kWater) && !noise_.water_returns) return;  // specular and absorbing: no return
   const double sigma = noise_.range_sigma_m;
   const auto col = static_cast<std::uint16_t>(k / rings), ring = static_cast<std::uint16_t>(k % rings);
   double range = hit_range + beam_offset_m_;
@@ -294,7 +299,7 @@ void LidarSimulator::emit(std::size_t k, double hit_range, std::int32_t cell_col
   if (range < noise_.min_range_m || range > noise_.max_range_m) return;
   const Eigen::Vector3d p = ray_origin_[k] + (range - beam_offset_m_) * ray_dir_[k];
   out.push_back(LidarPoint{static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()),
-                           static_cast<float>(range), world_.class_id.at<std::uint8_t>(cell_row, cell_col), ring, col});
+                           static_cast<float>(range), cls, ring, col});
 }
 
 void LidarSimulator::scan_per_ray(const Pose3& pose, std::uint64_t seed, std::vector<LidarPoint>& out) const {

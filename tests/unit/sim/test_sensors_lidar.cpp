@@ -377,6 +377,34 @@ TEST(Lidar, DropoutAndRangeLimits) {
   }
 }
 
+// Water is specular and absorbing at 865 nm: a pond is a hole in the scan, and the ground beyond it
+// still returns (unless `water_returns`, the old model).
+TEST(Lidar, WaterGivesNoReturnButTheFarShoreDoes) {
+  World w = flat_world(400, 400, 0.25, -50.0, 50.0, ClassId::kGrass);
+  for (int r = 0; r < 400; ++r)
+    for (int c = 0; c < 400; ++c) {
+      const double x = -50.0 + (c + 0.5) * 0.25, y = 50.0 - (r + 0.5) * 0.25;
+      if (x > 4.0 && x < 12.0 && std::fabs(y) < 6.0) w.class_id.at<std::uint8_t>(r, c) = raw(ClassId::kWater);
+    }
+  const Pose3 pose{0, 0, 0.7, 0, 0, 0};
+  for (const bool water_returns : {false, true}) {
+    LidarNoise n = exact();
+    n.water_returns = water_returns;
+    std::vector<LidarPoint> pts;
+    LidarSimulator(w, beams(512), n).scan(pose, 3, pts);
+    int on_water = 0, far_shore = 0;
+    for (const LidarPoint& p : pts) {
+      on_water += p.cls == raw(ClassId::kWater) ? 1 : 0;
+      far_shore += (p.x > 12.5F && p.x < 20.0F && std::fabs(p.y) < 1.0F) ? 1 : 0;
+    }
+    if (water_returns)
+      EXPECT_GT(on_water, 500);
+    else
+      EXPECT_EQ(on_water, 0) << "no return from the pond";
+    EXPECT_GE(far_shore, 15) << "the ground beyond the pond returns either way";
+  }
+}
+
 TEST(Lidar, RepeatedScansReuseTheBuffer) {
   const World w = wall_world();
   const LidarSimulator sim(w, beams(2048), LidarNoise{});

@@ -60,6 +60,11 @@ struct LidarNoise {
   double min_range_m{0.3};     // [m] returns closer than this are dropped
   double max_range_m{120};     // [m] nothing is seen beyond this
   double dropout_prob{0.0};    // [-] chance that a return is lost
+  // Water returns nothing: at the Ouster's 865 nm the surface is specular (the beam glances off) and
+  // water absorbs what enters it, so a ground robot's LiDAR sees holes where ponds are (Henley et al.,
+  // "Detection and Mapping of Specular Surfaces Using Multibounce Lidar Returns", arXiv:2209.03336;
+  // puddle detectors use these holes). true = water returns like ground (the simulator before session 39).
+  bool water_returns{false};
 
   [[nodiscard]] Status check() const;
   // YAML section `lidar_noise:` with the keys above; errors name the file and the key.
