@@ -35,6 +35,8 @@ LocalTracker::LocalTracker(const LocalTrackerParams& p) : p_(p) {
   inliers_.assign(4096, 0);
   end_stamp_.assign(grid_.size(), 0);
   hit_stamp_.assign(grid_.size(), 0);
+  memo_key_.assign(grid_.size(), 0);
+  memo_at_.assign(grid_.size(), 0);
   const int nr = static_cast<int>(std::floor(p.no_ground_radius_m / p.cell_m));
   for (int dj = -nr; dj <= nr; ++dj)
     for (int di = -nr; di <= nr; ++di)
@@ -238,22 +240,48 @@ bool LocalTracker::update(std::span<const ScanReturn> pts, const Pose3& mount, c
 // Free cells (crossed by rays) with no ground return within no_ground_radius_m, in the ring where the
 // ground returns lie that close together: no ground there (water, a drop); an obstacle.
 void LocalTracker::mark_no_ground(int ri, int rj, double r_min_m) noexcept {
+  ++updates_;
+  if (updates_ == 0) {  // wrapped: forget the memory
+    std::fill(memo_at_.begin(), memo_at_.end(), 0U);
+    updates_ = 1;
+  }
   const double r0 = (r_min_m + p_.no_ground_radius_m) / p_.cell_m, r1 = p_.no_ground_range_m / p_.cell_m;
-  if (!(r1 > r0)) return;
-  const int rc = static_cast<int>(std::ceil(r1));
+  const int rc = static_cast<int>(std::ceil(std::max(r0, r1)));
   const std::size_t m = near_di_.size();
+  const auto n = static_cast<std::int64_t>(n_);
+  // map-frame cell of grid cell (i, j), and its slot in the memory
+  auto key_of = [&](int i, int j, std::size_t& slot) {
+    const auto gx = static_cast<std::int64_t>(std::floor(cx_ / p_.cell_m + (i + 0.5 - 0.5 * n_)));
+    const auto gy = static_cast<std::int64_t>(std::floor(cy_ / p_.cell_m + (j + 0.5 - 0.5 * n_)));
+    slot = static_cast<std::size_t>(((gy % n + n) % n) * n + ((gx % n + n) % n));
+    return (static_cast<std::uint64_t>(static_cast<std::uint32_t>(gx)) << 32) | static_cast<std::uint32_t>(gy);
+  };
+  const auto memory = static_cast<std::uint32_t>(std::max(0, p_.no_ground_memory_updates));
   for (int dj = -rc; dj <= rc; ++dj)
     for (int di = -rc; di <= rc; ++di) {
       const int i = ri + di, j = rj + dj;
-      if (i < 0 || j < 0 || i >= n_ || j >= n_ || grid_[idx(i, j)] != kFree) continue;
+      if (i < 0 || j < 0 || i >= n_ || j >= n_ || grid_[idx(i, j)] == kObstacle) continue;
       const double d2 = static_cast<double>(di * di + dj * dj);
-      if (d2 < r0 * r0 || d2 > r1 * r1) continue;
+      if (d2 > std::max(r0, r1) * std::max(r0, r1)) continue;
+      std::size_t slot = 0;
+      const std::uint64_t key = key_of(i, j, slot);
+      if (d2 < r0 * r0) {  // too near for this scan to tell: what it found before
+        if (memory > 0 && memo_key_[slot] == key && memo_at_[slot] != 0 && updates_ - memo_at_[slot] <= memory) grid_[idx(i, j)] = kObstacle;
+        continue;
+      }
+      if (grid_[idx(i, j)] != kFree || !(r1 > r0)) continue;
       bool ground = false;
       for (std::size_t k = 0; k < m && !ground; ++k) {
         const int x = i + near_di_[k], y = j + near_dj_[k];
         ground = x >= 0 && y >= 0 && x < n_ && y < n_ && hit_stamp_[idx(x, y)] == stamp_;
       }
-      if (!ground) grid_[idx(i, j)] = kObstacle;
+      if (!ground) {
+        grid_[idx(i, j)] = kObstacle;
+        memo_key_[slot] = key;
+        memo_at_[slot] = updates_;
+      } else if (memo_key_[slot] == key) {
+        memo_at_[slot] = 0;  // ground seen there now
+      }
     }
 }
 

@@ -168,6 +168,27 @@ TEST(LocalTracker, WaterThatGivesNoReturnIsNoPlaceForTheLocalGoal) {
   }
 }
 
+// Beside the shore, the shore is inside the LiDAR's blind ring (its lowest beam meets the ground 1.45 m
+// out here): what an earlier scan found without ground there is still an obstacle.
+TEST(LocalTracker, AShoreSeenFromAfarIsStillAnObstacleBesideIt) {
+  const std::vector<Box> pond_far = {{1.5, 12.0, 0.4, 8.0, 0.0}};    // from (0, 0)
+  const std::vector<Box> pond_near = {{-1.5, 9.0, 0.9, 8.5, 0.0}};  // the same pond from (3, -0.5)
+  for (const int memory : {100, 0}) {
+    LocalTrackerParams p;
+    p.no_ground_memory_updates = memory;
+    LocalTracker t{p};
+    ASSERT_TRUE(t.update(scan({}, 0.6, 0.0, 0.0, 1, 64, pond_far), kMount, Pose2{0, 0, 0}, 0.0));
+    EXPECT_EQ(t.cell_at(3.5, 1.2), 2) << "seen from 3.5 m: no ground";
+    ASSERT_TRUE(t.update(scan({}, 0.6, 0.0, 0.0, 1, 64, pond_near), kMount, Pose2{3, -0.5, 0}, 0.0));
+    if (memory > 0) {
+      EXPECT_EQ(t.cell_at(3.5, 1.2), 2) << "1.8 m from the robot, in its blind ring: remembered";
+      EXPECT_NE(t.cell_at(3.0, -1.2), 2) << "dry ground in the blind ring is not";
+    } else {
+      EXPECT_NE(t.cell_at(3.5, 1.2), 2) << "without the memory the shore beside the robot is unknown to it";
+    }
+  }
+}
+
 TEST(LocalTracker, FreeSpaceTracedOncePerEndCellEqualsTracingEveryReturn) {
   LocalTrackerParams no_check;  // the reference grid is the rays alone
   no_check.no_ground_range_m = 0.0;

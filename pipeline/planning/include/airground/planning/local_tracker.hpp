@@ -45,6 +45,10 @@ struct LocalTrackerParams {
   // local goal (the cell farthest from obstacles) went onto it (gen6's pond, session 39). 0 = off.
   double no_ground_range_m{6.0};
   double no_ground_radius_m{0.5};
+  // The LiDAR cannot see the ground within about 2.5 m of the robot (its lowest beam): cells found
+  // without ground are remembered (map frame) for this many updates and stay obstacles there, so a
+  // shore seen from 4 m is still one when the robot is beside it. 0 = no memory.
+  int no_ground_memory_updates{100};
   bool trace_each_end_cell_once{true};  // false: a line to every ground return (the reference, same grid)
 };
 
@@ -108,6 +112,11 @@ class LocalTracker {
   std::vector<std::uint32_t> end_stamp_;
   std::vector<std::uint32_t> hit_stamp_;  // cells a ground return fell in (this update's stamp_)
   std::vector<std::int16_t> near_di_, near_dj_;  // cell offsets within no_ground_radius_m
+  // Cells found without ground, by map-frame cell (X, Y) in a table of the grid's size indexed by
+  // (X mod n, Y mod n): the key and the update it was last found in (0: ground seen there since).
+  std::vector<std::uint64_t> memo_key_;
+  std::vector<std::uint32_t> memo_at_;
+  std::uint32_t updates_{0};
   void mark_no_ground(int ri, int rj, double r_min_m) noexcept;
   std::vector<std::uint64_t> far_keys_;
   std::vector<std::uint32_t> far_stamp_;
