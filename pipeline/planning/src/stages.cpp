@@ -45,6 +45,10 @@ Status PlannerStage::init(StageContext& ctx) {
 
 static_assert(static_cast<std::uint8_t>(PlanStatus::kStartBlocked) == kPlanStatusStartBlocked, "the localizer reads this value");
 
+// Lifting the marks re-plans at once only when that folds in no more than this many tiles (the marks'
+// own: a mark touches at most four); with the map still loading the next steps fold them in as usual.
+constexpr std::size_t kLiftReplanTiles = 16;
+
 void PlannerStage::plan_now(TimeNs now) noexcept {
   ++c_.plans;
   last_plan_ = now;
@@ -58,6 +62,15 @@ void PlannerStage::plan_now(TimeNs now) noexcept {
     snap = std::min(cfg_.initialising_snap_m, std::max(cfg_.snap_radius_m, 2.0 * sigma));
   }
   map_->plan(Point2{pose_.pose.x, pose_.pose.y}, Point2{goal_.goal.x, goal_.goal.y}, *path_, snap);
+  // The robot's own blocked marks may have closed the only way (a one-lane track where it stood): lift
+  // them and plan again at once, before the mission counts a failure. A mark diverts, it never strands.
+  if (path_->status != PlanStatus::kOk && path_->status != PlanStatus::kStartOutside && path_->status != PlanStatus::kGoalOutside &&
+      stall_->lift_all(*map_)) {
+    if (map_->pending_tiles() <= kLiftReplanTiles) {
+      map_->update();
+      map_->plan(Point2{pose_.pose.x, pose_.pose.y}, Point2{goal_.goal.x, goal_.goal.y}, *path_, snap);
+    }
+  }
   add_work(1.0);  // one route planned (compute-time model)
   PlannedPathMsg& m = *msg_;
   m.stamp = pose_.stamp;

@@ -46,6 +46,14 @@ bool StallMarks::expire(TimeNs now, Roadmap& map) noexcept {
   return any;
 }
 
+bool StallMarks::lift_all(Roadmap& map) noexcept {
+  if (n_ == 0) return false;
+  AG_LOG_INFO("planner", "no route with %zu blocked mark(s): lifted (a mark diverts a route, it never closes the last way)", n_);
+  while (n_ > 0) lift(n_ - 1, map);
+  ++lifted_all_;
+  return true;
+}
+
 void StallMarks::lift(std::size_t i, Roadmap& map) noexcept {
   map.unblock_disc(marks_[i].centre, p_.radius_m);
   for (std::size_t k = i + 1; k < n_; ++k) marks_[k - 1] = marks_[k];

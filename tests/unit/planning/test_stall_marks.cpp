@@ -18,11 +18,11 @@ constexpr double kRes = 0.5;
 
 // Two road tiles (64 m x 32 m) cut by a building wall at x = 32 m with two 3 m gaps: A at y 4-7 m (on the
 // straight line of the test's route) and B at y 25-28 m (the long way round).
-std::vector<std::uint8_t> wall_tile(int tx) {
+std::vector<std::uint8_t> wall_tile(int tx, bool gap_b = true) {
   std::vector<std::uint8_t> t(64 * 64, kRoad);
   if (tx != 1) return t;
   for (int r = 0; r < 64; ++r) {
-    const bool gap = (r >= 8 && r < 14) || (r >= 50 && r < 56);
+    const bool gap = (r >= 8 && r < 14) || (gap_b && r >= 50 && r < 56);
     if (!gap)
       for (int c = 0; c < 2; ++c) t[static_cast<std::size_t>(r * 64 + c)] = kBuilding;
   }
@@ -213,6 +213,30 @@ TEST(StallMarks, ThePlannerStageRoutesAroundWhereTheRobotStood) {
     rig.step_planner();
   }
   EXPECT_EQ(rig.planner->counters().stalls, 1U);
+}
+
+
+// With gap A the only way, the mark where the robot stood closes it: the stage lifts its marks and plans
+// again at once, so the route is never "no route" because of the robot's own marks.
+TEST(StallMarks, AMarkNeverClosesTheLastWay) {
+  const auto w = loc::test::make_world(2, 1, 3);
+  test::Rig rig(w);
+  for (int tx = 0; tx < 2; ++tx) rig.push_tile(tx, 0, 1, wall_tile(tx, false));
+  do rig.step_planner();
+  while (rig.planner->roadmap().pending_tiles() > 0);
+  rig.pose = Pose2{31.0, 5.5, 0.0};
+  rig.goal(44.0, 5.5, 1);
+  std::uint64_t failed = 0;
+  for (int k = 0; k < 150; ++k) {  // 15 s standing in the gap
+    rig.clock.set(rig.clock.now() + 100 * kNsPerMs);
+    rig.step_planner();
+    failed += rig.planner->published().status != RouteStatus::kOk ? 1U : 0U;
+  }
+  EXPECT_EQ(rig.planner->counters().stalls, 1U);
+  EXPECT_EQ(rig.planner->stall_marks().count(), 0U) << "lifted";
+  EXPECT_GE(rig.planner->stall_marks().lifted_for_route(), 1U);
+  EXPECT_EQ(failed, 0U) << "no route was ever published";
+  EXPECT_FALSE(rig.planner->roadmap().blocked_cell(64, 11));
 }
 
 }  // namespace

@@ -61,10 +61,14 @@ class StallMarks {
   bool observe(const Pose2& pose, Point2 goal, bool following, TimeNs now, Roadmap& map) noexcept;
   // Lifts marks past their keep_s; true when any was lifted.
   bool expire(TimeNs now, Roadmap& map) noexcept;
+  // Lifts every mark (no route with them: a mark diverts a route, it never closes the last way); true
+  // when there was one.
+  bool lift_all(Roadmap& map) noexcept;
 
   [[nodiscard]] std::size_t count() const noexcept { return n_; }
   [[nodiscard]] const StallMark& mark(std::size_t i) const noexcept { return marks_[i]; }
   [[nodiscard]] std::uint64_t stalls() const noexcept { return stalls_; }
+  [[nodiscard]] std::uint64_t lifted_for_route() const noexcept { return lifted_all_; }
   [[nodiscard]] bool widened() const noexcept { return widened_; }
   [[nodiscard]] const StallParams& params() const noexcept { return p_; }
 
@@ -76,7 +80,7 @@ class StallMarks {
   bool anchored_{false};
   Point2 anchor_{};
   TimeNs since_{0};
-  std::uint64_t stalls_{0};
+  std::uint64_t stalls_{0}, lifted_all_{0};
   bool widened_{false};
 };
 
