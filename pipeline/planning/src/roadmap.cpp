@@ -60,6 +60,7 @@ Roadmap::Roadmap(const RoadmapParams& params, const ClassTable& classes, const T
   cls_.assign(n, raw(ClassId::kUnknown));
   trav_.assign(n, 0);
   mark_.assign(n, 0);
+  widen_.assign(n, 0);
   dil_.assign(n, 0);
   closed_.assign(n, 0);
   free_.assign(n, 0);
@@ -112,16 +113,13 @@ bool Roadmap::set_max_level(Traversability level) noexcept {
   p_.max_level = level;
   set_levels();
   for (std::int32_t r = 0; r < h_; ++r)
-    for (std::int32_t c = 0; c < w_; ++c) {
-      const std::size_t k = idx(c, r);
-      trav_[k] = level_[cls_[k]] != 0 && in_fence(c, r) && mark_[k] == 0 ? 1 : 0;
-    }
+    for (std::int32_t c = 0; c < w_; ++c) trav_[idx(c, r)] = trav_of(c, r);
   for (std::size_t t = 0; t < tile_dirty_.size(); ++t) mark_tile_dirty(t);
   return true;
 }
 
 std::size_t Roadmap::memory_bytes() const noexcept {
-  return sizeof(*this) + cls_.size() * 7 + edt_.size() * sizeof(float) + cover_.size() * 2 + tile_version_.size() * 13 +
+  return sizeof(*this) + cls_.size() * 8 + edt_.size() * sizeof(float) + cover_.size() * 2 + tile_version_.size() * 13 +
          nodes_.size() * sizeof(Node) + vis_.size() + (free_slots_.size() + new_nodes_.size() + cand_nodes_.size()) * 4 +
          cand_.size() * 4 + col_g_.size() + (g_.size() + parent_.size() + stamp_.size()) * 4 + heap_.size() * 8 +
          pairs_.size() * 8;
@@ -160,7 +158,7 @@ bool Roadmap::set_tile(std::int32_t tx, std::int32_t ty, std::uint64_t version, 
       const std::size_t k = idx(cx, cy);
       const std::uint8_t v = cls[static_cast<std::size_t>(r * p_.tile_cells + c)];
       cls_[k] = v;
-      trav_[k] = level_[v] != 0 && in_fence(cx, cy) && mark_[k] == 0 ? 1 : 0;
+      trav_[k] = trav_of(cx, cy);
     }
   mark_tile_dirty(t);
   return true;
@@ -173,10 +171,12 @@ void Roadmap::mark_tile_dirty(std::size_t t) noexcept {
   ++n_dirty_;
 }
 
-std::size_t Roadmap::block_disc(Point2 centre, double radius_m) noexcept { return change_disc(centre, radius_m, +1); }
-std::size_t Roadmap::unblock_disc(Point2 centre, double radius_m) noexcept { return change_disc(centre, radius_m, -1); }
+std::size_t Roadmap::block_disc(Point2 centre, double radius_m) noexcept { return change_disc(mark_, centre, radius_m, +1); }
+std::size_t Roadmap::unblock_disc(Point2 centre, double radius_m) noexcept { return change_disc(mark_, centre, radius_m, -1); }
+std::size_t Roadmap::widen_disc(Point2 centre, double radius_m) noexcept { return change_disc(widen_, centre, radius_m, +1); }
+std::size_t Roadmap::unwiden_disc(Point2 centre, double radius_m) noexcept { return change_disc(widen_, centre, radius_m, -1); }
 
-std::size_t Roadmap::change_disc(Point2 centre, double radius_m, int delta) noexcept {
+std::size_t Roadmap::change_disc(std::vector<std::uint8_t>& overlay, Point2 centre, double radius_m, int delta) noexcept {
   if (!std::isfinite(centre.x) || !std::isfinite(centre.y) || !(radius_m >= 0)) return 0;
   const double res = p_.resolution_m, fc = (centre.x - ox_) / res - 0.5, fr = (centre.y - oy_) / res - 0.5, rc = radius_m / res;
   const Rect box = clamp(Rect{static_cast<std::int32_t>(std::floor(fc - rc)), static_cast<std::int32_t>(std::floor(fr - rc)),
@@ -186,12 +186,12 @@ std::size_t Roadmap::change_disc(Point2 centre, double radius_m, int delta) noex
     for (std::int32_t c = box.x0; c < box.x1; ++c) {
       if ((c - fc) * (c - fc) + (r - fr) * (r - fr) > rc * rc) continue;
       const std::size_t k = idx(c, r);
-      const std::uint8_t before = mark_[k];
-      if (delta > 0 && before < 255) ++mark_[k];
-      if (delta < 0 && before > 0) --mark_[k];
-      if ((before == 0) == (mark_[k] == 0)) continue;
-      trav_[k] = level_[cls_[k]] != 0 && in_fence(c, r) && mark_[k] == 0 ? 1 : 0;
-      if (mark_[k] != 0) ++changed;
+      const std::uint8_t before = overlay[k];
+      if (delta > 0 && before < 255) ++overlay[k];
+      if (delta < 0 && before > 0) --overlay[k];
+      if ((before == 0) == (overlay[k] == 0)) continue;
+      trav_[k] = trav_of(c, r);
+      if (overlay[k] != 0) ++changed;
       const auto t = static_cast<std::size_t>(r / p_.tile_cells) * static_cast<std::size_t>(extent_.tiles_x) + static_cast<std::size_t>(c / p_.tile_cells);
       mark_tile_dirty(t);
     }

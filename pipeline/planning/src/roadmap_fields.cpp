@@ -113,7 +113,7 @@ bool Roadmap::walk(double x0, double y0, double x1, double y1, float* min_clear,
     const std::size_t i = idx(cc, rr);
     if (free_[i] == 0) return false;
     mc = std::min(mc, edt_[i]);
-    nc += level_[cls_[i]] == 2 ? 1U : 0U;
+    nc += costly_cell(i) ? 1U : 0U;
     return true;
   };
   if (!check(c, r)) return false;

@@ -25,6 +25,7 @@ bool StallMarks::observe(const Pose2& pose, Point2 goal, bool following, TimeNs 
   const Point2 c{pose.x + p_.ahead_m * std::cos(pose.yaw), pose.y + p_.ahead_m * std::sin(pose.yaw)};
   marks_[n_++] = StallMark{c, now + from_seconds(p_.keep_s)};
   map.block_disc(c, p_.radius_m);
+  if (p_.widen_radius_m > 0) map.widen_disc(c, p_.widen_radius_m);
   ++stalls_;
   if (static_cast<int>(p_.traversable) > static_cast<int>(map.params().max_level) && map.set_max_level(p_.traversable)) {
     map.rebuild();  // once: every tile changed
@@ -56,6 +57,7 @@ bool StallMarks::lift_all(Roadmap& map) noexcept {
 
 void StallMarks::lift(std::size_t i, Roadmap& map) noexcept {
   map.unblock_disc(marks_[i].centre, p_.radius_m);
+  if (p_.widen_radius_m > 0) map.unwiden_disc(marks_[i].centre, p_.widen_radius_m);
   for (std::size_t k = i + 1; k < n_; ++k) marks_[k - 1] = marks_[k];
   --n_;
 }

@@ -153,28 +153,47 @@ std::unique_ptr<Roadmap> track_map() {
   return rm;
 }
 
-TEST(StallMarks, AfterTheFirstMarkTheRobotAlsoPlansOverGrass) {
-  for (const Traversability widen : {Traversability::kCostly, Traversability::kRough}) {
+// Three ways round a mark on a one-lane road with grass beside it: everywhere over grass from the first
+// mark on (stall_traversable: costly), over grass only near the mark (the default, stall_widen_radius_m),
+// or not at all (both off: the mark closes the track).
+TEST(StallMarks, NearAMarkTheRobotAlsoPlansOverGrassAndOnlyThere) {
+  enum class Mode { kEverywhere, kNearTheMark, kNever };
+  for (const Mode mode : {Mode::kEverywhere, Mode::kNearTheMark, Mode::kNever}) {
+    SCOPED_TRACE(static_cast<int>(mode));
     auto rm = track_map();
     auto path = std::make_unique<PlannedPath>();
     rm->plan(Point2{3.0, 9.5}, Point2{29.0, 9.5}, *path);
     ASSERT_EQ(path->status, PlanStatus::kOk) << "along the road";
     StallParams p;
-    p.traversable = widen;
+    p.traversable = mode == Mode::kEverywhere ? Traversability::kCostly : Traversability::kRough;
+    if (mode != Mode::kNearTheMark) p.widen_radius_m = 0.0;
+    ASSERT_GT(StallParams{}.widen_radius_m, 0.0) << "near the mark is the default";
     StallMarks s(p);
     const Pose2 stand{15.0, 9.5, 0.0};
     for (int k = 0; k <= 100; ++k) s.observe(stand, Point2{29.0, 9.5}, true, static_cast<TimeNs>(k) * 100'000'000, *rm);
     ASSERT_EQ(s.count(), 1U);
     rm->update();
     rm->plan(Point2{3.0, 9.5}, Point2{29.0, 9.5}, *path);
-    if (widen == Traversability::kCostly) {
-      EXPECT_TRUE(s.widened());
-      EXPECT_EQ(rm->params().max_level, Traversability::kCostly);
-      ASSERT_EQ(path->status, PlanStatus::kOk) << "round the mark over the grass";
-      EXPECT_LT(crossing_y(std::span<const Point2>(path->points.data(), path->count), 16.0), 8.5) << "passes south of the mark (8.9-10.1 m), keeping its clearance over the grass";
-    } else {
+    const auto grass_at = [&](double x) { return rm->traversable_cell(static_cast<std::int32_t>(x / kRes), 12); };  // y 6.25 m: grass
+    if (mode == Mode::kNever) {
       EXPECT_FALSE(s.widened());
       EXPECT_NE(path->status, PlanStatus::kOk) << "road only: the mark closes the track";
+      EXPECT_FALSE(grass_at(16.0));
+      continue;
+    }
+    EXPECT_EQ(s.widened(), mode == Mode::kEverywhere);
+    ASSERT_EQ(path->status, PlanStatus::kOk) << "round the mark over the grass";
+    EXPECT_LT(crossing_y(std::span<const Point2>(path->points.data(), path->count), 16.0), 8.5)
+        << "passes south of the mark (8.9-10.1 m), keeping its clearance over the grass";
+    EXPECT_TRUE(grass_at(16.0)) << "beside the mark";
+    EXPECT_EQ(grass_at(26.0), mode == Mode::kEverywhere) << "10 m from the mark: grass only when widened everywhere";
+    if (mode == Mode::kNearTheMark) {
+      ASSERT_TRUE(s.lift_all(*rm));
+      rm->update();
+      EXPECT_FALSE(grass_at(16.0)) << "lifting the mark narrows the roadmap again";
+      rm->plan(Point2{3.0, 9.5}, Point2{29.0, 9.5}, *path);
+      ASSERT_EQ(path->status, PlanStatus::kOk);
+      EXPECT_GT(crossing_y(std::span<const Point2>(path->points.data(), path->count), 16.0), 8.5) << "back on the road";
     }
   }
 }

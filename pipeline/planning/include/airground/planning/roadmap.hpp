@@ -140,6 +140,13 @@ class Roadmap {
   // roadmap around them is stale until update(). Returns the cells newly blocked.
   std::size_t block_disc(Point2 centre, double radius_m) noexcept;
   std::size_t unblock_disc(Point2 centre, double radius_m) noexcept;
+  // Plans through costly classes (grass) on every cell whose centre lies within radius_m of `centre`,
+  // whatever max_level, until unwiden_disc() with the same disc (nesting like blocks; a blocked cell stays
+  // blocked): the way round a spot the robot found it cannot pass, where the map may call the real track
+  // grass. The roadmap around it is stale until update(). Returns the cells newly widened.
+  std::size_t widen_disc(Point2 centre, double radius_m) noexcept;
+  std::size_t unwiden_disc(Point2 centre, double radius_m) noexcept;
+  [[nodiscard]] bool widened_cell(std::int32_t c, std::int32_t r) const noexcept { return inside(c, r) && widen_[idx(c, r)] != 0; }
   [[nodiscard]] bool blocked_cell(std::int32_t c, std::int32_t r) const noexcept { return inside(c, r) && mark_[idx(c, r)] != 0; }
   // Plans through classes up to `level` from now on (every tile is stale until update() or rebuild()).
   // False when it already did.
@@ -190,7 +197,16 @@ class Roadmap {
   [[nodiscard]] Rect clamp(Rect r) const noexcept;
   void recompute_fields(Rect changed) noexcept;           // trav, closed, clearance, free around `changed`
   void mark_tile_dirty(std::size_t t) noexcept;
-  std::size_t change_disc(Point2 centre, double radius_m, int delta) noexcept;
+  std::size_t change_disc(std::vector<std::uint8_t>& overlay, Point2 centre, double radius_m, int delta) noexcept;
+  // A cell's traversable flag from its class, the fence and the overlays; whether it counts as costly.
+  [[nodiscard]] std::uint8_t trav_of(std::int32_t c, std::int32_t r) const noexcept {
+    const std::size_t k = idx(c, r);
+    const bool by_class = level_[cls_[k]] != 0 || (widen_[k] != 0 && class_trav_[cls_[k]] == Traversability::kCostly);
+    return by_class && in_fence(c, r) && mark_[k] == 0 ? 1 : 0;
+  }
+  [[nodiscard]] bool costly_cell(std::size_t k) const noexcept {
+    return level_[cls_[k]] == 2 || (widen_[k] != 0 && class_trav_[cls_[k]] == Traversability::kCostly);
+  }
   void recompute_closed(Rect out) noexcept;
   void recompute_clearance(Rect out) noexcept;
   void remove_node(std::uint32_t n) noexcept;
@@ -222,6 +238,7 @@ class Roadmap {
   std::array<std::uint8_t, 256> fillable_{};
   std::vector<std::uint8_t> cls_, trav_, dil_, closed_, free_;
   std::vector<std::uint8_t> mark_;  // discs blocking the cell (block_disc); at most 255 over one cell
+  std::vector<std::uint8_t> widen_;  // discs letting the planner through a costly class there (widen_disc)
   std::vector<float> edt_;        // [cells] distance to the nearest blocked cell centre, capped
   std::vector<std::uint16_t> cover_;
   std::vector<std::uint64_t> tile_version_;

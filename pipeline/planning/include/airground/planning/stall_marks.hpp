@@ -4,7 +4,8 @@
 // water gives no return): without this the planner sends the robot into the same shore for ever
 // (gen6 study, session 38: 63 collisions at one spot). nav2's costmaps learn from the robot's own
 // sensors in the same way; a mark is lifted after keep_s, so a team-mate that stood in the way is no
-// obstacle for ever. Optionally (stall_traversable: costly) it also plans over grass from its first mark
+// obstacle for ever. Within widen_radius_m of a mark the planner may also cross grass: the way round it.
+// Optionally (stall_traversable: costly) it also plans over grass from its first mark
 // on: where the map is wrong about a track it is often wrong both ways (gen6: the shore "road", the
 // track "grass"); off by default, as grass fields cost the localizer its fix.
 //
@@ -28,6 +29,11 @@ struct StallParams {
   double ahead_m{1.0};         // [m] the mark's centre ahead of the robot's centre (its footprint's edge)
   double radius_m{0.6};        // [m] the mark's radius
   double keep_s{600.0};        // [s] a mark is lifted after this
+  // Around a mark the planner also goes over grass (costly, at costly_factor): where the aerial map is
+  // wrong about a track it is often wrong both ways (gen6's pond: ErfNet calls the shore "road" and the
+  // track beside it "grass"), and the way round the mark is then the real track. Only near the mark: grass
+  // fields everywhere cost the localizer its fix (stall_traversable). 0 = off.
+  double widen_radius_m{6.0};
   // From the first mark on, plan through classes up to this level (costly: grass): the way round may be
   // ground the map calls grass. Off by default (rough, the planner's own default): measured on gen6
   // (session 39) a lone robot routed over grass fields lost track there for good (5 of 13 targets).
@@ -41,6 +47,8 @@ inline constexpr ParamField<StallParams> kStallFields[] = {
     field::real("stall_mark_ahead_m", &StallParams::ahead_m, 0.0, 5.0, "m", "the blocked mark's centre this far ahead of the robot's centre"),
     field::real("stall_mark_radius_m", &StallParams::radius_m, 0.1, 5.0, "m", "the blocked mark's radius"),
     field::real("stall_mark_keep_s", &StallParams::keep_s, 1.0, 36000.0, "s", "a blocked mark is lifted after this"),
+    field::real("stall_widen_radius_m", &StallParams::widen_radius_m, 0.0, 50.0, "m",
+                "within this of a blocked mark the planner also goes over grass (costly classes, at costly_factor): the way round it; 0 = off"),
     field::choice<&StallParams::traversable>(
         "stall_traversable", "free|rough|costly", {Traversability::kFree, Traversability::kRough, Traversability::kCostly},
         "from the first blocked mark on, plan through classes up to this level (costly: also grass); the default rough = never wider (grass fields cost the localizer its fix)"),
