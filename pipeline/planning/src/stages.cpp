@@ -148,7 +148,8 @@ void PlannerStage::step(TimeNs now) noexcept {
   }
   // Standing on the route: the ground ahead is marked blocked (folded in by update() like a changed tile).
   const bool following = have_goal_ && have_pose_ && pose_.status == LocalizationStatus::kTracking && msg_->status == RouteStatus::kOk;
-  if (stall_->observe(pose_.pose, Point2{goal_.goal.x, goal_.goal.y}, following, now, *map_)) {
+  const std::span<const Point2> route(path_->points.data(), path_->status == PlanStatus::kOk ? path_->count : 0U);
+  if (stall_->observe(pose_.pose, Point2{goal_.goal.x, goal_.goal.y}, following, now, *map_, route)) {
     ++c_.stalls;
     map_changed_ = true;  // re-plan soon (a widening rebuilt the roadmap at once: no tile is pending)
   }

@@ -138,6 +138,69 @@ TEST(StallMarks, AFullTableLiftsItsOldestMark) {
   EXPECT_TRUE(rm->blocked_cell(7, 42)) << "the second (3.5, 21) is still there";
 }
 
+TEST(StallMarks, PointAlongARouteFromTheRobot) {
+  const std::vector<Point2> route{{0, 0}, {10, 0}, {10, 10}};
+  const auto at = [&](Point2 from, double d) { return point_along(route, from, d); };
+  EXPECT_NEAR(at({3, 1}, 1.0).x, 4.0, 1e-12) << "from the nearest point (3, 0), 1 m on";
+  EXPECT_NEAR(at({3, 1}, 1.0).y, 0.0, 1e-12);
+  EXPECT_NEAR(at({9.5, -1}, 1.0).x, 10.0, 1e-12) << "round the corner";
+  EXPECT_NEAR(at({9.5, -1}, 1.0).y, 0.5, 1e-12);
+  EXPECT_NEAR(at({11, 9}, 5.0).y, 10.0, 1e-12) << "past the end: its last point";
+  EXPECT_NEAR(point_along(std::span<const Point2>(route.data(), 1), Point2{3, 1}, 1.0).x, 3.0, 1e-12) << "no polyline: the robot itself";
+}
+
+// The mark goes where the route goes, not where the robot faces: wedged against the pond's shore, a robot
+// on gen6 faced south-west while its route went north-west over the water the map calls road; marks
+// along its heading left that way open, 32 times on one spot (session 40).
+TEST(StallMarks, TheMarkGoesAlongTheRouteNotTheHeading) {
+  auto rm = wall_map();
+  StallParams p;
+  p.stall_s = 1.0;
+  StallMarks s(p);
+  const std::vector<Point2> route{{20.0, 5.5}, {44.0, 5.5}};
+  const Pose2 facing_north{25.0, 5.5, M_PI / 2};
+  for (int k = 0; k <= 11 && s.count() == 0; ++k) s.observe(facing_north, Point2{44.0, 5.5}, true, k * 100'000'000LL, *rm, route);
+  ASSERT_EQ(s.count(), 1U);
+  EXPECT_NEAR(s.mark(0).centre.x, 26.0, 1e-9) << "1 m east along the route";
+  EXPECT_NEAR(s.mark(0).centre.y, 5.5, 1e-9);
+  StallMarks q(p);
+  for (int k = 0; k <= 11 && q.count() == 0; ++k) q.observe(facing_north, Point2{44.0, 5.5}, true, k * 100'000'000LL, *rm);
+  ASSERT_EQ(q.count(), 1U);
+  EXPECT_NEAR(q.mark(0).centre.y, 6.5, 1e-9) << "no route: 1 m along the heading";
+}
+
+// Standing again on a marked spot: the way round the first mark did not get the robot moving, so each
+// new mark there is larger (radius_m more per mark already on the spot, up to max_radius_m); a mark on
+// another spot starts small again, and every mark lifts with its own radius.
+TEST(StallMarks, StandingAgainOnAMarkedSpotGrowsTheNextMark) {
+  auto rm = wall_map();
+  StallParams p;
+  p.stall_s = 1.0;
+  p.keep_s = 1000.0;
+  StallMarks s(p);
+  TimeNs t = 0;
+  auto stand = [&](const Pose2& at) {
+    const std::size_t before = s.count();
+    for (int k = 0; k <= 11 && s.count() == before; ++k, t += 100'000'000) s.observe(at, Point2{60.0, 5.0}, true, t, *rm);
+    EXPECT_EQ(s.count(), before + 1);
+    return s.mark(s.count() - 1).radius_m;
+  };
+  // The marks at (11, 20); the centres of cells (22, 41), (22, 42), (22, 43) lie 0.79, 1.27 and 1.77 m from it.
+  const Pose2 spot{10.0, 20.0, 0.0};
+  EXPECT_DOUBLE_EQ(stand(spot), 0.6);
+  EXPECT_FALSE(rm->blocked_cell(22, 41)) << "outside the first mark";
+  EXPECT_DOUBLE_EQ(stand(spot), 1.2);
+  EXPECT_TRUE(rm->blocked_cell(22, 41)) << "inside the second";
+  EXPECT_FALSE(rm->blocked_cell(22, 42));
+  EXPECT_DOUBLE_EQ(stand(spot), 1.8);
+  EXPECT_TRUE(rm->blocked_cell(22, 43)) << "inside the third";
+  EXPECT_DOUBLE_EQ(stand(spot), 1.8) << "capped at max_radius_m";
+  EXPECT_DOUBLE_EQ(stand(Pose2{30.0, 20.0, 0.0}), 0.6) << "another spot starts small";
+  ASSERT_TRUE(s.lift_all(*rm));
+  for (std::int32_t c = 16; c < 30; ++c)
+    for (std::int32_t r = 34; r < 47; ++r) EXPECT_FALSE(rm->blocked_cell(c, r)) << c << ", " << r << ": each mark lifted with its own radius";
+}
+
 // A 3 m road between buildings (north) and a 3 m strip of grass (south, then buildings): gen6's pond
 // track, where the map's "road" was water and its "grass" the track.
 std::unique_ptr<Roadmap> track_map() {

@@ -14,6 +14,7 @@
 
 #include <array>
 #include <cstdint>
+#include <span>
 
 #include "airground/messages/geometry.hpp"
 #include "airground/platform/param_binding.hpp"
@@ -26,8 +27,12 @@ struct StallParams {
   double stall_s{10.0};        // following a route and within move_m of one spot this long: stalled; 0 = off
   double move_m{0.3};          // [m]
   double goal_clear_m{3.0};    // [m] not within this of the goal (a robot at its goal stands by design)
-  double ahead_m{1.0};         // [m] the mark's centre ahead of the robot's centre (its footprint's edge)
+  double ahead_m{1.0};         // [m] the mark's centre this far along the route from the robot (its footprint's edge)
   double radius_m{0.6};        // [m] the mark's radius
+  // Standing again where a mark already is (its centre within radius_m of one): the way round it did not
+  // get the robot moving (gen6, session 40: wedged at the pond's shore, 32 marks on one spot, the same
+  // route each time), so the new mark is larger: radius_m more for every mark already there, up to this.
+  double max_radius_m{1.8};
   double keep_s{600.0};        // [s] a mark is lifted after this
   // Around a mark the planner also goes over grass (costly, at costly_factor): where the aerial map is
   // wrong about a track it is often wrong both ways (gen6's pond: ErfNet calls the shore "road" and the
@@ -44,8 +49,10 @@ inline constexpr ParamField<StallParams> kStallFields[] = {
                 "following a route but within stall_move_m of one spot this long: the ground ahead is marked blocked and the route re-planned; 0 = off"),
     field::real("stall_move_m", &StallParams::move_m, 0.05, 5.0, "m", "... moving less than this counts as standing"),
     field::real("stall_goal_clear_m", &StallParams::goal_clear_m, 0.0, 50.0, "m", "... not within this of the goal"),
-    field::real("stall_mark_ahead_m", &StallParams::ahead_m, 0.0, 5.0, "m", "the blocked mark's centre this far ahead of the robot's centre"),
+    field::real("stall_mark_ahead_m", &StallParams::ahead_m, 0.0, 5.0, "m", "the blocked mark's centre this far along the route from the robot (ahead of it without a route)"),
     field::real("stall_mark_radius_m", &StallParams::radius_m, 0.1, 5.0, "m", "the blocked mark's radius"),
+    field::real("stall_mark_max_radius_m", &StallParams::max_radius_m, 0.1, 5.0, "m",
+                "standing again at a marked spot: the new mark grows by stall_mark_radius_m per mark already there, up to this"),
     field::real("stall_mark_keep_s", &StallParams::keep_s, 1.0, 36000.0, "s", "a blocked mark is lifted after this"),
     field::real("stall_widen_radius_m", &StallParams::widen_radius_m, 0.0, 50.0, "m",
                 "within this of a blocked mark the planner also goes over grass (costly classes, at costly_factor): the way round it; 0 = off"),
@@ -56,17 +63,25 @@ inline constexpr ParamField<StallParams> kStallFields[] = {
 
 struct StallMark {
   Point2 centre;
+  double radius_m{0};
   TimeNs until{0};
 };
+
+// The point `dist` metres along the polyline `pts` from its point nearest `from` (the last point when it
+// is shorter); `from` itself when `pts` has fewer than two points.
+Point2 point_along(std::span<const Point2> pts, Point2 from, double dist) noexcept;
 
 class StallMarks {
  public:
   static constexpr std::size_t kMaxMarks = 32;  // a full table lifts its oldest mark for a new one
   explicit StallMarks(const StallParams& p) : p_(p) {}
 
-  // One pose (map frame). `following`: a route to a goal is being driven on a tracking pose. Returns true
-  // when it marked the ground ahead blocked in `map` (the caller re-plans once map.update() has run).
-  bool observe(const Pose2& pose, Point2 goal, bool following, TimeNs now, Roadmap& map) noexcept;
+  // One pose (map frame). `following`: a route to a goal is being driven on a tracking pose; `route`: its
+  // points (the mark goes ahead_m along it from the point nearest the robot: where it could not go; empty:
+  // ahead_m along the robot's heading). Returns true when it marked the ground ahead blocked in `map`
+  // (the caller re-plans once map.update() has run).
+  bool observe(const Pose2& pose, Point2 goal, bool following, TimeNs now, Roadmap& map,
+               std::span<const Point2> route = {}) noexcept;
   // Lifts marks past their keep_s; true when any was lifted.
   bool expire(TimeNs now, Roadmap& map) noexcept;
   // Lifts every mark (no route with them: a mark diverts a route, it never closes the last way); true
