@@ -385,17 +385,7 @@ LocalGoal LocalTracker::local_goal(const Pose2& robot, TimeNs now) noexcept {
     const Point2 a = path_[wp_], b = path_[wp_ + 1];
     const double dx = b.x - a.x, dy = b.y - a.y, l2 = dx * dx + dy * dy;
     const double t = l2 > 0 ? std::clamp(((robot.x - a.x) * dx + (robot.y - a.y) * dy) / l2, 0.0, 1.0) : 1.0;
-    Point2 p{a.x + t * dx, a.y + t * dy};
-    for (std::uint32_t s = wp_ + 1; s < n_path_; ++s) {
-      const double l = std::hypot(path_[s].x - p.x, path_[s].y - p.y);
-      if (l >= dist) {
-        const double f = dist / std::max(l, 1e-9);
-        return Point2{p.x + f * (path_[s].x - p.x), p.y + f * (path_[s].y - p.y)};
-      }
-      dist -= l;
-      p = path_[s];
-    }
-    return p;
+    return walk_along(std::span<const Point2>(path_.data(), n_path_), wp_ + 1, Point2{a.x + t * dx, a.y + t * dy}, dist);
   };
   for (const double dist : {p_.goal_distance_m, 0.5 * p_.goal_distance_m, std::min(1.5, p_.goal_distance_m)})
     // Cells nearer the target than half the way there: a goal that makes progress.

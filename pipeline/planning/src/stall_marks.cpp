@@ -23,15 +23,8 @@ Point2 point_along(std::span<const Point2> pts, Point2 from, double dist) noexce
       best_u = u;
     }
   }
-  Point2 at{pts[best_k].x + best_u * (pts[best_k + 1].x - pts[best_k].x), pts[best_k].y + best_u * (pts[best_k + 1].y - pts[best_k].y)};
-  double left = dist;
-  for (std::size_t k = best_k + 1; k < pts.size(); ++k) {
-    const double seg = std::hypot(pts[k].x - at.x, pts[k].y - at.y);
-    if (seg >= left && seg > 0) return Point2{at.x + (pts[k].x - at.x) * left / seg, at.y + (pts[k].y - at.y) * left / seg};
-    left -= seg;
-    at = pts[k];
-  }
-  return at;
+  const Point2 foot{pts[best_k].x + best_u * (pts[best_k + 1].x - pts[best_k].x), pts[best_k].y + best_u * (pts[best_k + 1].y - pts[best_k].y)};
+  return walk_along(pts, best_k + 1, foot, dist);
 }
 
 bool StallMarks::observe(const Pose2& pose, Point2 goal, bool following, TimeNs now, Roadmap& map, std::span<const Point2> route) noexcept {

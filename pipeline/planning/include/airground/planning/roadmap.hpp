@@ -17,7 +17,9 @@
 // plan() never allocate.
 #pragma once
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <span>
@@ -73,6 +75,22 @@ struct Point2 {
 };
 
 inline constexpr std::size_t kMaxPathPoints = 512;
+
+// The point `dist` metres on along the polyline `pts` from `foot`, a point on the segment that ends at
+// pts[next]; the polyline's last point when it is shorter (the local tracker's goal, a stall mark).
+inline Point2 walk_along(std::span<const Point2> pts, std::size_t next, Point2 foot, double dist) noexcept {
+  Point2 p = foot;
+  for (std::size_t s = next; s < pts.size(); ++s) {
+    const double l = std::hypot(pts[s].x - p.x, pts[s].y - p.y);
+    if (l >= dist) {
+      const double f = dist / std::max(l, 1e-9);
+      return Point2{p.x + f * (pts[s].x - p.x), p.y + f * (pts[s].y - p.y)};
+    }
+    dist -= l;
+    p = pts[s];
+  }
+  return p;
+}
 
 enum class PlanStatus : std::uint8_t {
   kOk = 0,
