@@ -2,6 +2,7 @@
 // under the service loop (signals, sd_notify, watchdog), stop cleanly and print the counters.
 #include "role_main.hpp"
 
+#include <algorithm>
 #include <unistd.h>
 
 #include <cstdio>
@@ -33,6 +34,9 @@ void print_help(const RoleDescription& role, const char* argv0) {
       "      --print-config    print the effective parameters with units and ranges, then exit\n"
       "      --check-config    validate the configuration and exit (0 = valid)\n"
       "      --run-for SECONDS stop by itself after this long (default: run until SIGTERM/SIGINT)\n"
+      "      --oracle labels   allow the simulator's ground truth as an ablation: point classes from the\n"
+      "                        Ouster reflectivity byte (lidar.classes: reflectivity), which airground-sim\n"
+      "                        hil --oracle labels writes; refused without it (a real Ouster gives no class)\n"
       "  -h, --help            this help\n"
       "  -V, --version         version and build\n\n"
       "Stages (rate, budget, priority, cpu):\n",
@@ -56,6 +60,7 @@ int run_role(const RoleDescription& role, int argc, char** argv) {
   bool config_given = false;
   bool print_config = false;
   bool check_config = false;
+  bool labels_oracle = false;  // --oracle labels: the user named the ground-truth ablation
   double run_for_s = 0.0;
   std::vector<std::string> sets;
   const std::string rname(role.name);
@@ -87,6 +92,19 @@ int run_role(const RoleDescription& role, int argc, char** argv) {
       print_config = true;
     } else if (a == "--check-config") {
       check_config = true;
+    } else if (a == "--oracle" || a.rfind("--oracle=", 0) == 0) {
+      const std::string v = a == "--oracle" ? std::string(need_value("--oracle")) : a.substr(9);
+      for (std::size_t b = 0; b <= v.size();) {
+        const std::size_t e = std::min(v.find(',', b), v.size());
+        const std::string name = v.substr(b, e - b);
+        if (name != "labels") {
+          std::fprintf(stderr, "airground-%s: --oracle: unknown oracle '%s' (a role binary knows only 'labels')\n", rname.c_str(),
+                       name.c_str());
+          return 2;
+        }
+        labels_oracle = true;
+        b = e + 1;
+      }
     } else if (a == "--run-for") {
       const char* v = need_value("--run-for");
       char* end = nullptr;
@@ -125,11 +143,11 @@ int run_role(const RoleDescription& role, int argc, char** argv) {
     return 0;
   }
   // Classes the robot's sensors cannot give (a V4L2 camera's, an Ouster's) stop it here, with the keys.
-  if (Status st = check_sensor_labels(cfg, config_path.empty() ? "built-in defaults" : config_path); !st) {
+  if (Status st = check_sensor_labels(cfg, config_path.empty() ? "built-in defaults" : config_path, labels_oracle); !st) {
     std::fprintf(stderr, "airground-%s: %s\n", rname.c_str(), st.error().message.c_str());
     return 2;
   }
-  for (const std::string& w : sensor_label_warnings(cfg))  // before the logger starts: straight to stderr
+  for (const std::string& w : sensor_label_warnings(cfg, labels_oracle))  // before the logger starts: straight to stderr
     std::fprintf(stderr, "airground-%s: warning: %s\n", rname.c_str(), w.c_str());
   for (const std::string& w : stage_agreement_warnings(cfg))
     std::fprintf(stderr, "airground-%s: warning: %s\n", rname.c_str(), w.c_str());

@@ -17,13 +17,15 @@ namespace ag {
 // - segmentation.labels erfnet with ortho_map.keyframes_channel keyframes: the mapper would never see
 //   ErfNet's classes;
 // - ortho_map.keyframes_channel keyframes with a V4L2 camera: the mapper's keyframes carry no classes;
-// - localization.labels gt needs point classes: refused when lidar.classes is none and lidar.source is not none.
+// - localization.labels gt needs point classes: refused when lidar.classes is none and lidar.source is not none;
+// - lidar.classes reflectivity with a live LiDAR reads each point's class from the Ouster's reflectivity
+//   byte, where only the simulator's labels oracle writes classes: refused unless `labels_oracle` (the
+//   user named the ablation: `--oracle labels` on the role binary, as airground-sim hil passes it).
 // `origin` names the configuration (a file) in the message.
-[[nodiscard]] Status check_sensor_labels(const Config& c, std::string_view origin);
+[[nodiscard]] Status check_sensor_labels(const Config& c, std::string_view origin, bool labels_oracle = false);
 
-// What may work but most likely does not on a real robot, said at start-up (and by --check-config):
-// - lidar.classes reflectivity with a live LiDAR: the class of each point is read from the Ouster's
-//   reflectivity byte, where only airground-sim hil's --oracle labels ablation writes classes.
-[[nodiscard]] std::vector<std::string> sensor_label_warnings(const Config& c);
+// Said at start-up (and by --check-config) when the labels oracle is named and the configuration uses it:
+// the run is a ground-truth ablation, not field mode.
+[[nodiscard]] std::vector<std::string> sensor_label_warnings(const Config& c, bool labels_oracle);
 
 }  // namespace ag

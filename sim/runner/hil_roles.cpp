@@ -124,13 +124,14 @@ Settings ugv_shared_settings(const Run& run) {
 
 // One role's YAML: its shipped configuration (built in from firmware_host/<role>/<role>.yaml) with the
 // "section.key=value" pairs the simulator must set, every key written out.
-Status write_role_yaml(const fs::path& path, const std::string& title, const RoleDescription& role, const Settings& kv) {
+Status write_role_yaml(const fs::path& path, const std::string& title, const RoleDescription& role, const Settings& kv,
+                       bool labels_oracle) {
   const std::string origin = "firmware_host/" + std::string(role.name) + "/" + std::string(role.name) + ".yaml (built into airground-sim)";
   auto c = Config::load_string(role_schema(role), shipped_config_yaml(role.name), origin);
   if (!c) return c.error();
   for (const auto& [k, v] : kv)
     if (auto st = c.value().set(k + "=" + v, "airground-sim hil"); !st) return st.error();
-  if (auto st = check_sensor_labels(c.value(), origin + " with airground-sim hil's settings"); !st) return st.error();
+  if (auto st = check_sensor_labels(c.value(), origin + " with airground-sim hil's settings", labels_oracle); !st) return st.error();
   std::ofstream f(path);
   f << "# " << title << " — written by airground-sim hil: the shipped " << role.name << ".yaml and the keys the simulator sets\n"
     << c.value().to_yaml();
@@ -159,7 +160,7 @@ Status write_ugv_yaml(Run& run, int i, const mission::TeamMember& tm, const Ugv&
     kv.emplace_back("mission.waypoints", wp);
   }
   const fs::path cfg = out / "config" / (u.name + ".yaml");
-  if (auto st = write_role_yaml(cfg, u.name + " (ground robot " + std::to_string(tm.id) + ")", ugv_role(), kv); !st) return st.error();
+  if (auto st = write_role_yaml(cfg, u.name + " (ground robot " + std::to_string(tm.id) + ")", ugv_role(), kv, run.labels_oracle); !st) return st.error();
   run.children.push_back(RoleProcess{u.name, "ugv", -1, out / "logs" / (u.name + ".log")});
   return ok_status();
 }
@@ -186,7 +187,7 @@ Status write_uav_yaml(Run& run) {
     kv.emplace_back("camera.vo_channel", "visual_odometry");
     kv.emplace_back("vo.output_channel", "visual_odometry_own");
   }
-  if (auto st = write_role_yaml(run.out / "config" / "uav.yaml", "uav (quadrotor)", uav_role(), kv); !st) return st.error();
+  if (auto st = write_role_yaml(run.out / "config" / "uav.yaml", "uav (quadrotor)", uav_role(), kv, run.labels_oracle); !st) return st.error();
   run.children.insert(run.children.begin(), RoleProcess{"uav", "uav", -1, run.out / "logs" / "uav.log"});
   return ok_status();
 }
@@ -197,7 +198,7 @@ Status write_base_yaml(Run& run) {
   kv.emplace_back("web.port", std::to_string(run.web_port));
   kv.emplace_back("web.bind", "127.0.0.1");
   kv.emplace_back("web.log_path", (run.out / "mission.jsonl").string());
-  if (auto st = write_role_yaml(run.out / "config" / "base.yaml", "base station", base_role(), kv); !st) return st.error();
+  if (auto st = write_role_yaml(run.out / "config" / "base.yaml", "base station", base_role(), kv, run.labels_oracle); !st) return st.error();
   run.children.push_back(RoleProcess{"base", "base", -1, run.out / "logs" / "base.log"});
   return ok_status();
 }
@@ -210,7 +211,9 @@ Status start_roles(Run& run) {
   for (std::size_t i : order) {
     RoleProcess& c = run.children[i];
     const fs::path cfg = run.out / "config" / (c.name + ".yaml");
-    auto pid = spawn({(run.bin / ("airground-" + c.role)).string(), "--config", cfg.string()}, c.log);
+    std::vector<std::string> argv{(run.bin / ("airground-" + c.role)).string(), "--config", cfg.string()};
+    if (run.labels_oracle) argv.emplace_back("--oracle=labels");  // the ablation the user named, passed on by name
+    auto pid = spawn(argv, c.log);
     if (!pid) {
       signal_roles(run.children, SIGTERM);
       return pid.error();

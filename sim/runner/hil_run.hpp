@@ -161,7 +161,8 @@ Result<fs::path> find_role_binaries(const std::string& bin_dir);
 [[nodiscard]] Settings common_settings(const Run& run, int id, const std::string& name, std::size_t node);
 // The settings every ground robot shares (labels, area, drive, base, mission parameters).
 [[nodiscard]] Settings ugv_shared_settings(const Run& run);
-Status write_role_yaml(const fs::path& path, const std::string& title, const RoleDescription& role, const Settings& kv);
+Status write_role_yaml(const fs::path& path, const std::string& title, const RoleDescription& role, const Settings& kv,
+                       bool labels_oracle);
 // Ground robot i's YAML (team member tm, `shared` from ugv_shared_settings, its devices on the given
 // ports); adds its process.
 Status write_ugv_yaml(Run& run, int i, const mission::TeamMember& tm, const Ugv& u, const Settings& shared,

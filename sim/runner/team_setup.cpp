@@ -483,7 +483,7 @@ Result<const Config*> RoleFactory::configure(const RoleDescription& role, const 
     if (auto st = c.set(kv, "the simulator"); !st) return st.error();
   for (const auto& kv : extra)
     if (auto st = c.set(kv, what); !st) return st.error();
-  if (auto st = check_sensor_labels(c, origin + " with the simulator's settings and the " + what); !st) return st.error();
+  if (auto st = check_sensor_labels(c, origin + " with the simulator's settings and the " + what, opt_.oracle("labels")); !st) return st.error();
   for (std::string& w : stage_agreement_warnings(c))
     if (std::find(warned_.begin(), warned_.end(), w) == warned_.end()) {
       std::fprintf(stderr, "airground-sim: warning: %.*s: %s\n", static_cast<int>(role.name.size()), role.name.data(), w.c_str());

@@ -103,12 +103,21 @@ TEST(RoleBinaryErrors, LabelsTheSensorsCannotGiveExit2NamingTheKeys) {
   EXPECT_NE(ugv.err.find("ugv.yaml"), std::string::npos) << ugv.err;
   EXPECT_NE(ugv.err.find("localization.labels: gt"), std::string::npos) << ugv.err;
   EXPECT_NE(ugv.err.find("lidar.classes: none"), std::string::npos) << ugv.err;
-  // The simulator's HIL mode: point classes in the reflectivity byte, so gt labels can work.
+  // Point classes from the reflectivity byte: only the simulator's labels oracle writes them there, so a
+  // configuration that reads them is refused unless the user names the ablation.
+  const auto refl = run({role_bin("ugv"), "--config", source_dir() + "/firmware_host/ugv/ugv.yaml", "--set", "localization.labels=gt", "--set",
+                         "lidar.classes=reflectivity", "--check-config"});
+  EXPECT_EQ(refl.exit_code, 2) << refl.err;
+  EXPECT_NE(refl.err.find("lidar.classes: reflectivity"), std::string::npos) << refl.err;
+  EXPECT_NE(refl.err.find("--oracle labels"), std::string::npos) << "the error names the way to ask for the ablation: " << refl.err;
   const auto hil = run({role_bin("ugv"), "--config", source_dir() + "/firmware_host/ugv/ugv.yaml", "--set", "localization.labels=gt", "--set",
-                        "lidar.classes=reflectivity", "--check-config"});
+                        "lidar.classes=reflectivity", "--oracle", "labels", "--check-config"});
   EXPECT_EQ(hil.exit_code, 0) << hil.err;
-  // ... which a real Ouster does not do: accepted, but said at start-up.
-  EXPECT_NE(hil.err.find("warning: lidar.classes: reflectivity"), std::string::npos) << hil.err;
+  // ... named, it runs, and says at start-up that it is an ablation.
+  EXPECT_NE(hil.err.find("warning: oracle labels: lidar.classes: reflectivity"), std::string::npos) << hil.err;
+  const auto unknown = run({role_bin("ugv"), "--config", source_dir() + "/firmware_host/ugv/ugv.yaml", "--oracle=labels,vo", "--check-config"});
+  EXPECT_EQ(unknown.exit_code, 2) << unknown.err;
+  EXPECT_NE(unknown.err.find("unknown oracle 'vo'"), std::string::npos) << unknown.err;
   const auto shipped = run({role_bin("ugv"), "--config", source_dir() + "/firmware_host/ugv/ugv.yaml", "--check-config"});
   EXPECT_EQ(shipped.exit_code, 0) << shipped.err;
   EXPECT_EQ(shipped.err.find("warning"), std::string::npos) << "the shipped configuration warns of nothing: " << shipped.err;
