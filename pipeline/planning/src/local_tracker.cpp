@@ -237,8 +237,9 @@ bool LocalTracker::update(std::span<const ScanReturn> pts, const Pose3& mount, c
   return true;
 }
 
-// Free cells (crossed by rays) with no ground return within no_ground_radius_m, in the ring where the
-// ground returns lie that close together: no ground there (water, a drop); an obstacle.
+// Free cells (crossed by rays), and with no_ground_unseen unknown ones, with no ground return within
+// no_ground_radius_m, in the ring where the ground returns lie that close together: no ground there
+// (water, a drop); an obstacle.
 void LocalTracker::mark_no_ground(int ri, int rj, double r_min_m) noexcept {
   ++updates_;
   if (updates_ == 0) {  // wrapped: forget the memory
@@ -269,7 +270,10 @@ void LocalTracker::mark_no_ground(int ri, int rj, double r_min_m) noexcept {
         if (memory > 0 && memo_key_[slot] == key && memo_at_[slot] != 0 && updates_ - memo_at_[slot] <= memory) grid_[idx(i, j)] = kObstacle;
         continue;
       }
-      if (grid_[idx(i, j)] != kFree || !(r1 > r0)) continue;
+      // A cell no ray crossed is no-ground too: the LiDAR sees the ground all round within this ring, so
+      // there it is water whose far shore is out of reach, a drop, or ground hidden behind an obstacle.
+      const std::uint8_t v = grid_[idx(i, j)];
+      if (!(v == kFree || (p_.no_ground_unseen && v == kUnknown)) || !(r1 > r0)) continue;
       bool ground = false;
       for (std::size_t k = 0; k < m && !ground; ++k) {
         const int x = i + near_di_[k], y = j + near_dj_[k];

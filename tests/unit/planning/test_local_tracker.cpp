@@ -168,6 +168,37 @@ TEST(LocalTracker, WaterThatGivesNoReturnIsNoPlaceForTheLocalGoal) {
   }
 }
 
+// A pond too wide for any ray to reach its far shore (gen6's pond, session 41): no return and no ray
+// over it, so its cells are unknown, not free, and the clearance field never saw them; the goal farthest
+// from the trees sat on the water's edge and the robot's footprint went in. Ground unseen within the
+// ring where the LiDAR sees all the ground is no ground.
+TEST(LocalTracker, WaterBeyondTheLidarsReachIsNoPlaceForTheLocalGoalEither) {
+  const std::vector<Box> trees = {{0.0, 12.0, -4.5, -1.1, 2.0}};
+  const std::vector<Box> pond = {{1.5, 60.0, 0.4, 60.0, 0.0}};  // beyond the scan's 30 m every way over it
+  const auto pts = scan(trees, 0.6, 0.0, 0.0, 1, 64, pond);
+  const Point2 path[] = {{0, 0}, {20, 0}};
+  for (const bool unseen : {true, false}) {
+    LocalTrackerParams p;
+    p.no_ground_unseen = unseen;
+    LocalTracker t{p};
+    t.set_path(path);
+    ASSERT_TRUE(t.update(pts, kMount, Pose2{0, 0, 0}, 0.0));
+    const LocalGoal g = t.local_goal(Pose2{0, 0, 0}, 0);
+    ASSERT_TRUE(g.valid);
+    EXPECT_EQ(t.cell_at(-3.0, 3.0), 1) << "dry ground beside the pond, behind the robot";
+    EXPECT_EQ(t.cell_at(4.0, -0.3), 1) << "the track is free";
+    if (unseen) {
+      EXPECT_EQ(t.cell_at(4.0, 2.0), 2) << "water within the ring is an obstacle";
+      EXPECT_EQ(t.cell_at(8.0, 2.0), 0) << "beyond no_ground_range_m it stays unknown";
+      EXPECT_LT(g.goal.y, 0.4 + p.no_ground_radius_m - p.min_clearance_m + 0.2) << "clear of the water's edge";
+      EXPECT_GT(g.goal.y, -1.1 + p.min_clearance_m - 0.2) << "... and of the trees";
+    } else {
+      EXPECT_EQ(t.cell_at(4.0, 2.0), 0) << "without it the water is unknown";
+      EXPECT_GT(g.goal.y, 0.3) << "and the goal farthest from the trees is at the water's edge";
+    }
+  }
+}
+
 // Beside the shore, the shore is inside the LiDAR's blind ring (its lowest beam meets the ground 1.45 m
 // out here): what an earlier scan found without ground there is still an obstacle.
 TEST(LocalTracker, AShoreSeenFromAfarIsStillAnObstacleBesideIt) {

@@ -45,6 +45,10 @@ struct LocalTrackerParams {
   // local goal (the cell farthest from obstacles) went onto it (gen6's pond, session 39). 0 = off.
   double no_ground_range_m{6.0};
   double no_ground_radius_m{0.5};
+  // ... and so is a cell in that ring no ray crossed: a pond whose far shore is out of reach gives no
+  // return and no ray over it, and was unknown, which the local goal's clearance ignored: goals went
+  // onto its edge and the robot's footprint into the water (gen6's pond, session 41).
+  bool no_ground_unseen{true};
   // The LiDAR cannot see the ground within about 2.5 m of the robot (its lowest beam): cells found
   // without ground are remembered (map frame) for this many updates and stay obstacles there, so a
   // shore seen from 4 m is still one when the robot is beside it. 0 = no memory.

@@ -154,6 +154,8 @@ inline constexpr ParamField<LocalTrackerParams> kTrackerFields[] = {
     field::real("no_ground_range_m", &LocalTrackerParams::no_ground_range_m, 0.0, 10.0, "m",
                 "within this of the robot, ground the rays crossed with no ground return near it (water, a drop) is an obstacle; 0 = off"),
     field::real("no_ground_radius_m", &LocalTrackerParams::no_ground_radius_m, 0.2, 2.0, "m", "... no ground return within this of the cell"),
+    field::boolean("no_ground_unseen", &LocalTrackerParams::no_ground_unseen,
+                   "... and so is a cell in that ring no ray crossed (water out to beyond the LiDAR's reach, a drop)"),
     field::integer("no_ground_memory_updates", &LocalTrackerParams::no_ground_memory_updates, 0, 100000, "scans",
                    "cells found without ground stay obstacles this many scans while too near the robot for its LiDAR to see (0 = no memory)"),
 };
