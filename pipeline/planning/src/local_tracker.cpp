@@ -35,6 +35,7 @@ LocalTracker::LocalTracker(const LocalTrackerParams& p) : p_(p) {
   inliers_.assign(4096, 0);
   end_stamp_.assign(grid_.size(), 0);
   hit_stamp_.assign(grid_.size(), 0);
+  nog_stamp_.assign(grid_.size(), 0);
   memo_key_.assign(grid_.size(), 0);
   memo_at_.assign(grid_.size(), 0);
   const int nr = static_cast<int>(std::floor(p.no_ground_radius_m / p.cell_m));
@@ -187,6 +188,7 @@ bool LocalTracker::update(std::span<const ScanReturn> pts, const Pose3& mount, c
   };
   // Free space first: a ray from the robot to every ground return (once per end cell).
   if (++stamp_ == 0) {  // wrapped: forget every old mark
+    std::fill(nog_stamp_.begin(), nog_stamp_.end(), 0U);
     std::fill(end_stamp_.begin(), end_stamp_.end(), 0U);
     std::fill(hit_stamp_.begin(), hit_stamp_.end(), 0U);
     std::fill(far_stamp_.begin(), far_stamp_.end(), 0U);
@@ -230,7 +232,10 @@ bool LocalTracker::update(std::span<const ScanReturn> pts, const Pose3& mount, c
     double mx = 0, my = 0, bx = 0, by = 0;
     to_map(q, mx, my, bx, by);
     int i = 0, j = 0;
-    if (cell_of(mx, my, i, j)) grid_[idx(i, j)] = kObstacle;
+    if (cell_of(mx, my, i, j)) {
+      grid_[idx(i, j)] = kObstacle;
+      nog_stamp_[idx(i, j)] = 0;  // a return: the obstacle is exactly here
+    }
     if (h > p_.reflex_height_m && bx > 0.0 && bx < reach && std::fabs(by) < p_.reflex_half_width_m) reflex_ = true;
   }
   compute_clearance();
@@ -267,7 +272,10 @@ void LocalTracker::mark_no_ground(int ri, int rj, double r_min_m) noexcept {
       std::size_t slot = 0;
       const std::uint64_t key = key_of(i, j, slot);
       if (d2 < r0 * r0) {  // too near for this scan to tell: what it found before
-        if (memory > 0 && memo_key_[slot] == key && memo_at_[slot] != 0 && updates_ - memo_at_[slot] <= memory) grid_[idx(i, j)] = kObstacle;
+        if (memory > 0 && memo_key_[slot] == key && memo_at_[slot] != 0 && updates_ - memo_at_[slot] <= memory) {
+          grid_[idx(i, j)] = kObstacle;
+          nog_stamp_[idx(i, j)] = stamp_;
+        }
         continue;
       }
       // A cell no ray crossed is no-ground too: the LiDAR sees the ground all round within this ring, so
@@ -281,6 +289,7 @@ void LocalTracker::mark_no_ground(int ri, int rj, double r_min_m) noexcept {
       }
       if (!ground) {
         grid_[idx(i, j)] = kObstacle;
+        nog_stamp_[idx(i, j)] = stamp_;
         memo_key_[slot] = key;
         memo_at_[slot] = updates_;
       } else if (memo_key_[slot] == key) {
@@ -290,10 +299,14 @@ void LocalTracker::mark_no_ground(int ri, int rj, double r_min_m) noexcept {
 }
 
 // Chamfer (1, sqrt 2) distance to the nearest obstacle cell, capped; less half a cell: from the cell's
-// centre to the obstacle cell's edge.
+// centre to the obstacle cell's edge. A no-ground cell starts at -no_ground_radius_m: it was marked
+// because no ground return lay within that radius, so the water's real edge may be that much nearer
+// (a cell 0.4 m from the shore still had the track's returns within 0.5 m and stayed free).
 void LocalTracker::compute_clearance() noexcept {
   const auto c = static_cast<float>(p_.cell_m), d = c * 1.41421356F;
-  for (std::size_t k = 0; k < grid_.size(); ++k) clear_[k] = grid_[k] == kObstacle ? 0.0F : kClearCap;
+  const float edge = p_.no_ground_edge_margin ? -static_cast<float>(p_.no_ground_radius_m) : 0.0F;
+  for (std::size_t k = 0; k < grid_.size(); ++k)
+    clear_[k] = grid_[k] != kObstacle ? kClearCap : (have_plane_ && nog_stamp_[k] == stamp_ ? edge : 0.0F);
   for (int j = 0; j < n_; ++j)
     for (int i = 0; i < n_; ++i) {
       float& v = clear_[idx(i, j)];

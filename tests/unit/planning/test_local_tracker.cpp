@@ -199,6 +199,33 @@ TEST(LocalTracker, WaterBeyondTheLidarsReachIsNoPlaceForTheLocalGoalEither) {
   }
 }
 
+// The track's ground returns reach to the water's edge, so cells up to no_ground_radius_m (0.5 m) into
+// the water still have a return near them and stay free: the first obstacle cell lies up to 0.5 m past
+// the edge. A no-ground cell's clearance counts from that much inside it; without it a cell 0.3 m from
+// the water had 0.7 m of clearance and was a legal goal (gen6's robots touched the pond there).
+TEST(LocalTracker, ClearanceFromWaterCountsFromWhereTheWaterMayBegin) {
+  const std::vector<Box> pond = {{1.5, 60.0, 0.4, 60.0, 0.0}};
+  const auto pts = scan({}, 0.6, 0.0, 0.0, 1, 64, pond);
+  const Point2 path[] = {{0, 0}, {20, 0}};
+  double gap[2] = {0, 0}, near[2] = {0, 0};  // [without, with]
+  LocalTrackerParams p;
+  for (const bool margin : {false, true}) {
+    p.no_ground_edge_margin = margin;
+    LocalTracker t{p};
+    t.set_path(path);
+    ASSERT_TRUE(t.update(pts, kMount, Pose2{0, 0, 0}, 0.0));
+    const LocalGoal g = t.local_goal(Pose2{0, 0, 0}, 0);
+    ASSERT_TRUE(g.valid);
+    gap[margin] = 0.4 - g.goal.y;  // from the goal to the water
+    near[margin] = t.clearance_at(4.0, 0.1);
+  }
+  const double preferred = p.min_clearance_m + 0.9;  // the goal's "enough" clearance
+  EXPECT_LT(near[1], near[0] - 0.4) << "the clearance 0.3 m from the water drops by the radius";
+  EXPECT_LT(near[1], p.min_clearance_m) << "0.3 m from the water is no place for a goal";
+  EXPECT_GE(gap[1], preferred - 0.1) << "the goal keeps its preferred clearance from the water itself";
+  EXPECT_LT(gap[0], preferred - 0.1) << "without it the goal is nearer the water than it means to be";
+}
+
 // Beside the shore, the shore is inside the LiDAR's blind ring (its lowest beam meets the ground 1.45 m
 // out here): what an earlier scan found without ground there is still an obstacle.
 TEST(LocalTracker, AShoreSeenFromAfarIsStillAnObstacleBesideIt) {

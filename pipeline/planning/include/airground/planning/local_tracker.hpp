@@ -49,6 +49,11 @@ struct LocalTrackerParams {
   // return and no ray over it, and was unknown, which the local goal's clearance ignored: goals went
   // onto its edge and the robot's footprint into the water (gen6's pond, session 41).
   bool no_ground_unseen{true};
+  // A no-ground cell's clearance counts from no_ground_radius_m inside it: the cells within that radius
+  // of the last ground return are free although the water may begin anywhere among them. Without it a
+  // goal 0.6 m from the first no-ground cell was 0.1 m from the water, and the robot's footprint touched
+  // it (gen6's pond, session 41).
+  bool no_ground_edge_margin{true};
   // The LiDAR cannot see the ground within about 2.5 m of the robot (its lowest beam): cells found
   // without ground are remembered (map frame) for this many updates and stay obstacles there, so a
   // shore seen from 4 m is still one when the robot is beside it. 0 = no memory.
@@ -115,6 +120,7 @@ class LocalTracker {
   // open-addressed set (far_keys_/far_stamp_); when that is full a ray is traced anyway (same grid).
   std::vector<std::uint32_t> end_stamp_;
   std::vector<std::uint32_t> hit_stamp_;  // cells a ground return fell in (this update's stamp_)
+  std::vector<std::uint32_t> nog_stamp_;  // obstacle cells found without ground (this update's stamp_)
   std::vector<std::int16_t> near_di_, near_dj_;  // cell offsets within no_ground_radius_m
   // Cells found without ground, by map-frame cell (X, Y) in a table of the grid's size indexed by
   // (X mod n, Y mod n): the key and the update it was last found in (0: ground seen there since).

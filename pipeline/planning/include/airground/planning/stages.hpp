@@ -156,6 +156,8 @@ inline constexpr ParamField<LocalTrackerParams> kTrackerFields[] = {
     field::real("no_ground_radius_m", &LocalTrackerParams::no_ground_radius_m, 0.2, 2.0, "m", "... no ground return within this of the cell"),
     field::boolean("no_ground_unseen", &LocalTrackerParams::no_ground_unseen,
                    "... and so is a cell in that ring no ray crossed (water out to beyond the LiDAR's reach, a drop)"),
+    field::boolean("no_ground_edge_margin", &LocalTrackerParams::no_ground_edge_margin,
+                   "clearance from a no-ground cell counts from no_ground_radius_m inside it (the water may begin that much nearer)"),
     field::integer("no_ground_memory_updates", &LocalTrackerParams::no_ground_memory_updates, 0, 100000, "scans",
                    "cells found without ground stay obstacles this many scans while too near the robot for its LiDAR to see (0 = no memory)"),
 };
