@@ -168,6 +168,14 @@ TEST(LocalTracker, WaterThatGivesNoReturnIsNoPlaceForTheLocalGoal) {
   }
 }
 
+// One scan from the origin, the route east along the x axis: the tracker's local goal.
+LocalGoal goal_along_x(LocalTracker& t, const std::vector<ScanReturn>& pts) {
+  const Point2 path[] = {{0, 0}, {20, 0}};
+  t.set_path(path);
+  EXPECT_TRUE(t.update(pts, kMount, Pose2{0, 0, 0}, 0.0));
+  return t.local_goal(Pose2{0, 0, 0}, 0);
+}
+
 // A pond too wide for any ray to reach its far shore (gen6's pond, session 41): no return and no ray
 // over it, so its cells are unknown, not free, and the clearance field never saw them; the goal farthest
 // from the trees sat on the water's edge and the robot's footprint went in. Ground unseen within the
@@ -176,14 +184,11 @@ TEST(LocalTracker, WaterBeyondTheLidarsReachIsNoPlaceForTheLocalGoalEither) {
   const std::vector<Box> trees = {{0.0, 12.0, -4.5, -1.1, 2.0}};
   const std::vector<Box> pond = {{1.5, 60.0, 0.4, 60.0, 0.0}};  // beyond the scan's 30 m every way over it
   const auto pts = scan(trees, 0.6, 0.0, 0.0, 1, 64, pond);
-  const Point2 path[] = {{0, 0}, {20, 0}};
   for (const bool unseen : {true, false}) {
     LocalTrackerParams p;
     p.no_ground_unseen = unseen;
     LocalTracker t{p};
-    t.set_path(path);
-    ASSERT_TRUE(t.update(pts, kMount, Pose2{0, 0, 0}, 0.0));
-    const LocalGoal g = t.local_goal(Pose2{0, 0, 0}, 0);
+    const LocalGoal g = goal_along_x(t, pts);
     ASSERT_TRUE(g.valid);
     EXPECT_EQ(t.cell_at(-3.0, 3.0), 1) << "dry ground beside the pond, behind the robot";
     EXPECT_EQ(t.cell_at(4.0, -0.3), 1) << "the track is free";
@@ -206,15 +211,12 @@ TEST(LocalTracker, WaterBeyondTheLidarsReachIsNoPlaceForTheLocalGoalEither) {
 TEST(LocalTracker, ClearanceFromWaterCountsFromWhereTheWaterMayBegin) {
   const std::vector<Box> pond = {{1.5, 60.0, 0.4, 60.0, 0.0}};
   const auto pts = scan({}, 0.6, 0.0, 0.0, 1, 64, pond);
-  const Point2 path[] = {{0, 0}, {20, 0}};
   double gap[2] = {0, 0}, near[2] = {0, 0};  // [without, with]
   LocalTrackerParams p;
   for (const bool margin : {false, true}) {
     p.no_ground_edge_margin = margin;
     LocalTracker t{p};
-    t.set_path(path);
-    ASSERT_TRUE(t.update(pts, kMount, Pose2{0, 0, 0}, 0.0));
-    const LocalGoal g = t.local_goal(Pose2{0, 0, 0}, 0);
+    const LocalGoal g = goal_along_x(t, pts);
     ASSERT_TRUE(g.valid);
     gap[margin] = 0.4 - g.goal.y;  // from the goal to the water
     near[margin] = t.clearance_at(4.0, 0.1);
