@@ -40,9 +40,17 @@ double ParticleFilter::room_distance_m(const ClassDistanceFields& f, std::uint8_
   return p_.obstacle_max_depth_m;
 }
 
+std::uint8_t ParticleFilter::room_channels(const ClassDistanceFields& f) const noexcept {
+  if (p_.obstacle_penalty_per_m <= 0.0) return 0;
+  const LocalizationChannels& ch = f.channels();
+  const bool confirmed = est_.status == FilterStatus::kTracking && tracked_m_ >= p_.confirm_distance_m;
+  if (p_.confirmed_room_obstacles_only && confirmed && ch.blocked_space_channels() != 0U) return ch.blocked_space_channels();
+  return ch.obstacle_space_channels();
+}
+
 bool ParticleFilter::pose_blocked(const ClassDistanceFields& fields) const noexcept {
-  if (p_.obstacle_penalty_per_m <= 0.0 || est_.status == FilterStatus::kUninitialised) return false;
-  const std::uint8_t mask = fields.channels().obstacle_space_channels();
+  if (est_.status == FilterStatus::kUninitialised) return false;
+  const std::uint8_t mask = room_channels(fields);
   return mask != 0U && room_distance_m(fields, mask, est_.pose.x, est_.pose.y) > p_.obstacle_margin_m;
 }
 

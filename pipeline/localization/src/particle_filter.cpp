@@ -377,7 +377,7 @@ UpdateReport ParticleFilter::update_impl(const ScanRenderPolar& render, const Cl
     order_[i] = (interleave16(cx) | (interleave16(cyy) << 1U)) << 32U | i;
   }
   std::sort(order_.begin(), order_.begin() + static_cast<std::ptrdiff_t>(n_));
-  const std::uint8_t obstacle_mask = p_.obstacle_penalty_per_m > 0.0 ? fields.channels().obstacle_space_channels() : std::uint8_t{0};
+  const std::uint8_t obstacle_mask = room_channels(fields);
   const bool searching = est_.status != FilterStatus::kTracking && est_.refused_fixes > 0;
   // Searching from the initial guess: nothing beyond its gate, the guess moved by the odometry.
   const double gate = est_.status == FilterStatus::kLost && distrust_good_ ? p_.guess_gate_sigmas * dead_reckoned_sigma_m() : 0.0;

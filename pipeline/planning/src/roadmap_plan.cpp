@@ -95,6 +95,37 @@ bool Roadmap::snap(Point2 p, double radius_m, std::int32_t& c, std::int32_t& r) 
   return found;
 }
 
+bool Roadmap::escape(Point2 p, std::int32_t& c, std::int32_t& r) const noexcept {
+  if (!(p_.start_escape_m > 0.0)) return false;
+  const double res = p_.resolution_m;
+  const double sx = (p.x - ox_) / res, sy = (p.y - oy_) / res;  // [cells]
+  const auto pc = static_cast<std::int32_t>(std::floor(sx)), pr = static_cast<std::int32_t>(std::floor(sy));
+  if (!escape_ground(pc, pr)) return false;
+  // Every cell the line from p to the centre of (cc, cr) passes, sampled at a quarter cell.
+  const auto over_ground = [&](std::int32_t cc, std::int32_t cr) {
+    const double dx = cc + 0.5 - sx, dy = cr + 0.5 - sy;
+    const int steps = static_cast<int>(std::ceil(4.0 * std::hypot(dx, dy)));
+    for (int i = 1; i < steps; ++i) {
+      const double f = static_cast<double>(i) / steps;
+      if (!escape_ground(static_cast<std::int32_t>(std::floor(sx + f * dx)), static_cast<std::int32_t>(std::floor(sy + f * dy)))) return false;
+    }
+    return true;
+  };
+  const auto rad = static_cast<std::int32_t>(std::ceil(p_.start_escape_m / res));
+  double best = 1e30;
+  bool found = false;
+  for (std::int32_t dy = -rad; dy <= rad; ++dy)
+    for (std::int32_t dx = -rad; dx <= rad; ++dx) {
+      const double d2 = dx * dx + dy * dy;
+      if (d2 > sq(rad) || d2 >= best || !free_cell(pc + dx, pr + dy) || !over_ground(pc + dx, pr + dy)) continue;
+      best = d2;
+      c = pc + dx;
+      r = pr + dy;
+      found = true;
+    }
+  return found;
+}
+
 std::uint32_t Roadmap::visible_nodes(double x, double y, std::uint32_t* out, std::uint32_t cap) const noexcept {
   const auto c = static_cast<std::int32_t>(std::floor(x)), r = static_cast<std::int32_t>(std::floor(y));
   std::uint32_t n = 0;
@@ -107,6 +138,7 @@ void Roadmap::plan(Point2 start, Point2 goal, PlannedPath& out, double snap_radi
   out.length_m = out.cost = 0;
   out.expanded = 0;
   out.min_clearance_m = 0;
+  out.start_escaped = false;
   const double res = p_.resolution_m;
   auto outside = [&](Point2 p) { return !inside(static_cast<std::int32_t>(std::floor((p.x - ox_) / res)), static_cast<std::int32_t>(std::floor((p.y - oy_) / res))); };
   if (outside(start)) {
@@ -118,7 +150,7 @@ void Roadmap::plan(Point2 start, Point2 goal, PlannedPath& out, double snap_radi
     return;
   }
   std::int32_t sc = 0, sr = 0, gc = 0, gr = 0;
-  if (!snap(start, snap_radius_m, sc, sr)) {
+  if (!snap(start, snap_radius_m, sc, sr) && !(out.start_escaped = escape(start, sc, sr))) {
     out.status = PlanStatus::kStartBlocked;
     return;
   }

@@ -71,6 +71,9 @@ void PlannerStage::plan_now(TimeNs now) noexcept {
       map_->plan(Point2{pose_.pose.x, pose_.pose.y}, Point2{goal_.goal.x, goal_.goal.y}, *path_, snap);
     }
   }
+  if (path_->status == PlanStatus::kOk && path_->start_escaped && c_.start_escapes++ % 50 == 0)
+    AG_LOG_INFO("planner", "no free cell within %.1f m of the start (%.1f, %.1f): the route starts across the grass to the nearest one (%llu such routes)",
+                snap, pose_.pose.x, pose_.pose.y, static_cast<unsigned long long>(c_.start_escapes));
   add_work(1.0);  // one route planned (compute-time model)
   PlannedPathMsg& m = *msg_;
   m.stamp = pose_.stamp;

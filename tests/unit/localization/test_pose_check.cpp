@@ -74,9 +74,8 @@ TEST(PoseCheck, AFilterDoesNotConvergeWhereThePlannerCouldNotStart) {
 namespace {
 
 // A robot tracks on a road and stops; 10 s later either nothing happens, or the quadrotor's next tile says
-// the ground around it is grass (no route: the planner could not start from there; nothing else changes,
-// as grass and road are both "ground" to the scan), or its planner says it found no free cell near the
-// pose. Returns the seconds from then until tracking is lost (-1: never), with the standing updates made
+// it stands in a wood (no room even from the obstacle classes alone, which its confirmed fix is judged by:
+// test_confirmed_fix.cpp), or its planner says it found no free cell near the pose. Returns the seconds from then until tracking is lost (-1: never), with the standing updates made
 // and whether the filter tracked again after it lost track (`retracked`, optional), and the particles'
 // weight within 2 m of the standing robot at the end (`weight_at_stand`, optional: inside the 3 m disc
 // around the fix it tracked there, which was within 1 m of the truth).
@@ -125,8 +124,8 @@ double seconds_until_lost(Word word, int* standing_before, int* standing_after, 
         const Pose2& at = truth[k].pose;
         const int tx = static_cast<int>(std::floor(at.x / w.resolution)) / w.tile_cells;
         const int ty = static_cast<int>(std::floor(at.y / w.resolution)) / w.tile_cells;
-        const std::vector<std::uint8_t> grass(static_cast<std::size_t>(w.tile_cells * w.tile_cells), raw(ClassId::kGrass));
-        EXPECT_TRUE(fields.set_tile(tx, ty, 2, grass));
+        const std::vector<std::uint8_t> wood(static_cast<std::size_t>(w.tile_cells * w.tile_cells), raw(ClassId::kTree));
+        EXPECT_TRUE(fields.set_tile(tx, ty, 2, wood));
         fields.update();
         EXPECT_TRUE(loc.filter().pose_blocked(fields));
       }

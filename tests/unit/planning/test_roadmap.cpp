@@ -209,6 +209,41 @@ TEST(RoadmapQuery, SeparatedPartsHaveNoRouteAndBadEndsAreNamed) {
   EXPECT_STREQ(to_string(PlanStatus::kStartBlocked), "no free cell near the start");
 }
 
+// A start out on the grass beyond the snap radius (where the stall marks' widening took the robot) joins
+// the road straight across the grass; never through a wall, and not with start_escape_m 0.
+TEST(RoadmapQuery, AStartOnTheGrassBeyondTheSnapRadiusJoinsTheRoadAcrossItButNeverThroughAWall) {
+  std::vector<std::uint8_t> t = road_tile();
+  for (int r = 0; r < 44; ++r)  // grass south of y 22 m
+    for (int c = 0; c < 64; ++c) t[static_cast<std::size_t>(r * 64 + c)] = raw(ClassId::kGrass);
+  for (int r = 40; r < 42; ++r)  // a wall along the road's edge, x 0 - 20 m, y 20 - 21 m
+    for (int c = 0; c < 40; ++c) t[static_cast<std::size_t>(r * 64 + c)] = kBuilding;
+  auto path = std::make_unique<PlannedPath>();
+  for (const double escape_m : {RoadmapParams{}.start_escape_m, 0.0}) {
+    RoadmapParams p;
+    p.start_escape_m = escape_m;
+    Roadmap rm(p, ClassTable::builtin(), TileExtent{0, 0, 1, 1});
+    ASSERT_TRUE(rm.set_tile(0, 0, 1, t));
+    rm.rebuild();
+    rm.plan({30, 19.5}, {5, 28}, *path, 2.0);  // 3 m out on the open grass
+    if (escape_m > 0.0) {
+      ASSERT_EQ(path->status, PlanStatus::kOk);
+      EXPECT_TRUE(path->start_escaped);
+      EXPECT_NEAR(path->points[0].x, 30.0, 1e-9);
+      EXPECT_NEAR(path->points[0].y, 19.5, 1e-9);
+      EXPECT_NEAR(path->points[1].x, 30.0, 0.5) << "straight to the nearest free cell";
+      EXPECT_NEAR(path->points[1].y, 22.75, 0.3);
+    } else {
+      EXPECT_EQ(path->status, PlanStatus::kStartBlocked);
+    }
+    rm.plan({10, 19}, {5, 28}, *path, 2.0);  // behind the wall: the road within 6 m lies across it
+    EXPECT_EQ(path->status, PlanStatus::kStartBlocked) << "escape " << escape_m;
+    EXPECT_FALSE(path->start_escaped);
+    rm.plan({30, 22.0}, {5, 28}, *path, 2.0);  // within the snap radius: snapped, as before
+    ASSERT_EQ(path->status, PlanStatus::kOk);
+    EXPECT_FALSE(path->start_escaped);
+  }
+}
+
 TEST(RoadmapTiles, BadTilesAreRefused) {
   Roadmap rm(RoadmapParams{}, ClassTable::builtin(), TileExtent{2, 3, 2, 2});
   const std::vector<std::uint8_t> t = road_tile();

@@ -147,6 +147,14 @@ struct ParticleFilterParams {
   // clearance enough between the crowns but no road: a pose there converged "tracking" where the planner
   // found no free cell near the start.
   Traversability obstacle_traversable{Traversability::kRough};
+  // ... except for a confirmed fix (tracking, confirm_distance_m driven since it converged): its pose check
+  // and its particles' prior measure room from the obstacle classes alone (trees, buildings, vehicles:
+  // LocalizationChannels::blocked_space_channels). The planner itself sends a robot onto grass (its stall
+  // marks widen the way round a spot it could not pass, stall_widen_radius_m), which the room from the
+  // planner's classes does not know: on gen6 a robot tracking 0.5 m from the truth 2.5 m out on the grass
+  // beside a parking lot was called lost, could not converge where it stood, and stood there lost until
+  // the mission's cap. A new fix still needs the planner's free space (a clearing in a wood is no place).
+  bool confirmed_room_obstacles_only{true};
 };
 
 inline constexpr ParamField<ParticleFilterParams> kParticleFilterFields[] = {
@@ -213,6 +221,8 @@ inline constexpr ParamField<ParticleFilterParams> kParticleFilterFields[] = {
         "pf_obstacle_traversable", "free|rough|costly|any",
         {Traversability::kFree, Traversability::kRough, Traversability::kCostly, Traversability::kBlocked},
         "... room is clearance from the classes above this level (the planner's traversable; any = from obstacles only)"),
+    field::boolean("pf_confirmed_room_obstacles_only", &ParticleFilterParams::confirmed_room_obstacles_only,
+                   "... but a confirmed fix's room is clearance from the obstacle classes alone (the planner's stall marks may send it onto grass)"),
 };
 inline constexpr auto kParticleFilterParamSpecs = param_specs(kParticleFilterFields);
 ParticleFilterParams load_particle_filter_params(const SectionView& s);
@@ -329,6 +339,9 @@ class ParticleFilter {
   // `obstacle_mask` channels' sources, or unknown (outside the fields is unknown), obstacle_max_depth_m
   // when there is none that near. Exact on the fields' cells (the offset table, nearest first).
   [[nodiscard]] double room_distance_m(const ClassDistanceFields& f, std::uint8_t obstacle_mask, double x, double y) const noexcept;
+  // The channels room is measured from now (0: the obstacle prior is off): the obstacle classes alone for a
+  // confirmed fix (confirmed_room_obstacles_only), else the fields' obstacle space (the planner's classes).
+  [[nodiscard]] std::uint8_t room_channels(const ClassDistanceFields& f) const noexcept;
   static constexpr int kRoomTableCells = 32;  // 16 m on 0.5 m cells, 8 m on 0.25 m
   void update_status(double best_cost, bool cost_valid, bool standing, bool blocked) noexcept;
   void respread(const Pose2& centre, double sigma_xy, double sigma_yaw) noexcept;

@@ -87,8 +87,13 @@ class LocalizationChannels {
   // measures it (the particle filter's obstacle prior). No bit set: no such channels, no prior.
   void set_obstacle_space(int channel) noexcept {
     obstacle_ = static_cast<std::uint8_t>(obstacle_ | (1U << static_cast<unsigned>(channel)));
+    blocked_ = static_cast<std::uint8_t>(blocked_ | (1U << static_cast<unsigned>(channel)));
   }
   [[nodiscard]] std::uint8_t obstacle_space_channels() const noexcept { return obstacle_; }
+  // The channels of the classes a robot cannot enter (set_obstacle_space), also after add_off_route made
+  // the off-route channel the only obstacle channel: the room a confirmed fix is checked against
+  // (ParticleFilterParams::confirmed_room_obstacles_only).
+  [[nodiscard]] std::uint8_t blocked_space_channels() const noexcept { return blocked_; }
   // Adds the "off route" channel (weight 0, no scan label counts into it): its sources are the classes of
   // `table` above `level` (the planner's traversable), and it becomes the only obstacle channel. Its
   // distance at a cell is then the planner's own clearance (to the nearest cell it does not route over),
@@ -104,6 +109,7 @@ class LocalizationChannels {
   std::array<std::uint8_t, 256> sources_{};
   std::uint8_t surface_{0};
   std::uint8_t obstacle_{0};
+  std::uint8_t blocked_{0};
   std::array<float, kMaxChannels> weight_{};
   std::array<std::string, kMaxChannels> name_{};
 };

@@ -48,6 +48,12 @@ struct RoadmapParams {
   double clearance_penalty_cap{100.0};
   double shortcut_clearance_m{1.5}; // [m] a shortcut keeps min(this, what the replaced stretch kept)
   int max_nodes{16384};
+  // A start with no free cell within the snap radius joins the nearest free cell within this [m] straight
+  // across ground the planner only avoids (a costly class: grass), never across an obstacle, a blocked disc,
+  // an unknown cell or the fence (0 = off). The planner's own stall marks widen the way round onto grass
+  // (StallParams::widen_radius_m, 6 m), and once they expire or are lifted a robot still out there had no
+  // route back: on gen6 one stood 2.5 m out on the grass by a parking lot, "no free cell near the start".
+  double start_escape_m{6.0};
   MapRect fence{};  // cells centred outside it are blocked (the planner stage: its area_* less geofence_margin_m)
 };
 
@@ -66,6 +72,8 @@ inline constexpr ParamField<RoadmapParams> kRoadmapFields[] = {
     field::real("clearance_gain_m", &RoadmapParams::clearance_gain_m, 0.0, 100.0, "m", "clearance penalty per metre = gain / (d + 0.01 m): falls as clearance d grows"),
     field::real("shortcut_clearance_m", &RoadmapParams::shortcut_clearance_m, 0.0, 10.0, "m", "a shortcut keeps at least min(this, the clearance of the stretch it replaces)"),
     field::integer("max_nodes", &RoadmapParams::max_nodes, 64, 1 << 20, "nodes", "roadmap capacity (allocated at start)"),
+    field::real("start_escape_m", &RoadmapParams::start_escape_m, 0.0, 20.0, "m",
+                "a start off the free cells beyond the snap radius joins one within this, straight across grass (never an obstacle); 0 = off"),
 };
 RoadmapParams load_roadmap_params(const SectionView& s, double resolution_m, int tile_cells);
 
@@ -111,6 +119,7 @@ struct PlannedPath {
   double length_m{0};
   double cost{0};
   double min_clearance_m{0};   // smallest clearance of the cells it crosses (after the snap segments)
+  bool start_escaped{false};   // the start joined the free cells across grass (RoadmapParams::start_escape_m)
   std::uint32_t expanded{0};   // graph nodes the search closed
 };
 
@@ -240,6 +249,15 @@ class Roadmap {
   // Line walk over cell coordinates (cell centres at +0.5): returns false at the first non-free cell.
   bool walk(double x0, double y0, double x1, double y1, float* min_clear, std::uint32_t* costly) const noexcept;
   bool snap(Point2 p, double radius_m, std::int32_t& c, std::int32_t& r) const noexcept;
+  // The nearest free cell within start_escape_m joined from p by a straight line over ground (escape_ground).
+  bool escape(Point2 p, std::int32_t& c, std::int32_t& r) const noexcept;
+  // A cell a robot may cross to reach the free cells: inside the fence, not in a blocked disc, of a class
+  // up to costly (not an obstacle, not unknown).
+  [[nodiscard]] bool escape_ground(std::int32_t c, std::int32_t r) const noexcept {
+    if (!inside(c, r) || !in_fence(c, r)) return false;
+    const std::size_t k = idx(c, r);
+    return mark_[k] == 0 && static_cast<int>(class_trav_[cls_[k]]) <= static_cast<int>(Traversability::kCostly);
+  }
   std::uint32_t visible_nodes(double x, double y, std::uint32_t* out, std::uint32_t cap) const noexcept;
   void shortcut(PlannedPath& out) noexcept;
 

@@ -52,6 +52,7 @@ struct PlannerCounters {
   std::uint64_t tiles_in{0}, tiles_applied{0}, tiles_outside{0}, tiles_stale{0};
   std::uint64_t goals{0}, goals_non_finite{0}, plans{0}, plans_failed{0};
   std::uint64_t stalls{0};  // stood on the route stall_s: the ground ahead marked blocked
+  std::uint64_t start_escapes{0};  // routes whose start joined the free cells across grass (start_escape_m)
 };
 
 class PlannerStage final : public Stage {
