@@ -72,6 +72,23 @@ double min_clearance(const Roadmap& map, const PlannedPath& out, std::uint32_t a
 
 }  // namespace
 
+template <class Accept>
+bool Roadmap::nearest_cell(std::int32_t pc, std::int32_t pr, double radius_m, Accept accept, std::int32_t& c, std::int32_t& r) const noexcept {
+  const auto rad = static_cast<std::int32_t>(std::ceil(radius_m / p_.resolution_m));
+  double best = 1e30;
+  bool found = false;
+  for (std::int32_t dy = -rad; dy <= rad; ++dy)
+    for (std::int32_t dx = -rad; dx <= rad; ++dx) {
+      const double d2 = dx * dx + dy * dy;
+      if (d2 > sq(rad) || d2 >= best || !free_cell(pc + dx, pr + dy) || !accept(pc + dx, pr + dy)) continue;
+      best = d2;
+      c = pc + dx;
+      r = pr + dy;
+      found = true;
+    }
+  return found;
+}
+
 bool Roadmap::snap(Point2 p, double radius_m, std::int32_t& c, std::int32_t& r) const noexcept {
   const double res = p_.resolution_m;
   const auto pc = static_cast<std::int32_t>(std::floor((p.x - ox_) / res)), pr = static_cast<std::int32_t>(std::floor((p.y - oy_) / res));
@@ -80,19 +97,7 @@ bool Roadmap::snap(Point2 p, double radius_m, std::int32_t& c, std::int32_t& r) 
     r = pr;
     return true;
   }
-  const auto rad = static_cast<std::int32_t>(std::ceil(radius_m / res));
-  double best = 1e30;
-  bool found = false;
-  for (std::int32_t dy = -rad; dy <= rad; ++dy)
-    for (std::int32_t dx = -rad; dx <= rad; ++dx) {
-      const double d2 = dx * dx + dy * dy;
-      if (d2 > sq(rad) || d2 >= best || !free_cell(pc + dx, pr + dy)) continue;
-      best = d2;
-      c = pc + dx;
-      r = pr + dy;
-      found = true;
-    }
-  return found;
+  return nearest_cell(pc, pr, radius_m, [](std::int32_t, std::int32_t) { return true; }, c, r);
 }
 
 bool Roadmap::escape(Point2 p, std::int32_t& c, std::int32_t& r) const noexcept {
@@ -111,19 +116,7 @@ bool Roadmap::escape(Point2 p, std::int32_t& c, std::int32_t& r) const noexcept 
     }
     return true;
   };
-  const auto rad = static_cast<std::int32_t>(std::ceil(p_.start_escape_m / res));
-  double best = 1e30;
-  bool found = false;
-  for (std::int32_t dy = -rad; dy <= rad; ++dy)
-    for (std::int32_t dx = -rad; dx <= rad; ++dx) {
-      const double d2 = dx * dx + dy * dy;
-      if (d2 > sq(rad) || d2 >= best || !free_cell(pc + dx, pr + dy) || !over_ground(pc + dx, pr + dy)) continue;
-      best = d2;
-      c = pc + dx;
-      r = pr + dy;
-      found = true;
-    }
-  return found;
+  return nearest_cell(pc, pr, p_.start_escape_m, over_ground, c, r);
 }
 
 std::uint32_t Roadmap::visible_nodes(double x, double y, std::uint32_t* out, std::uint32_t cap) const noexcept {

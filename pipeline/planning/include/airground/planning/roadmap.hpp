@@ -249,6 +249,9 @@ class Roadmap {
   // Line walk over cell coordinates (cell centres at +0.5): returns false at the first non-free cell.
   bool walk(double x0, double y0, double x1, double y1, float* min_clear, std::uint32_t* costly) const noexcept;
   bool snap(Point2 p, double radius_m, std::int32_t& c, std::int32_t& r) const noexcept;
+  // The nearest free cell within radius_m of cell (pc, pr) that `accept(c, r)` also takes.
+  template <class Accept>
+  bool nearest_cell(std::int32_t pc, std::int32_t pr, double radius_m, Accept accept, std::int32_t& c, std::int32_t& r) const noexcept;
   // The nearest free cell within start_escape_m joined from p by a straight line over ground (escape_ground).
   bool escape(Point2 p, std::int32_t& c, std::int32_t& r) const noexcept;
   // A cell a robot may cross to reach the free cells: inside the fence, not in a blocked disc, of a class
